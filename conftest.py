@@ -1,0 +1,60 @@
+"""Test-run settings shared by tests/ and the lessons executed by nbval.
+
+* ``MOCAPLAB_FAST=1``: lessons shrink iteration counts and clip lengths.
+* pyvista renders off-screen with its static backend in executed lessons.
+* ``MOCAPLAB_DATA_DIR`` defaults to the data folder beside the checkout.
+* Each lesson's run time is reported; a lesson over its budget fails the run.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent
+LESSON_BUDGET_S = 60.0
+
+os.environ.setdefault("MOCAPLAB_FAST", "1")
+os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
+os.environ.setdefault("MOCAPLAB_JUPYTER_BACKEND", "static")
+os.environ.setdefault("MPLBACKEND", "Agg")
+_default_mirror = ROOT.parent / "shared" / "mocap"
+if "MOCAPLAB_DATA_DIR" not in os.environ and _default_mirror.is_dir():
+    os.environ["MOCAPLAB_DATA_DIR"] = str(_default_mirror)
+
+_lesson_times: dict[str, float] = {}
+_lesson_start: dict[str, float] = {}
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    path = str(item.path)
+    if path.endswith(".ipynb"):
+        _lesson_start.setdefault(path, time.perf_counter())
+
+
+def pytest_runtest_teardown(item: pytest.Item) -> None:
+    path = str(item.path)
+    if path.endswith(".ipynb"):
+        _lesson_times[path] = time.perf_counter() - _lesson_start[path]
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:  # type: ignore[no-untyped-def]
+    if not _lesson_times:
+        return
+    terminalreporter.section("lesson run times (budget %.0f s each)" % LESSON_BUDGET_S)
+    over = []
+    for path, seconds in sorted(_lesson_times.items()):
+        flag = "  OVER BUDGET" if seconds > LESSON_BUDGET_S else ""
+        terminalreporter.write_line(f"{Path(path).name:45s} {seconds:6.1f} s{flag}")
+        if seconds > LESSON_BUDGET_S:
+            over.append(path)
+    if over:
+        terminalreporter.write_line(f"{len(over)} lesson(s) over the {LESSON_BUDGET_S:.0f} s budget", red=True)
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    if any(t > LESSON_BUDGET_S for t in _lesson_times.values()) and exitstatus == 0:
+        session.exitstatus = 1

@@ -1,0 +1,453 @@
+"""The motion data model: :class:`Skeleton` and :class:`Motion`.
+
+Conventions, written once for the whole package
+-----------------------------------------------
+* **Units:** metres and seconds; angles inside the core are radians (degrees
+  appear only in file formats).
+* **Axes:** right-handed, **Y up**, the ground is the plane ``y = 0``.  The
+  ground plane coordinates of a point are ``(x, z)``.
+* **Quaternions:** ``(x, y, z, w)``, scalar last, as in
+  :mod:`scipy.spatial.transform` (see :mod:`mocaplab.quat`).
+* **Frames and time:** frame ``i`` of a clip sampled at ``fps`` frames per
+  second happens at time ``i / fps`` seconds after its first frame.
+* **Joints:** joint 0 is the root; ``parents[j] < j`` for every other joint,
+  so a single forward pass visits parents before children.
+
+Both classes are frozen dataclasses whose arrays are private, read-only
+copies: no function in mocaplab mutates a Motion, every operation returns a
+new one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from collections.abc import Sequence
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import kinematics, quat
+
+__all__ = ["Skeleton", "Motion", "concatenate", "mirror_name"]
+
+DEFAULT_ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation")
+DEFAULT_JOINT_CHANNELS = ("Zrotation", "Yrotation", "Xrotation")
+VALID_CHANNELS = frozenset(
+    ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
+)
+
+
+def _frozen(a: ArrayLike, dtype: Any = float) -> NDArray[Any]:
+    out = np.array(a, dtype=dtype, copy=True)
+    out.flags.writeable = False
+    return out
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Skeleton:
+    """A joint hierarchy with rest offsets.
+
+    Parameters
+    ----------
+    names : sequence of str, length J
+        Unique joint names.
+    parents : array_like of int, shape (J,)
+        ``parents[0] == -1`` and ``0 <= parents[j] < j`` for ``j > 0``.
+    offsets : array_like, shape (J, 3)
+        Translation of each joint from its parent, in the parent's frame
+        (metres).  The root's offset is kept for file round trips only.
+    channels : sequence of sequence of str, optional
+        BVH channel names per joint, in file order (defaults: 6 channels on
+        the root, ``Zrotation Yrotation Xrotation`` elsewhere).
+    end_site_parents : array_like of int, shape (E,), optional
+        Joint that carries each BVH ``End Site``.
+    end_site_offsets : array_like, shape (E, 3), optional
+        Offset of each end site from its joint (metres).
+
+    Examples
+    --------
+    >>> sk = Skeleton(["hips", "knee"], [-1, 0], [[0, 0, 0], [0, -0.5, 0]])
+    >>> sk.index("knee"), sk.n_joints
+    (1, 2)
+    """
+
+    names: tuple[str, ...]
+    parents: NDArray[np.int64]
+    offsets: NDArray[np.float64]
+    channels: tuple[tuple[str, ...], ...] = ()
+    end_site_parents: NDArray[np.int64] = dataclasses.field(
+        default_factory=lambda: np.zeros(0, dtype=np.int64)
+    )
+    end_site_offsets: NDArray[np.float64] = dataclasses.field(
+        default_factory=lambda: np.zeros((0, 3))
+    )
+
+    def __post_init__(self) -> None:
+        names = tuple(str(n) for n in self.names)
+        n = len(names)
+        if n == 0:
+            raise ValueError("Expected at least one joint in `names`, got none")
+        if len(set(names)) != n:
+            dup = sorted({x for x in names if names.count(x) > 1})
+            raise ValueError(f"Expected unique joint names, got duplicates {dup}")
+        parents = np.asarray(self.parents)
+        if parents.shape != (n,) or not np.issubdtype(parents.dtype, np.integer):
+            raise ValueError(f"Expected `parents` of {n} integers, got shape {parents.shape} dtype {parents.dtype}")
+        if parents[0] != -1:
+            raise ValueError(f"Expected parents[0] == -1 (the root), got {parents[0]}")
+        bad = [j for j in range(1, n) if not 0 <= parents[j] < j]
+        if bad:
+            raise ValueError(f"Expected 0 <= parents[j] < j, violated at joints {bad[:5]}")
+        offsets = np.asarray(self.offsets, dtype=float)
+        if offsets.shape != (n, 3) or not np.all(np.isfinite(offsets)):
+            raise ValueError(f"Expected finite `offsets` of shape ({n}, 3), got shape {offsets.shape}")
+        channels = tuple(tuple(c) for c in self.channels)
+        if not channels:
+            channels = (DEFAULT_ROOT_CHANNELS,) + (DEFAULT_JOINT_CHANNELS,) * (n - 1)
+        if len(channels) != n:
+            raise ValueError(f"Expected channels for {n} joints, got {len(channels)}")
+        for j, ch in enumerate(channels):
+            unknown = [c for c in ch if c not in VALID_CHANNELS]
+            if unknown or len(set(ch)) != len(ch):
+                raise ValueError(f"Invalid channels {ch} for joint {names[j]!r}")
+        esp = np.asarray(self.end_site_parents, dtype=np.int64).reshape(-1)
+        eso = np.asarray(self.end_site_offsets, dtype=float).reshape(-1, 3)
+        if esp.shape[0] != eso.shape[0] or np.any((esp < 0) | (esp >= n)):
+            raise ValueError("Expected end_site_parents (E,) of joint indices matching end_site_offsets (E, 3)")
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "parents", _frozen(parents, np.int64))
+        object.__setattr__(self, "offsets", _frozen(offsets))
+        object.__setattr__(self, "channels", channels)
+        object.__setattr__(self, "end_site_parents", _frozen(esp, np.int64))
+        object.__setattr__(self, "end_site_offsets", _frozen(eso))
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.names)
+
+    def index(self, name: str) -> int:
+        """Index of the joint called ``name`` (KeyError listing names if absent)."""
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"No joint named {name!r}; joints are {list(self.names)}") from None
+
+    def children(self, j: int) -> list[int]:
+        """Indices of the direct children of joint ``j``."""
+        return [int(c) for c in np.flatnonzero(self.parents == j)]
+
+    def depth(self) -> NDArray[np.int64]:
+        """Number of edges from the root to each joint, shape (J,)."""
+        d = np.zeros(self.n_joints, dtype=np.int64)
+        for j in range(1, self.n_joints):
+            d[j] = d[self.parents[j]] + 1
+        return d
+
+    def chain(self, start: str | int, end: str | int) -> list[int]:
+        """Joints from ``start`` down to its descendant ``end`` (both included)."""
+        s = start if isinstance(start, int) else self.index(start)
+        e = end if isinstance(end, int) else self.index(end)
+        out = [e]
+        while out[-1] != s:
+            if out[-1] <= 0:
+                raise ValueError(f"{self.names[e]!r} does not descend from {self.names[s]!r}")
+            out.append(int(self.parents[out[-1]]))
+        return out[::-1]
+
+    def scaled(self, factor: float) -> Skeleton:
+        """The same skeleton with every length multiplied by ``factor``."""
+        return dataclasses.replace(
+            self, offsets=self.offsets * factor, end_site_offsets=self.end_site_offsets * factor
+        )
+
+    def mirror_map(self) -> NDArray[np.int64]:
+        """For each joint, the index of its left/right counterpart (itself if none)."""
+        lookup = {n: i for i, n in enumerate(self.names)}
+        return np.array([lookup.get(mirror_name(n), i) for i, n in enumerate(self.names)], dtype=np.int64)
+
+    def describe(self) -> str:
+        """An indented text tree of the hierarchy."""
+        depth = self.depth()
+        return "\n".join("  " * int(depth[j]) + self.names[j] for j in range(self.n_joints))
+
+
+_SIDE_PATTERNS = (
+    (re.compile(r"Left"), "Right"),
+    (re.compile(r"Right"), "Left"),
+    (re.compile(r"left"), "right"),
+    (re.compile(r"right"), "left"),
+    (re.compile(r"^L(?=[A-Z_])"), "R"),
+    (re.compile(r"^R(?=[A-Z_])"), "L"),
+    (re.compile(r"^l(?=[A-Z_])"), "r"),
+    (re.compile(r"^r(?=[A-Z_])"), "l"),
+)
+
+
+def mirror_name(name: str) -> str:
+    """The joint name of the other side (``LeftArm`` -> ``RightArm``, ``lThigh`` -> ``rThigh``)."""
+    for pattern, repl in _SIDE_PATTERNS:
+        if pattern.search(name):
+            return pattern.sub(repl, name, count=1)
+    return name
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Motion:
+    """A clip: a skeleton animated by root positions and local rotations.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    rotations : array_like, shape (F, J, 4)
+        Local joint rotations as unit quaternions ``(x, y, z, w)``.
+    root_positions : array_like, shape (F, 3)
+        World position of the root joint, metres.
+    fps : float
+        Frames per second (> 0).
+    translations : array_like, shape (F, J, 3), optional
+        Animated local translations for files that put position channels on
+        joints other than the root.  ``None`` means the skeleton offsets.
+    name : str
+        A label (file stem or clip id).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> sk = Skeleton(["hips", "knee"], [-1, 0], [[0, 0, 0], [0, -0.5, 0]])
+    >>> m = Motion(sk, np.tile([0, 0, 0, 1.0], (3, 2, 1)), np.zeros((3, 3)), 30.0)
+    >>> m.n_frames, m.global_positions()[0, 1].tolist()
+    (3, [0.0, -0.5, 0.0])
+    """
+
+    skeleton: Skeleton
+    rotations: NDArray[np.float64]
+    root_positions: NDArray[np.float64]
+    fps: float
+    translations: NDArray[np.float64] | None = None
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.skeleton, Skeleton):
+            raise TypeError(f"Expected `skeleton` to be a Skeleton, got {type(self.skeleton).__name__}")
+        n = self.skeleton.n_joints
+        rot = np.asarray(self.rotations, dtype=float)
+        if rot.ndim != 3 or rot.shape[1:] != (n, 4) or rot.shape[0] < 1:
+            raise ValueError(f"Expected `rotations` of shape (F, {n}, 4) with F >= 1, got {rot.shape}")
+        frames = rot.shape[0]
+        root = np.asarray(self.root_positions, dtype=float)
+        if root.shape != (frames, 3):
+            raise ValueError(f"Expected `root_positions` of shape ({frames}, 3), got {root.shape}")
+        if not (np.all(np.isfinite(rot)) and np.all(np.isfinite(root))):
+            raise ValueError("Expected finite `rotations` and `root_positions`, got NaN or inf")
+        norms = np.sqrt(np.einsum("...i,...i->...", rot, rot))
+        if np.any(np.abs(norms - 1.0) > 1e-3):
+            worst = np.unravel_index(np.argmax(np.abs(norms - 1.0)), norms.shape)
+            raise ValueError(
+                f"Expected unit quaternions in `rotations`, got norm {norms[worst]:.6g} "
+                f"at frame {worst[0]}, joint {self.skeleton.names[worst[1]]!r}"
+            )
+        if np.any(np.abs(norms - 1.0) > 1e-14):
+            rot = rot / norms[..., None]
+        fps = float(self.fps)
+        if not np.isfinite(fps) or fps <= 0:
+            raise ValueError(f"Expected `fps` > 0, got {self.fps!r}")
+        tr = self.translations
+        if tr is not None:
+            tr = np.asarray(tr, dtype=float)
+            if tr.shape != (frames, n, 3) or not np.all(np.isfinite(tr)):
+                raise ValueError(f"Expected finite `translations` of shape ({frames}, {n}, 3), got {tr.shape}")
+            tr = _frozen(tr)
+        object.__setattr__(self, "rotations", _frozen(rot))
+        object.__setattr__(self, "root_positions", _frozen(root))
+        object.__setattr__(self, "fps", fps)
+        object.__setattr__(self, "translations", tr)
+        object.__setattr__(self, "name", str(self.name))
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_frames(self) -> int:
+        return int(self.rotations.shape[0])
+
+    @property
+    def n_joints(self) -> int:
+        return self.skeleton.n_joints
+
+    @property
+    def dt(self) -> float:
+        """Seconds between frames."""
+        return 1.0 / self.fps
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first to the last frame."""
+        return (self.n_frames - 1) / self.fps
+
+    @property
+    def times(self) -> NDArray[np.float64]:
+        """Time of each frame in seconds, shape (F,)."""
+        return np.arange(self.n_frames) / self.fps
+
+    def __len__(self) -> int:
+        return self.n_frames
+
+    def __repr__(self) -> str:
+        label = f" {self.name!r}" if self.name else ""
+        return f"<Motion{label}: {self.n_frames} frames, {self.n_joints} joints, {self.fps:g} fps>"
+
+    # ------------------------------------------------------------ kinematics
+    @cached_property
+    def _fk(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        grot, gpos = kinematics.fk(
+            self.rotations,
+            self.root_positions,
+            self.skeleton.offsets,
+            self.skeleton.parents,
+            translations=self.translations,
+        )
+        grot.flags.writeable = False
+        gpos.flags.writeable = False
+        return grot, gpos
+
+    def global_positions(self) -> NDArray[np.float64]:
+        """World joint positions, shape (F, J, 3), metres (read-only, cached)."""
+        return self._fk[1]
+
+    def global_rotations(self) -> NDArray[np.float64]:
+        """World joint rotations, shape (F, J, 4) (read-only, cached)."""
+        return self._fk[0]
+
+    def end_site_positions(self) -> NDArray[np.float64]:
+        """World positions of the end sites, shape (F, E, 3)."""
+        sk = self.skeleton
+        grot, gpos = self._fk
+        return gpos[:, sk.end_site_parents] + quat.rotate(grot[:, sk.end_site_parents], sk.end_site_offsets)
+
+    def joint_velocities(self) -> NDArray[np.float64]:
+        """World joint velocities, shape (F, J, 3), metres per second."""
+        return kinematics.velocities(self.global_positions(), self.fps)
+
+    def joint_speeds(self) -> NDArray[np.float64]:
+        """Norm of the joint velocities, shape (F, J), metres per second."""
+        return np.linalg.norm(self.joint_velocities(), axis=-1)
+
+    # ------------------------------------------------------------- editing
+    def replace(self, **changes: Any) -> Motion:
+        """A new Motion with some fields replaced (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    def __getitem__(self, frames: slice) -> Motion:
+        """Frame slicing: ``motion[10:100]`` or ``motion[::2]`` (fps adjusted)."""
+        if not isinstance(frames, slice):
+            raise TypeError(f"Expected a slice of frames, got {type(frames).__name__}")
+        step = frames.step or 1
+        if step <= 0:
+            raise ValueError(f"Expected a positive slice step, got {step}")
+        idx = np.arange(self.n_frames)[frames]
+        if idx.size == 0:
+            raise ValueError(f"Slice {frames} selects no frames of a {self.n_frames}-frame motion")
+        return self.replace(
+            rotations=self.rotations[idx],
+            root_positions=self.root_positions[idx],
+            translations=None if self.translations is None else self.translations[idx],
+            fps=self.fps / step,
+        )
+
+    def resample(self, fps: float) -> Motion:
+        """The same motion sampled at another frame rate (slerp / linear).
+
+        The new clip covers the same time span (its last frame is at or before
+        the old last frame's time).
+        """
+        if not fps > 0:
+            raise ValueError(f"Expected fps > 0, got {fps}")
+        n_new = int(np.floor(self.duration * fps + 1e-9)) + 1
+        return self.sample(np.arange(n_new) / fps, fps=fps)
+
+    def sample(self, times: ArrayLike, *, fps: float | None = None) -> Motion:
+        """Poses at arbitrary times (seconds, clamped to the clip), as a Motion.
+
+        Rotations are slerped and positions linearly interpolated between the
+        two nearest frames.  ``fps`` labels the result (default: this clip's).
+        """
+        t = np.clip(np.asarray(times, dtype=float).reshape(-1), 0.0, self.duration)
+        u = t * self.fps
+        i0 = np.clip(np.floor(u).astype(np.int64), 0, self.n_frames - 1)
+        i1 = np.minimum(i0 + 1, self.n_frames - 1)
+        a = u - i0
+        rot = quat.slerp(self.rotations[i0], self.rotations[i1], np.broadcast_to(a[:, None], (t.size, self.n_joints)))
+        root = (1 - a)[:, None] * self.root_positions[i0] + a[:, None] * self.root_positions[i1]
+        tr = None
+        if self.translations is not None:
+            tr = (1 - a)[:, None, None] * self.translations[i0] + a[:, None, None] * self.translations[i1]
+        return self.replace(rotations=rot, root_positions=root, translations=tr, fps=fps or self.fps)
+
+    def mirror(self) -> Motion:
+        """Mirror image across the ``x = 0`` plane, left and right joints swapped."""
+        swap = self.skeleton.mirror_map()
+        flip = np.array([-1.0, 1.0, 1.0])
+        qflip = np.array([1.0, -1.0, -1.0, 1.0])
+        sk = self.skeleton
+        esp = swap[sk.end_site_parents]
+        # keep end sites attached to the mirrored joint with that joint's mirrored offset
+        eso = np.empty_like(sk.end_site_offsets)
+        for e, (p, off) in enumerate(zip(sk.end_site_parents, sk.end_site_offsets)):
+            partner = np.flatnonzero(sk.end_site_parents == swap[p])
+            eso[e] = (sk.end_site_offsets[partner[0]] if partner.size else off) * flip
+        new_sk = dataclasses.replace(
+            sk, offsets=sk.offsets[swap] * flip, end_site_parents=sk.end_site_parents, end_site_offsets=eso
+        )
+        del esp
+        tr = None if self.translations is None else self.translations[:, swap] * flip
+        return self.replace(
+            skeleton=new_sk,
+            rotations=self.rotations[:, swap] * qflip,
+            root_positions=self.root_positions * flip,
+            translations=tr,
+        )
+
+    def with_root(
+        self, *, root_positions: ArrayLike | None = None, root_rotations: ArrayLike | None = None
+    ) -> Motion:
+        """A new Motion with the root trajectory and/or root orientation replaced."""
+        rot = self.rotations
+        if root_rotations is not None:
+            rot = np.array(self.rotations, copy=True)
+            rot[:, 0] = np.asarray(root_rotations, dtype=float)
+        root = self.root_positions if root_positions is None else root_positions
+        return self.replace(rotations=rot, root_positions=root)
+
+    def transformed(self, *, yaw: float = 0.0, translation: ArrayLike = (0.0, 0.0, 0.0)) -> Motion:
+        """Rigidly turn the whole clip by ``yaw`` radians about the vertical axis
+        through the origin, then translate it."""
+        q = quat.from_yaw(np.float64(yaw))
+        root = quat.rotate(q, self.root_positions) + np.asarray(translation, dtype=float)
+        return self.with_root(root_positions=root, root_rotations=quat.mul(q, self.rotations[:, 0]))
+
+
+def concatenate(motions: Sequence[Motion]) -> Motion:
+    """Join clips end to end (same skeleton and fps); no alignment or blending."""
+    if not motions:
+        raise ValueError("Expected at least one motion to concatenate, got none")
+    first = motions[0]
+    for k, m in enumerate(motions[1:], start=1):
+        if m.skeleton.names != first.skeleton.names or not np.allclose(m.skeleton.offsets, first.skeleton.offsets):
+            raise ValueError(f"Motion {k} has a different skeleton from motion 0")
+        if abs(m.fps - first.fps) > 1e-9:
+            raise ValueError(f"Motion {k} runs at {m.fps} fps, motion 0 at {first.fps} fps")
+    has_tr = [m.translations is not None for m in motions]
+    tr = None
+    if any(has_tr):
+        tr = np.concatenate(
+            [
+                m.translations if m.translations is not None else np.broadcast_to(m.skeleton.offsets, (m.n_frames, m.n_joints, 3))
+                for m in motions
+            ]
+        )
+    return first.replace(
+        rotations=np.concatenate([m.rotations for m in motions]),
+        root_positions=np.concatenate([m.root_positions for m in motions]),
+        translations=tr,
+    )

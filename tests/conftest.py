@@ -1,0 +1,47 @@
+"""Fixtures: real CMU clips from the local mirror, small synthetic skeletons."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+DATA = Path(__file__).parent / "data"
+
+
+def _mirror() -> Path | None:
+    value = os.environ.get("MOCAPLAB_DATA_DIR")
+    return Path(value) if value and Path(value).is_dir() else None
+
+
+@pytest.fixture(scope="session")
+def mocap_dir() -> Path:
+    """The CMU mirror; a missing mirror skips locally but fails in CI."""
+    root = _mirror()
+    if root is None:
+        if os.environ.get("CI"):
+            pytest.fail("MOCAPLAB_DATA_DIR must name the CMU mirror in CI (see .ci/run)")
+        pytest.skip("no CMU mirror: set MOCAPLAB_DATA_DIR")
+    return root
+
+
+@pytest.fixture(scope="session")
+def cmu(mocap_dir: Path):
+    """``cmu("16_15")`` loads a clip from the mirror (cached per session)."""
+    from mocaplab import data
+
+    cache: dict[str, object] = {}
+
+    def load(trial: str):
+        if trial not in cache:
+            cache[trial] = data.cmu(trial)
+        return cache[trial]
+
+    return load
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(12345)

@@ -1,0 +1,72 @@
+"""Synchronized multi-character path editing and time warping (Kim et al. 2009).
+
+Sections 3, 4.1, 4.2 and 4.4 of Kim, Hwang, Lee and Lee 2009,
+"Synchronized multi-character motion editing": every character's root path is
+deformed by Laplacian (as-rigid-as-possible) curve editing and its timing by a
+1D Laplacian time warp, all characters in ONE sparse system, under soft
+(weighted least squares) and hard (Lagrange multiplier) constraints.
+
+API summary (names are stable; lessons and widgets code against them)
+--------------------------------------------------------------------
+Conventions: ground positions are ``(x, z)`` in metres, times in seconds on a
+shared *reference clock*, frames are indices into each character's own clip,
+characters are indices into the ``characters`` sequence.  Directions on the
+ground are 2-vectors ``(x, z)`` or yaw angles in radians (``atan2(x, z)``, the
+convention of :func:`mocaplab.quat.yaw`).  Local frames are ``(forward, left)``:
+forward along the path tangent, left along the normal ``R t`` (tangent turned
++90 degrees about +Y).
+
+Paths (:mod:`mocaplab.editing.paths`)
+    ``MotionPath.from_motion(motion, *, min_speed=0.1) -> MotionPath`` with
+    ``.positions (F, 2)``, ``.tangents (F, 2)`` (central differences
+    ``p[i+1] - p[i-1]``, degenerate ones interpolated), ``.normals (F, 2)``,
+    ``.directions (F,)`` root heading relative to the tangent (radians),
+    ``.headings (F,)``, ``.degenerate (F,) bool``, ``.fps``, ``.length``,
+    ``.laplacian_coordinates() -> (F, 2)`` (eq. 3; NaN at the two ends),
+    ``.local_offset(frame, point) -> (forward, left)``.
+    ``stationary_segments(motion, *, speed=0.15, min_duration=0.3) -> list[(start, stop)]``.
+
+Constraints (:mod:`mocaplab.editing.constraints`), frozen dataclasses
+    ``PinPosition(character, frame, position, *, hard=False, weight=1.0, frames=None)``
+    ``PinDirection(character, frame, direction, *, hard=False, weight=1.0, frames=None)``
+    ``Relative(character, frame, other, other_frame, offset, *, direction=None,
+    hard=False, weight=1.0, frames=None, other_frames=None)`` (offset = (forward, left)
+    metres in the tangent frame of ``other`` at ``other_frame``; eqs. 1-2)
+    ``AbsoluteTime(character, frame, time, *, hard=False, weight=1.0, frames=None)``
+    ``Duration(character, frame, end_frame, duration, *, hard=False, weight=1.0)``
+    ``Sync(character, frame, other, other_frame, *, offset=0.0, hard=False,
+    weight=1.0, frames=None, other_frames=None)`` (``t[frame] = t_other[other_frame] + offset``)
+    ``EndEffectorConstraint(character, constraint)``: wraps a
+    :mod:`mocaplab.refine` end-effector for full-body refinement.
+    Variational form: pass ``frame=None, frames=(start, end)`` (inclusive);
+    sampled every 10th frame.  Every constraint has ``.target``,
+    ``.with_target(new_target)``, ``.hard``, ``.weight``, ``.characters``.
+    ``ConstraintError(ValueError)`` with ``.constraints`` (the offending ones)
+    and ``.indices``.
+
+Editing (:mod:`mocaplab.editing.scene`)
+    ``edit(characters, constraints, **options) -> EditResult``
+    ``SceneEditor(characters, constraints=(), **options)`` with
+    ``.drag(constraint_index, new_target) -> EditResult``, ``.add(constraint) -> int``,
+    ``.remove(index)``, ``.replace(index, constraint)``, ``.result``, ``.constraints``,
+    ``.factorizations`` (counter: how many KKT factorizations so far).
+    ``EditResult``: ``.paths[k] (F_k, 2)``, ``.times[k] (F_k,)``, ``.motions[k]``
+    (lazy; all on one shared clock ``.clock (N,)``, pose held outside each
+    character's own span, ``.active[k] (N,) bool``), ``.shape_paths[k]``
+    (phase-1 result), ``.tangents[k]``, ``.heading_change[k] (F_k,)``,
+    ``.flips[k] (F_k,) bool`` (repaired tangent flips), ``.stationary[k]``,
+    ``.constraints``, ``.transformations`` (section 5 discrete edits; empty),
+    ``.end_effectors[k]``, ``.report() -> dict`` and attributes
+    ``hard_residual_space, hard_residual_time, soft_residual_space,
+    soft_residual_time, shape_distortion, length_change (K,), min_time_step``,
+    ``.energies -> Energies(shape, scale, time)``, ``.refined()``.
+    Options: ``scale_compensation=True, stationary="auto", min_step=0.25,
+    max_step=4.0`` (ratios of the frame time), ``flip_threshold=pi/2,
+    variational_step=10, regularization=1e-8, clock_fps=None, start_times=None,
+    discrete=False, refine=False``.
+
+Energy (:mod:`mocaplab.editing.energy`)
+    ``deformation_energy(result, *, cs=1.0, ct=1.0, reference=None) -> float`` (eq. 10).
+"""
+
+from __future__ import annotations

@@ -1,0 +1,382 @@
+"""Static matplotlib drawings for lessons and reports.
+
+This is the only module of the core that imports matplotlib, and it does so
+lazily, inside each function, so ``import mocaplab`` never loads it.  Every
+function draws into the Axes it is given (``ax=``) or into a new figure made
+with :func:`matplotlib.pyplot.subplots` (so it shows inline in Jupyter), and
+returns the Axes.
+
+Axes conventions
+----------------
+* World coordinates are metres, Y up, ground plane ``(x, z)``
+  (see :mod:`mocaplab.motion`).
+* In 3D plots the world axes are shown cyclically permuted, matplotlib's
+  ``(X, Y, Z) = (z, x, y)``, so that the world's up axis is matplotlib's
+  vertical axis and the view stays right-handed (no mirror image).
+* Top-down plots (:func:`root_path`, ``projection="top"``) draw ``x`` along
+  the horizontal axis and ``z`` along the vertical axis, equal aspect.
+
+Examples
+--------
+>>> import matplotlib
+>>> matplotlib.use("Agg")
+>>> from mocaplab.data import cmu                      # doctest: +SKIP
+>>> walk = cmu("16_15")                                # doctest: +SKIP
+>>> ax = skeleton(walk, 0)                             # doctest: +SKIP
+>>> ax = root_path(walk)                               # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import quat
+from .contacts import Contacts
+from .motion import Motion
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
+
+__all__ = ["skeleton", "root_path", "joint_curves", "contact_timeline", "COLORS"]
+
+#: Default colours of successive characters (matplotlib's tab10 cycle).
+COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
+
+Projection = Literal["3d", "front", "side", "top"]
+# world axis indices shown on (horizontal, vertical) of each 2D projection
+_PLANES = {"front": (0, 1), "side": (2, 1), "top": (0, 2)}
+_AXIS_NAMES = ("x", "y", "z")
+
+
+def _new_axes(ax: Axes | None, *, three_d: bool = False, figsize: tuple[float, float] = (6.0, 4.0)) -> Axes:
+    if ax is not None:
+        if three_d and getattr(ax, "name", "") != "3d":
+            raise ValueError(f"Expected a 3D Axes (projection='3d') for `ax`, got a {getattr(ax, 'name', '?')!r} Axes")
+        return ax
+    import matplotlib.pyplot as plt
+
+    if three_d:
+        fig = plt.figure(figsize=figsize)
+        return fig.add_subplot(projection="3d")
+    _, new = plt.subplots(figsize=figsize)
+    return new
+
+
+def _check_motion(motion: object, what: str = "motion") -> Motion:
+    if not isinstance(motion, Motion):
+        raise TypeError(f"Expected `{what}` to be a Motion, got {type(motion).__name__}")
+    return motion
+
+
+def _frame_index(motion: Motion, frame: int) -> int:
+    f = int(frame)
+    if not -motion.n_frames <= f < motion.n_frames:
+        raise IndexError(f"Expected `frame` in [0, {motion.n_frames}), got {frame}")
+    return f % motion.n_frames
+
+
+def _bones(motion: Motion, frame: int, end_sites: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Joint positions (J, 3) and bone segments (B, 2, 3) at one frame."""
+    sk = motion.skeleton
+    pos = motion.global_positions()[frame]
+    segs = [np.stack([pos[sk.parents[1:]], pos[1:]], axis=1)]
+    if end_sites and sk.end_site_parents.size:
+        ends = motion.end_site_positions()[frame]
+        segs.append(np.stack([pos[sk.end_site_parents], ends], axis=1))
+    return pos, np.concatenate(segs, axis=0)
+
+
+def _to_mpl3d(p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """World (x, y, z) to matplotlib 3D (X, Y, Z) = (z, x, y)."""
+    return p[..., [2, 0, 1]]
+
+
+def _set_equal_3d(ax: Any, points: NDArray[np.float64], margin: float = 0.1) -> None:
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    centre, half = (lo + hi) / 2, max(float((hi - lo).max()) / 2, 0.05) + margin
+    ax.set_xlim(centre[0] - half, centre[0] + half)
+    ax.set_ylim(centre[1] - half, centre[1] + half)
+    ax.set_zlim(max(centre[2] - half, min(0.0, lo[2])), centre[2] + half)
+    ax.set_box_aspect((1, 1, (ax.get_zlim()[1] - ax.get_zlim()[0]) / (2 * half)))
+
+
+# --------------------------------------------------------------------------
+def skeleton(
+    motion: Motion,
+    frame: int = 0,
+    *,
+    ax: Axes | None = None,
+    projection: Projection = "3d",
+    color: str | None = None,
+    highlight: Sequence[str] = (),
+    highlight_color: str = "#d62728",
+    end_sites: bool = True,
+    ground: bool = True,
+    label: str | None = None,
+    linewidth: float = 2.5,
+) -> Axes:
+    """Draw the skeleton at one frame: bones as lines, joints as dots.
+
+    Parameters
+    ----------
+    motion : Motion
+    frame : int
+        Frame index (negative counts from the end).
+    ax : Axes, optional
+        Where to draw; a 3D Axes when ``projection="3d"``.  Default: a new figure.
+    projection : {"3d", "front", "side", "top"}
+        ``"3d"``: perspective view; ``"front"``: (x, y); ``"side"``: (z, y);
+        ``"top"``: (x, z) seen from above.
+    color : str, optional
+        Bone colour (default the first of :data:`COLORS`).
+    highlight : sequence of str
+        Joint names drawn larger in ``highlight_color`` (e.g. contact joints).
+    end_sites : bool
+        Also draw the bones to the BVH end sites (toe tips, head top, fingers).
+    ground : bool
+        Draw the ground line or plane (y = 0) under the character.
+    label : str, optional
+        Legend label (default the motion's name).
+    linewidth : float
+
+    Returns
+    -------
+    Axes
+    """
+    motion = _check_motion(motion)
+    if projection not in ("3d", *_PLANES):
+        raise ValueError(f"Expected `projection` in {('3d', *_PLANES)}, got {projection!r}")
+    f = _frame_index(motion, frame)
+    pos, segs = _bones(motion, f, end_sites)
+    color = color or COLORS[0]
+    label = motion.name if label is None else label
+    marked = np.array([motion.skeleton.index(n) for n in highlight], dtype=np.int64)
+    if projection == "3d":
+        ax = _new_axes(ax, three_d=True)
+        from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+        ax.add_collection3d(Line3DCollection(_to_mpl3d(segs), colors=color, linewidths=linewidth, label=label or None))
+        p = _to_mpl3d(pos)
+        ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=10, color=color, depthshade=False)
+        if marked.size:
+            ax.scatter(*_to_mpl3d(pos[marked]).T, s=50, color=highlight_color, depthshade=False)
+        if ground:
+            lo, hi = p.min(axis=0) - 0.3, p.max(axis=0) + 0.3
+            gx, gy = np.meshgrid([lo[0], hi[0]], [lo[1], hi[1]])
+            ax.plot_surface(gx, gy, np.zeros_like(gx), color="0.85", alpha=0.35, zorder=-1)
+        _set_equal_3d(ax, np.concatenate([_to_mpl3d(segs).reshape(-1, 3), [[p[0, 0], p[0, 1], 0.0]]]))
+        ax.set_xlabel("z (m)")
+        ax.set_ylabel("x (m)")
+        ax.set_zlabel("y (m, up)")
+    else:
+        ax = _new_axes(ax)
+        from matplotlib.collections import LineCollection
+
+        h, v = _PLANES[projection]
+        ax.add_collection(LineCollection(segs[:, :, [h, v]], colors=color, linewidths=linewidth, label=label or None))
+        ax.scatter(pos[:, h], pos[:, v], s=10, color=color, zorder=3)
+        if marked.size:
+            ax.scatter(pos[marked, h], pos[marked, v], s=50, color=highlight_color, zorder=4)
+        if ground and v == 1:
+            ax.axhline(0.0, color="0.5", linewidth=1, zorder=0)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.autoscale_view()
+        ax.set_xlabel(f"{_AXIS_NAMES[h]} (m)")
+        ax.set_ylabel(f"{_AXIS_NAMES[v]} (m)")
+    title = f"{motion.name + ', ' if motion.name else ''}frame {f} (t = {f / motion.fps:.2f} s)"
+    ax.set_title(title)
+    return ax
+
+
+# --------------------------------------------------------------------------
+def _ground_path(item: object, k: int) -> tuple[NDArray[np.float64], str]:
+    if isinstance(item, Motion):
+        return np.asarray(item.root_positions)[:, [0, 2]], item.name
+    a = np.asarray(item, dtype=float)
+    if a.ndim == 2 and a.shape[1] == 2:
+        return a, ""
+    if a.ndim == 2 and a.shape[1] == 3:
+        return a[:, [0, 2]], ""
+    raise ValueError(
+        f"Expected item {k} of `motions` to be a Motion or an (F, 2) (x, z) / (F, 3) path, got shape {a.shape}"
+    )
+
+
+def root_path(
+    motions: Motion | ArrayLike | Sequence[Motion | ArrayLike],
+    *,
+    ax: Axes | None = None,
+    colors: Sequence[str] | None = None,
+    labels: Sequence[str] | None = None,
+    ticks: float | None = 0.5,
+    linewidth: float = 2.0,
+) -> Axes:
+    """Top-down view of root paths on the ground plane.
+
+    Parameters
+    ----------
+    motions : Motion, ndarray or a list of them
+        Each item is a Motion (its root's ``(x, z)`` is drawn), an ``(F, 2)``
+        array of ``(x, z)`` points or an ``(F, 3)`` array of world positions.
+    ax : Axes, optional
+    colors, labels : sequence of str, optional
+        One per path (default :data:`COLORS` and each motion's name).
+    ticks : float or None
+        For Motions, a dot every ``ticks`` seconds along the path, to show
+        speed (``None``: no dots).  Start is a circle, end a square.
+    linewidth : float
+
+    Returns
+    -------
+    Axes
+    """
+    items: list[Any]
+    if isinstance(motions, Motion):
+        items = [motions]
+    elif isinstance(motions, np.ndarray) and motions.ndim == 2:
+        items = [motions]
+    else:
+        items = list(motions)  # type: ignore[arg-type]
+    if not items:
+        raise ValueError("Expected at least one motion or path in `motions`, got none")
+    ax = _new_axes(ax)
+    for k, item in enumerate(items):
+        xz, name = _ground_path(item, k)
+        color = colors[k % len(colors)] if colors else COLORS[k % len(COLORS)]
+        label = labels[k] if labels is not None else (name or f"path {k}")
+        ax.plot(xz[:, 0], xz[:, 1], color=color, linewidth=linewidth, label=label)
+        ax.plot(*xz[0], "o", color=color, markersize=7)
+        ax.plot(*xz[-1], "s", color=color, markersize=7)
+        if ticks and isinstance(item, Motion):
+            step = max(1, int(round(ticks * item.fps)))
+            ax.plot(xz[::step, 0], xz[::step, 1], ".", color=color, markersize=5)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
+    ax.set_title("root path, top view")
+    ax.grid(True, alpha=0.3)
+    if len(items) > 1 or labels is not None:
+        ax.legend(loc="best", fontsize="small")
+    return ax
+
+
+# --------------------------------------------------------------------------
+Component = Literal["angle", "x", "y", "z", "height", "speed"]
+
+
+def joint_curves(
+    motion: Motion,
+    joints: str | Sequence[str],
+    *,
+    ax: Axes | None = None,
+    component: Component = "height",
+    contacts: Contacts | None = None,
+    colors: Sequence[str] | None = None,
+) -> Axes:
+    """Per-joint curves over time.
+
+    Parameters
+    ----------
+    motion : Motion
+    joints : str or sequence of str
+        Joint names.
+    ax : Axes, optional
+    component : {"angle", "x", "y", "z", "height", "speed"}
+        ``"angle"``: angle of the joint's local rotation away from the rest
+        pose, degrees; ``"x"``, ``"y"``, ``"z"``: world position, metres
+        (``"height"`` is ``"y"``); ``"speed"``: world speed, m/s.
+    contacts : Contacts, optional
+        Shade the contact intervals of each plotted joint found in it.
+    colors : sequence of str, optional
+
+    Returns
+    -------
+    Axes
+    """
+    motion = _check_motion(motion)
+    names = [joints] if isinstance(joints, str) else list(joints)
+    if not names:
+        raise ValueError("Expected at least one joint name in `joints`, got none")
+    idx = [motion.skeleton.index(n) for n in names]
+    if component == "angle":
+        values = np.degrees(quat.angle(motion.rotations[:, idx]))
+        unit = "local rotation angle (deg)"
+    elif component in ("x", "y", "z", "height"):
+        axis = {"x": 0, "y": 1, "height": 1, "z": 2}[component]
+        values = motion.global_positions()[:, idx, axis]
+        unit = "height y (m)" if axis == 1 else f"{component} (m)"
+    elif component == "speed":
+        values = motion.joint_speeds()[:, idx]
+        unit = "speed (m/s)"
+    else:
+        raise ValueError(f"Expected `component` in ('angle', 'x', 'y', 'z', 'height', 'speed'), got {component!r}")
+    if contacts is not None and contacts.n_frames != motion.n_frames:
+        raise ValueError(f"Expected `contacts` over {motion.n_frames} frames, got {contacts.n_frames}")
+    ax = _new_axes(ax, figsize=(8.0, 3.0))
+    t = motion.times
+    for k, name in enumerate(names):
+        color = colors[k % len(colors)] if colors else COLORS[k % len(COLORS)]
+        ax.plot(t, values[:, k], color=color, label=name)
+        if contacts is not None and name in contacts.joints:
+            for a, b in contacts.intervals(name):
+                ax.axvspan(a / motion.fps, (b - 1) / motion.fps, color=color, alpha=0.12, linewidth=0)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(unit)
+    ax.set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1.0)
+    ax.legend(loc="best", fontsize="small")
+    ax.grid(True, alpha=0.3)
+    return ax
+
+
+# --------------------------------------------------------------------------
+def contact_timeline(
+    contacts: Contacts,
+    *,
+    ax: Axes | None = None,
+    colors: Sequence[str] | None = None,
+    frame: int | None = None,
+) -> Axes:
+    """One row per joint, a bar over each contact interval, time in seconds.
+
+    Parameters
+    ----------
+    contacts : Contacts
+    ax : Axes, optional
+    colors : sequence of str, optional
+        Per joint; default: left-side joints blue, right-side joints orange,
+        others grey (sides guessed from the names).
+    frame : int, optional
+        Draw a vertical line at this frame.
+
+    Returns
+    -------
+    Axes
+    """
+    if not isinstance(contacts, Contacts):
+        raise TypeError(f"Expected `contacts` to be a Contacts, got {type(contacts).__name__}")
+    ax = _new_axes(ax, figsize=(8.0, 0.5 + 0.4 * len(contacts.joints)))
+    dt = 1.0 / contacts.fps
+    for k, name in enumerate(contacts.joints):
+        if colors:
+            color = colors[k % len(colors)]
+        elif name.startswith(("Left", "left", "L", "l")):
+            color = COLORS[0]
+        elif name.startswith(("Right", "right", "R", "r")):
+            color = COLORS[1]
+        else:
+            color = COLORS[7]
+        bars = [(a * dt, (b - a) * dt) for a, b in contacts.intervals(name)]
+        ax.broken_barh(bars, (k - 0.35, 0.7), facecolors=color)
+    if frame is not None:
+        ax.axvline(int(frame) * dt, color="k", linewidth=1)
+    ax.set_yticks(range(len(contacts.joints)), labels=list(contacts.joints))
+    ax.set_ylim(len(contacts.joints) - 0.5, -0.5)
+    ax.set_xlim(0.0, max(contacts.n_frames * dt, dt))
+    ax.set_xlabel("time (s)")
+    ax.set_title("contacts")
+    ax.grid(True, axis="x", alpha=0.3)
+    return ax

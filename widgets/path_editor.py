@@ -424,11 +424,11 @@ class PathEditor(_DragView):
 
         self._ghosts = [
             self.ax.plot(p[:, 0], p[:, 1], color=c, lw=1.0, ls=":", alpha=0.6)[0]
-            for p, c in zip(self.original_paths, self.colors)
+            for p, c in zip(self.original_paths, self.colors, strict=True)
         ]
         self._lines = [
             self.ax.plot(p[:, 0], p[:, 1], color=c, lw=2.0, label=f"character {k}")[0]
-            for k, (p, c) in enumerate(zip(self.original_paths, self.colors))
+            for k, (p, c) in enumerate(zip(self.original_paths, self.colors, strict=True))
         ]
         self._now = [self.ax.plot([], [], marker="^", ms=9, color=c, mec="k", ls="none")[0] for c in self.colors]
         (self._pins,) = self.ax.plot([], [], "o", ms=11, mfc="white", mec="k", mew=2.0, zorder=5)
@@ -603,7 +603,7 @@ class PathEditor(_DragView):
         return 0.08 * float(np.hypot(x1 - x0, y1 - y0))
 
     def _redraw(self, *, final: bool = False) -> None:
-        for line, path in zip(self._lines, self.result.paths):
+        for line, path in zip(self._lines, self.result.paths, strict=True):
             p = np.asarray(path, dtype=float)
             line.set_data(p[:, 0], p[:, 1])
         self._draw_now()
@@ -613,7 +613,7 @@ class PathEditor(_DragView):
 
     def _draw_now(self) -> None:
         t = float(self.time.value)
-        for marker, path, times in zip(self._now, self.result.paths, self.result.times):
+        for marker, path, times in zip(self._now, self.result.paths, self.result.times, strict=True):
             p = np.asarray(path, dtype=float)
             tt = np.asarray(times, dtype=float)
             if tt[0] - 1e-9 <= t <= tt[-1] + 1e-9:

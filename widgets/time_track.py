@@ -132,10 +132,10 @@ class TimeTrackEditor(_DragView):
         self.ax.set_yticks(range(n), self.labels)
         self.ax.set_ylim(n - 0.4, -0.7)  # track 0 on top
         self.ax.grid(True, axis="x", alpha=0.3)
-        for k, (t, c) in enumerate(zip(self.original_times, self.colors)):
+        for k, (t, c) in enumerate(zip(self.original_times, self.colors, strict=True)):
             self.ax.add_collection(_ticks(t, k - 0.42, k - 0.3, color=c, alpha=0.35, lw=0.6))
             self.ax.plot([t[0], t[-1]], [k, k], color=c, lw=1.0, alpha=0.6)
-        self._tracks = [_ticks(t, k - 0.2, k + 0.2, color=c, lw=0.8) for k, (t, c) in enumerate(zip(self.original_times, self.colors))]
+        self._tracks = [_ticks(t, k - 0.2, k + 0.2, color=c, lw=0.8) for k, (t, c) in enumerate(zip(self.original_times, self.colors, strict=True))]
         for coll in self._tracks:
             self.ax.add_collection(coll)
         (self._abs,) = self.ax.plot([], [], "v", ms=11, mfc="white", mec="k", mew=2.0, zorder=5)
@@ -198,7 +198,7 @@ class TimeTrackEditor(_DragView):
         self.ax.set_xlim(lo, hi)
 
     def _redraw(self, *, final: bool = False) -> None:
-        for k, (coll, times) in enumerate(zip(self._tracks, self.result.times)):
+        for k, (coll, times) in enumerate(zip(self._tracks, self.result.times, strict=True)):
             coll.set_segments(_segments(np.asarray(times, dtype=float), k - 0.2, k + 0.2))
         self._collect_handles()
         self.handles_info.value = html.escape(json.dumps(self.handle_positions()))

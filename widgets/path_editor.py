@@ -367,6 +367,9 @@ class PathEditor(_DragView):
         Length (metres) of direction-pin arrows; default 8% of the view diagonal.
     editor_options : dict, optional
         Options for the :class:`~mocaplab.editing.SceneEditor` built from characters.
+    viewer_options : dict, optional
+        Keyword options for the :class:`~mocaplab.widgets.MotionViewer` (e.g.
+        ``{"window_size": (480, 360), "backend": "static"}``).
 
     Attributes
     ----------
@@ -383,6 +386,8 @@ class PathEditor(_DragView):
         Reference time shown by the markers and the 3D viewer
         (CSS class ``mocaplab-path-time``).
     viewer : MotionViewer or None
+        Replaced by a new viewer when the mouse is released after an edit (the
+        viewer has no in-place motion update); ``viewer_updates`` counts them.
     widget : ipywidgets.Box
         The whole layout (CSS class ``mocaplab-path-editor``).
     """
@@ -402,6 +407,7 @@ class PathEditor(_DragView):
         title: str = "mocaplab path editor",
         arrow_length: float | None = None,
         editor_options: dict[str, Any] | None = None,
+        viewer_options: dict[str, Any] | None = None,
     ) -> None:
         super().__init__(editor_or_characters, constraints, pick_radius=pick_radius, editor_options=editor_options)
         self.title = title
@@ -454,8 +460,10 @@ class PathEditor(_DragView):
         self.time.add_class("mocaplab-path-time")
         self.time.observe(self._on_time, names="value")
 
+        self.viewer_options = dict(viewer_options or {})
+        self.viewer_updates = 0  # how many times the 3D viewer received new motions
         self.viewer = self._make_viewer(viewer)
-        self._viewer_box = W.Box([self.viewer.widget if hasattr(self.viewer, "widget") else self.viewer] if self.viewer is not None else [])
+        self._viewer_box = W.Box([self._viewer_widget()] if self.viewer is not None else [])
         left = W.VBox([self._view.widget, self.time, self.status, self.handles_info])
         self.widget = W.HBox([left, self._viewer_box])
         self.widget.add_class("mocaplab-path-editor")
@@ -519,42 +527,42 @@ class PathEditor(_DragView):
             from .viewer import MotionViewer
         except ImportError:
             return None
-        return MotionViewer(list(self.result.motions))
+        return MotionViewer(list(self.result.motions), colors=self.colors, **self.viewer_options)
 
     def _update_viewer(self) -> None:
+        """Show the edited motions in the 3D viewer (in place if it can, else a new viewer)."""
         if self.viewer is None:
             return
         motions = list(self.result.motions)
-        for name in ("set_motions", "update_motions"):
-            method = getattr(self.viewer, name, None)
-            if callable(method):
-                method(motions)
-                self._sync_viewer_time()
-                return
-        # no in-place update: build a new viewer of the same type
-        self.viewer = type(self.viewer)(motions)
-        self._viewer_box.children = [self.viewer.widget if hasattr(self.viewer, "widget") else self.viewer]
+        method = getattr(self.viewer, "set_motions", None)
+        if callable(method):
+            method(motions)
+        else:
+            old = self.viewer
+            options = dict(self.viewer_options)
+            if hasattr(old, "backend"):
+                options.setdefault("backend", old.backend)
+            self.viewer = type(old)(motions, colors=self.colors, **options)
+            self._viewer_box.children = [self._viewer_widget()]
+            close = getattr(old, "close", None)
+            if callable(close):
+                close()
+        self.viewer_updates += 1
         self._sync_viewer_time()
 
+    def _viewer_widget(self) -> Any:
+        return getattr(self.viewer, "widget", self.viewer)
+
     def _sync_viewer_time(self) -> None:
+        """Move the viewer to the slider's reference time (its clock starts at ``result.clock[0]``)."""
         if self.viewer is None:
             return
         t = float(self.time.value)
+        clock = getattr(self.result, "clock", None)
+        t0 = float(clock[0]) if clock is not None and len(clock) else self._time_range()[0]
         setter = getattr(self.viewer, "set_time", None)
         if callable(setter):
-            setter(t)
-            return
-        frame = getattr(self.viewer, "frame", None)
-        motions = list(self.result.motions)
-        if frame is not None and motions:
-            t0 = self._time_range()[0]
-            fps = float(motions[0].fps)
-            n = max(m.n_frames for m in motions)
-            value = int(np.clip(round((t - t0) * fps), 0, n - 1))
-            if hasattr(frame, "value"):
-                frame.value = value
-            else:
-                self.viewer.frame = value
+            setter(t - t0)
 
     def _collect_handles(self) -> None:
         paths = self.result.paths

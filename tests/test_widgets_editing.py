@@ -1,0 +1,380 @@
+"""PathEditor and TimeTrackEditor driven headless with matplotlib mouse events.
+
+The widgets are thin views over :class:`mocaplab.editing.SceneEditor`: every
+test feeds events through ``canvas.callbacks.process`` (as the browser would
+through ipympl) and checks what reached the editor and what the view shows.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from matplotlib.backend_bases import MouseEvent
+from mocaplab.widgets.path_editor import PathEditor
+from mocaplab.widgets.time_track import TimeTrackEditor
+
+from mocaplab.editing import AbsoluteTime, Duration, PinDirection, PinPosition, Relative, SceneEditor, Sync
+
+
+# --------------------------------------------------------------------------- fixtures and helpers
+@pytest.fixture(scope="module")
+def walks(cmu):
+    """Two 30 fps CMU walks side by side (16_15 and 02_01 shifted 1.5 m in x)."""
+    a = cmu("16_15").resample(30)
+    b = cmu("02_01").resample(30).transformed(translation=(1.5, 0.0, 0.0))
+    return [a, b]
+
+
+class Spy:
+    """A SceneEditor that records the calls the widget makes."""
+
+    def __init__(self, editor: SceneEditor) -> None:
+        self._editor = editor
+        self.calls: list[tuple] = []
+
+    def __getattr__(self, name):
+        return getattr(self._editor, name)
+
+    def drag(self, index, target):
+        self.calls.append(("drag", index, np.array(target, dtype=float)))
+        return self._editor.drag(index, target)
+
+    def add(self, constraint):
+        self.calls.append(("add", constraint))
+        return self._editor.add(constraint)
+
+    def remove(self, index):
+        self.calls.append(("remove", index))
+        return self._editor.remove(index)
+
+
+class ViewerStub:
+    """Stands in for MotionViewer: records motions and times it was given."""
+
+    built: list[ViewerStub] = []
+
+    def __init__(self, motions, **options) -> None:
+        self.motions = list(motions)
+        self.times: list[float] = []
+        self.widget = None
+        self.closed = False
+        ViewerStub.built.append(self)
+
+    def set_time(self, t: float) -> None:
+        self.times.append(float(t))
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def _event(view, name, xy, *, data=True, key=None, modifiers=None, button=1):
+    """Feed one mouse event at data (or display) coordinates ``xy``."""
+    x, y = view.ax.transData.transform(xy) if data else xy
+    event = MouseEvent(name, view.canvas, x, y, button=button, key=key, modifiers=modifiers)
+    view.canvas.callbacks.process(name, event)
+    return event
+
+
+def _drag(view, start, stop, *, steps=5, **kw):
+    """Press at ``start``, move in ``steps`` to ``stop`` (data coordinates), release."""
+    _event(view, "button_press_event", start, **kw)
+    for s in np.linspace(0.0, 1.0, steps + 1)[1:]:
+        _event(view, "motion_notify_event", (1 - s) * np.asarray(start) + s * np.asarray(stop), **kw)
+    _event(view, "button_release_event", stop, **kw)
+
+
+def _status(view) -> str:
+    return view.status.value
+
+
+# --------------------------------------------------------------------------- PathEditor
+def test_press_on_path_pins_and_drag_moves_the_pin(walks):
+    spy = Spy(SceneEditor(walks, [PinPosition(0, 0, walks[0].root_positions[0, [0, 2]], hard=True)]))
+    pe = PathEditor(spy, viewer=False)
+    pe.figure.canvas.draw()
+    before = np.array(pe.result.paths[0])
+    start = before[60]
+    stop = start + np.array([0.8, 0.3])
+    _drag(pe, start, stop)
+
+    kinds = [c[0] for c in spy.calls]
+    assert kinds[0] == "add" and isinstance(spy.calls[0][1], PinPosition)
+    assert spy.calls[0][1].character == 0 and spy.calls[0][1].frame == 60
+    assert kinds.count("drag") == 5, "one solve per motion event"
+    assert all(c[1] == 1 for c in spy.calls if c[0] == "drag"), "drags go to the new pin, constraint 1"
+    pin = pe.editor.constraints[1]
+    assert np.allclose(pin.position, stop, atol=1e-9), "the pin sits under the mouse"
+    after = np.array(pe.result.paths[0])
+    assert np.linalg.norm(after[60] - stop) < 0.1, "the path follows the soft pin"
+    assert np.linalg.norm(after[0] - before[0]) < 1e-6, "the hard pin at frame 0 holds"
+    assert np.allclose(pe._lines[0].get_xydata(), after), "the drawn path is the edited path"
+    assert "PinPosition #1" in _status(pe) and "residual" in _status(pe)
+    assert f"{stop[0]:.3f}" in _status(pe) and f"{stop[1]:.3f}" in _status(pe)
+    handles = json.loads(pe.handles_info.value.replace("&quot;", '"'))
+    assert [h["index"] for h in handles] == [0, 1]
+    assert np.allclose(handles[1]["data"], stop)
+
+
+def test_drag_existing_pin_then_click_unpins(walks):
+    end = walks[0].n_frames - 1
+    target = walks[0].root_positions[end, [0, 2]]
+    spy = Spy(SceneEditor([walks[0]], [PinPosition(0, end, target, hard=True)]))
+    pe = PathEditor(spy, viewer=False)
+    pe.figure.canvas.draw()
+    moved = target + np.array([1.0, 0.0])
+    _drag(pe, target, moved)
+    assert [c[0] for c in spy.calls] == ["drag"] * 5
+    assert np.allclose(pe.result.paths[0][end], moved, atol=1e-6), "hard pin: exact"
+    assert "moved PinPosition #0" in _status(pe)
+    assert "e-0" in _status(pe).split("residual")[1]  # a tiny residual, printed in e-notation
+
+    # press and release on the handle without moving: unpin
+    _event(pe, "button_press_event", moved)
+    _event(pe, "button_release_event", moved)
+    assert spy.calls[-1] == ("remove", 0)
+    assert len(pe.editor.constraints) == 0
+    assert "removed PinPosition #0" in _status(pe)
+    assert np.allclose(pe.result.paths[0], walks[0].root_positions[:, [0, 2]], atol=1e-6), "no constraint: original path"
+
+
+def test_click_on_path_pins_in_place_without_changing_it(walks):
+    pe = PathEditor([walks[0]], viewer=False)
+    pe.figure.canvas.draw()
+    p = np.array(pe.result.paths[0][30])
+    _event(pe, "button_press_event", p)
+    _event(pe, "button_release_event", p)
+    (pin,) = pe.editor.constraints
+    assert isinstance(pin, PinPosition) and pin.frame == 30
+    assert np.allclose(pe.result.paths[0], walks[0].root_positions[:, [0, 2]], atol=1e-6)
+    assert "pinned PinPosition #0" in _status(pe)
+
+
+def test_shift_drag_sets_a_direction(walks):
+    spy = Spy(SceneEditor([walks[0]], [PinPosition(0, 0, walks[0].root_positions[0, [0, 2]], hard=True)]))
+    pe = PathEditor(spy, viewer=False)
+    pe.figure.canvas.draw()
+    f = 60
+    base = np.array(pe.result.paths[0][f])
+    tangent = pe.result.paths[0][f + 1] - pe.result.paths[0][f - 1]
+    u = tangent / np.linalg.norm(tangent)
+    left = np.array([u[1], -u[0]])
+    goal = base + 0.5 * (u + left)  # 45 degrees to the left of the walking direction
+    _drag(pe, base, goal, modifiers=["shift"])
+    adds = [c[1] for c in spy.calls if c[0] == "add"]
+    assert len(adds) == 1 and isinstance(adds[0], PinDirection) and adds[0].frame == f
+    c = pe.editor.constraints[1]
+    want = (u + left) / np.linalg.norm(u + left)
+    got = np.asarray(c.direction, dtype=float)
+    assert np.allclose(got / np.linalg.norm(got), want, atol=0.05)
+    path = np.asarray(pe.result.paths[0])
+    new_t = path[f + 1] - path[f - 1]
+    angle = np.degrees(np.arccos(np.clip(new_t @ want / np.linalg.norm(new_t), -1, 1)))
+    assert angle < 10.0, "the path turned towards the dragged direction"
+    assert "PinDirection #1" in _status(pe)
+    kinds = [h["kind"] for h in pe.handle_positions()]
+    assert kinds == ["pin", "direction"]
+
+
+def test_relative_constraints_are_drawn_as_links(walks):
+    a, b = walks
+    cs = [Relative(1, 40, 0, 40, (0.0, -1.5))]
+    pe = PathEditor(walks, cs, viewer=False)
+    link = pe._links.get_xydata()
+    assert link.shape == (3, 2)
+    assert np.allclose(link[0], pe.result.paths[1][40]) and np.allclose(link[1], pe.result.paths[0][40])
+
+
+def test_errors_are_shown_in_the_status_not_raised(walks):
+    pe = PathEditor([walks[0]], [PinPosition(0, 10, walks[0].root_positions[10, [0, 2]])], viewer=False)
+    pe.figure.canvas.draw()
+
+    def broken(index, target):
+        raise ValueError("solver exploded")
+
+    pe.editor.drag = broken  # type: ignore[method-assign]
+    p = np.asarray(pe.editor.constraints[0].position)
+    _drag(pe, p, p + 0.5)  # must not raise
+    assert "ValueError" in _status(pe) and "solver exploded" in _status(pe)
+    assert isinstance(pe.last_error, ValueError)
+    assert "mocaplab-error" in _status(pe)
+
+
+def test_toolbar_zoom_mode_and_other_buttons_do_not_edit(walks):
+    pe = PathEditor([walks[0]], viewer=False)
+    pe.figure.canvas.draw()
+    p = np.array(pe.result.paths[0][20])
+    _drag(pe, p, p + 0.5, button=3)
+    assert len(pe.editor.constraints) == 0
+    pe.canvas.toolbar.zoom()
+    _drag(pe, p, p + 0.5)
+    pe.canvas.toolbar.zoom()
+    assert len(pe.editor.constraints) == 0
+
+
+def test_viewer_gets_new_motions_on_release_and_follows_time(walks, monkeypatch):
+    ViewerStub.built.clear()
+    pe = PathEditor(walks, viewer=ViewerStub([]))
+    first = pe.viewer
+    pe.figure.canvas.draw()
+    start = np.array(pe.result.paths[0][50])
+    _drag(pe, start, start + 0.6)
+    assert pe.viewer is not first and first.closed, "a new viewer replaces the old one"
+    assert pe.viewer_updates == 1
+    assert pe.viewer.motions[0] is pe.result.motions[0]
+    moved_root = pe.viewer.motions[0].root_positions[:, [0, 2]]
+    assert not np.allclose(moved_root, walks[0].root_positions[: len(moved_root), [0, 2]], atol=1e-3), "edited motion shown"
+    t0 = float(pe.result.clock[0])
+    pe.time.value = pe.time.min + 1.0
+    assert pe.viewer.times[-1] == pytest.approx(pe.time.value - t0)
+    marker = pe._now[0].get_xydata()[0]
+    times = np.asarray(pe.result.times[0])
+    expect = [np.interp(pe.time.value, times, pe.result.paths[0][:, i]) for i in (0, 1)]
+    assert np.allclose(marker, expect), "the time marker sits on the path at the slider's time"
+
+
+def test_real_motion_viewer_is_replaced_after_a_drag(walks, monkeypatch):
+    pytest.importorskip("pyvista")
+    monkeypatch.setenv("MOCAPLAB_JUPYTER_BACKEND", "static")
+    from mocaplab.widgets.viewer import MotionViewer
+
+    pe = PathEditor([walks[0]], viewer_options={"window_size": (160, 120), "backend": "static"})
+    assert isinstance(pe.viewer, MotionViewer)
+    first = pe.viewer
+    pe.figure.canvas.draw()
+    start = np.array(pe.result.paths[0][50])
+    _drag(pe, start, start + np.array([0.5, 0.0]))
+    assert pe.viewer is not first
+    shown = pe.viewer.characters[0].positions[:, 0, [0, 2]]
+    assert np.allclose(shown, pe.result.motions[0].global_positions()[:, 0, [0, 2]])
+    assert pe._viewer_box.children[0] is pe.viewer.widget
+
+
+def test_shares_a_scene_editor_with_the_time_track(walks):
+    editor = SceneEditor(walks, [])
+    pe = PathEditor(editor, viewer=False)
+    tt = TimeTrackEditor(editor)
+    pe.on_edit(lambda result: tt.refresh())
+    pe.figure.canvas.draw()
+    p = np.array(pe.result.paths[1][20])
+    _drag(pe, p, p + 0.4)
+    assert tt.result is editor.result and pe.result is editor.result
+
+
+def test_inputs_are_not_mutated(walks):
+    before = [np.array(m.root_positions) for m in walks]
+    pe = PathEditor(walks, viewer=False)
+    pe.figure.canvas.draw()
+    p = np.array(pe.result.paths[0][40])
+    _drag(pe, p, p + 1.0)
+    for m, b in zip(walks, before, strict=True):
+        assert np.array_equal(m.root_positions, b)
+
+
+def test_layout_and_dom_classes(walks):
+    pe = PathEditor([walks[0]], viewer=False)
+    assert "mocaplab-path-editor" in pe.widget._dom_classes
+    assert "mocaplab-path-status" in pe.status._dom_classes
+    assert "mocaplab-path-handles" in pe.handles_info._dom_classes
+    assert "mocaplab-path-time" in pe.time._dom_classes
+    assert "mocaplab-path-canvas" in pe.canvas._dom_classes
+    assert pe.ax.get_title() == "mocaplab path editor"
+    assert pe.ax.yaxis_inverted(), "seen from above: z grows down the page"
+
+
+def test_agg_backend_shows_a_png(walks):
+    import ipywidgets as W
+
+    pe = PathEditor([walks[0]], viewer=False, backend="agg")
+    image = pe.widget.children[0].children[0]
+    assert isinstance(image, W.Image) and image.value[:4] == b"\x89PNG"
+    first = image.value
+    pe.figure.canvas.draw()
+    p = np.array(pe.result.paths[0][40])
+    _drag(pe, p, p + 1.0)
+    assert image.value != first, "redrawn on release"
+
+
+def test_bad_arguments(walks):
+    editor = SceneEditor([walks[0]], [])
+    with pytest.raises(ValueError, match="pick_radius"):
+        PathEditor(editor, pick_radius=0, viewer=False)
+    with pytest.raises(ValueError, match="constraints"):
+        PathEditor(editor, [], viewer=False)
+    with pytest.raises(ValueError, match="backend"):
+        PathEditor(editor, backend="qt", viewer=False)
+    with pytest.raises(ValueError, match="labels"):
+        TimeTrackEditor(editor, labels=["a", "b"])
+
+
+# --------------------------------------------------------------------------- TimeTrackEditor
+def test_press_on_tick_adds_absolute_time_and_drag_moves_it(walks):
+    spy = Spy(SceneEditor(walks, [AbsoluteTime(0, 0, 0.0, hard=True)]))
+    tt = TimeTrackEditor(spy)
+    tt.figure.canvas.draw()
+    f = 60
+    t = float(tt.result.times[0][f])
+    _drag(tt, (t, 0.0), (t + 0.8, 0.0))
+    assert spy.calls[0][0] == "add" and isinstance(spy.calls[0][1], AbsoluteTime)
+    assert spy.calls[0][1].frame == f
+    assert [c[0] for c in spy.calls[1:]] == ["drag"] * 5
+    times = np.asarray(tt.result.times[0])
+    assert abs(times[f] - (t + 0.8)) < 0.05, "frame 60 now plays about 0.8 s later"
+    assert abs(times[0]) < 1e-6
+    assert np.all(np.diff(times) > 0), "time warps stay monotone"
+    assert "AbsoluteTime #1" in _status(tt) and "min step" in _status(tt)
+    ticks = tt._tracks[0].get_segments()
+    assert np.allclose([s[0, 0] for s in ticks], times), "ticks at the warped reference times"
+    # click on the handle: removed
+    _event(tt, "button_press_event", (float(tt.editor.constraints[1].time), -0.25))
+    _event(tt, "button_release_event", (float(tt.editor.constraints[1].time), -0.25))
+    assert spy.calls[-1] == ("remove", 1)
+    assert "removed AbsoluteTime #1" in _status(tt)
+
+
+def test_duration_handle_drag(walks):
+    a = walks[0]
+    d0 = 60 / a.fps
+    spy = Spy(SceneEditor([a], [Duration(0, 0, 60, d0, hard=True)]))
+    tt = TimeTrackEditor(spy)
+    tt.figure.canvas.draw()
+    (h,) = tt.handle_positions()
+    assert h["kind"] == "duration"
+    end = np.array(h["data"])
+    _drag(tt, end, end + np.array([1.0, 0.0]))
+    assert all(c[0] == "drag" for c in spy.calls)
+    assert tt.editor.constraints[0].duration == pytest.approx(d0 + 1.0, abs=1e-9)
+    times = np.asarray(tt.result.times[0])
+    assert times[60] - times[0] == pytest.approx(d0 + 1.0, abs=1e-6), "hard duration: exact"
+    assert "Duration #0" in _status(tt)
+
+
+def test_sync_links_are_drawn_and_follow_the_warp(walks):
+    tt = TimeTrackEditor(walks, [Sync(1, 30, 0, 50, hard=True)])
+    link = tt._syncs.get_xydata()
+    assert link.shape == (3, 2)
+    assert link[0][0] == pytest.approx(link[1][0], abs=1e-6), "synchronized frames share a reference time"
+    assert tuple(link[0]) != tuple(link[1])
+
+
+def test_time_track_errors_are_shown(walks):
+    tt = TimeTrackEditor([walks[0]], [AbsoluteTime(0, 20, 20 / 30)])
+    tt.figure.canvas.draw()
+
+    def broken(index, target):
+        raise RuntimeError("no time")
+
+    tt.editor.drag = broken  # type: ignore[method-assign]
+    x = float(tt.editor.constraints[0].time)
+    _drag(tt, (x, -0.25), (x + 0.5, -0.25))
+    assert "RuntimeError" in _status(tt) and "no time" in _status(tt)
+
+
+def test_time_track_dom_classes(walks):
+    tt = TimeTrackEditor(walks)
+    assert "mocaplab-time-editor" in tt.widget._dom_classes
+    assert "mocaplab-time-status" in tt.status._dom_classes
+    assert "mocaplab-time-handles" in tt.handles_info._dom_classes
+    assert tt.ax.get_title() == "mocaplab time tracks"
+    assert [t.get_text() for t in tt.ax.get_yticklabels()] == ["0: 16_15", "1: 02_01"]

@@ -70,3 +70,37 @@ Energy (:mod:`mocaplab.editing.energy`)
 """
 
 from __future__ import annotations
+
+from .constraints import (
+    AbsoluteTime,
+    Constraint,
+    ConstraintError,
+    Duration,
+    EndEffectorConstraint,
+    PinDirection,
+    PinPosition,
+    Relative,
+    Sync,
+)
+from .energy import Energies, deformation_energy
+from .paths import MotionPath, stationary_segments
+from .scene import EditResult, SceneEditor, edit
+
+__all__ = [
+    "AbsoluteTime",
+    "Constraint",
+    "ConstraintError",
+    "Duration",
+    "EditResult",
+    "EndEffectorConstraint",
+    "Energies",
+    "MotionPath",
+    "PinDirection",
+    "PinPosition",
+    "Relative",
+    "SceneEditor",
+    "Sync",
+    "deformation_energy",
+    "edit",
+    "stationary_segments",
+]

@@ -1,0 +1,507 @@
+"""Spatial and temporal constraints on motion paths (Kim et al. 2009, section 3).
+
+Every constraint is a frozen dataclass whose first argument is the index of
+the character it acts on.  Each one is
+
+* **soft** (``hard=False``, the default): met in the least-squares sense with
+  weight ``weight`` (the squared residual is multiplied by ``weight``), or
+  **hard** (``hard=True``): met exactly through Lagrange multipliers;
+* **instant** (``frame=i``) or **variational** (``frame=None,
+  frames=(start, end)``, both ends included): a variational constraint is
+  approximated, as in the paper, by one instant constraint every
+  ``variational_step`` (10) frames of the interval, the last frame included.
+
+Units: ground positions ``(x, z)`` in metres, times in seconds on the shared
+reference clock.  Local frames are ``(forward, left)``: forward along the
+path tangent ``t_j = p[j+1] - p[j-1]``, left along the normal ``R t_j`` (the
+tangent turned +90 degrees about +Y).  Directions are ground vectors
+``(x, z)`` (normalised here) or yaw angles in radians, ``atan2(x, z)``.
+
+Choices where the paper leaves room
+-----------------------------------
+* Equations 1 and 2 write relative offsets as multiples of the unnormalised
+  tangent ``p[j+1] - p[j-1]``.  Users give offsets in metres instead; the
+  solver divides them by the length of that tangent on the *undeformed* path,
+  so the constraint stays linear and the metric offset follows the tangent's
+  length (which scale compensation keeps close to the original).
+* :class:`PinDirection` and the ``direction`` of :class:`Relative` fix the
+  direction of the path tangent; its length is kept at the undeformed length,
+  so the character's speed there is kept.
+
+The ``target`` of a constraint is the value a user drags: the position of a
+:class:`PinPosition`, the direction of a :class:`PinDirection`, the offset of a
+:class:`Relative`, the time of an :class:`AbsoluteTime`, the duration of a
+:class:`Duration`, the offset of a :class:`Sync`.  ``c.with_target(value)``
+returns a moved copy.  Moving the target of any constraint but
+:class:`Relative` changes only right-hand sides of the solver's systems (no
+refactorisation).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+
+__all__ = [
+    "Constraint",
+    "PinPosition",
+    "PinDirection",
+    "Relative",
+    "AbsoluteTime",
+    "Duration",
+    "Sync",
+    "EndEffectorConstraint",
+    "ConstraintError",
+    "SPATIAL",
+    "TEMPORAL",
+    "direction_vector",
+]
+
+
+class ConstraintError(ValueError):
+    """Constraints that cannot be met: conflicting, redundant or ill-posed.
+
+    Attributes
+    ----------
+    constraints : tuple
+        The offending constraints (user constraints, or descriptions such as
+        ``"rigid stationary segment of character 0, frames 300-346"``).
+    indices : tuple of int
+        Their indices in the scene's constraint list (automatic constraints
+        have no index and are left out).
+    """
+
+    def __init__(self, message: str, constraints: Sequence[Any] = (), indices: Sequence[int] = ()) -> None:
+        super().__init__(message)
+        self.constraints = tuple(constraints)
+        self.indices = tuple(int(i) for i in indices)
+
+
+def direction_vector(direction: Any, *, name: str = "direction") -> tuple[float, float]:
+    """A unit ground direction ``(x, z)`` from a yaw angle or a 2-vector."""
+    arr = np.asarray(direction, dtype=float)
+    if arr.ndim == 0:
+        a = float(arr)
+        if not math.isfinite(a):
+            raise ValueError(f"Expected a finite angle for `{name}`, got {direction!r}")
+        return (math.sin(a), math.cos(a))
+    if arr.shape != (2,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"Expected `{name}` as a yaw angle or a finite (x, z) pair, got {direction!r}")
+    n = float(np.hypot(arr[0], arr[1]))
+    if n < 1e-12:
+        raise ValueError(f"Expected a non-zero `{name}` vector, got {direction!r}")
+    return (float(arr[0] / n), float(arr[1] / n))
+
+
+def _pair(value: Any, name: str) -> tuple[float, float]:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (2,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"Expected `{name}` as a finite pair of numbers, got {value!r}")
+    return (float(arr[0]), float(arr[1]))
+
+
+def _scalar(value: Any, name: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"Expected `{name}` as a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"Expected a finite `{name}`, got {value!r}")
+    return v
+
+
+def _index(value: Any, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"Expected `{name}` as an integer, got {type(value).__name__} {value!r}")
+    if value < 0:
+        raise ValueError(f"Expected `{name}` >= 0, got {value}")
+    return int(value)
+
+
+def _interval(value: Any, name: str) -> tuple[int, int]:
+    try:
+        a, b = value
+    except (TypeError, ValueError):
+        raise ValueError(f"Expected `{name}` as a (start, end) pair of frames, got {value!r}") from None
+    a, b = _index(a, f"{name}[0]"), _index(b, f"{name}[1]")
+    if b <= a:
+        raise ValueError(f"Degenerate interval `{name}`={value!r}: expected start < end")
+    return (a, b)
+
+
+def _sample(start: int, end: int, step: int) -> list[int]:
+    out = list(range(start, end + 1, step))
+    if out[-1] != end:
+        out.append(end)
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class Constraint:
+    """Common base: ``character``, ``frame`` / ``frames``, ``hard``, ``weight``."""
+
+    kind: ClassVar[str] = ""  # "space" or "time"
+    target_name: ClassVar[str] = ""
+    target_in_matrix: ClassVar[bool] = False
+
+    def _check_common(self, *, allow_variational: bool = True) -> None:
+        object.__setattr__(self, "character", _index(self.character, "character"))
+        frame = self.frame
+        frames = getattr(self, "frames", None)
+        if frame is None and frames is None:
+            raise ValueError(f"{type(self).__name__}: give `frame` (instant) or `frames=(start, end)` (variational)")
+        if frame is not None and frames is not None:
+            raise ValueError(f"{type(self).__name__}: give either `frame` or `frames`, not both")
+        if frame is not None:
+            object.__setattr__(self, "frame", _index(frame, "frame"))
+        else:
+            if not allow_variational:
+                raise ValueError(f"{type(self).__name__} has no variational form: give `frame`")
+            object.__setattr__(self, "frames", _interval(frames, "frames"))
+        if not isinstance(self.hard, (bool, np.bool_)):
+            raise TypeError(f"Expected `hard` as a bool, got {self.hard!r}")
+        object.__setattr__(self, "hard", bool(self.hard))
+        w = _scalar(self.weight, "weight")
+        if w <= 0:
+            raise ValueError(f"Expected `weight` > 0, got {self.weight!r}")
+        object.__setattr__(self, "weight", w)
+
+    # ----------------------------------------------------------- interface
+    @property
+    def characters(self) -> tuple[int, ...]:
+        """Indices of the characters this constraint involves."""
+        other = getattr(self, "other", None)
+        return (self.character,) if other is None else (self.character, other)
+
+    @property
+    def variational(self) -> bool:
+        return getattr(self, "frames", None) is not None
+
+    @property
+    def target(self) -> Any:
+        """The draggable value (see the module docstring)."""
+        return getattr(self, self.target_name)
+
+    def with_target(self, new_target: Any) -> Constraint:
+        """A copy with the target moved (validated again)."""
+        return dataclasses.replace(self, **{self.target_name: new_target})
+
+    def frame_refs(self) -> list[tuple[int, int]]:
+        """Every ``(character, frame)`` this constraint reads (for range checks)."""
+        raise NotImplementedError
+
+    def samples(self, step: int = 10) -> list[tuple[int, ...]]:
+        """Frame tuples of the instant constraints this one stands for."""
+        raise NotImplementedError
+
+    def structure(self) -> tuple[Any, ...]:
+        """Everything that enters the solver's matrix (a drag keeps it)."""
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        if not self.target_in_matrix:
+            fields.pop(self.target_name)
+        return (type(self).__name__,) + tuple(sorted(fields.items()))
+
+
+@dataclasses.dataclass(frozen=True)
+class PinPosition(Constraint):
+    """Pin the root of ``character`` at ``frame`` to ground point ``position`` (x, z), metres.
+
+    Examples
+    --------
+    >>> PinPosition(0, 10, (1.0, 2.0), hard=True).position
+    (1.0, 2.0)
+    >>> PinPosition(0, None, (0.0, 0.0), frames=(0, 30)).samples()
+    [(0,), (10,), (20,), (30,)]
+    """
+
+    character: int
+    frame: int | None
+    position: tuple[float, float]
+    _: dataclasses.KW_ONLY
+    hard: bool = False
+    weight: float = 1.0
+    frames: tuple[int, int] | None = None
+
+    kind: ClassVar[str] = "space"
+    target_name: ClassVar[str] = "position"
+
+    def __post_init__(self) -> None:
+        self._check_common()
+        object.__setattr__(self, "position", _pair(self.position, "position"))
+
+    def frame_refs(self) -> list[tuple[int, int]]:
+        return [(self.character, f[0]) for f in self.samples(1_000_000)]
+
+    def samples(self, step: int = 10) -> list[tuple[int, ...]]:
+        if self.frames is None:
+            return [(self.frame,)]
+        return [(f,) for f in _sample(*self.frames, step)]
+
+
+@dataclasses.dataclass(frozen=True)
+class PinDirection(Constraint):
+    """Pin the path direction (tangent) of ``character`` at ``frame``.
+
+    ``direction`` is a ground vector ``(x, z)`` or a yaw angle (radians);
+    stored as a unit vector.  The tangent keeps its undeformed length.
+    """
+
+    character: int
+    frame: int | None
+    direction: Any
+    _: dataclasses.KW_ONLY
+    hard: bool = False
+    weight: float = 1.0
+    frames: tuple[int, int] | None = None
+
+    kind: ClassVar[str] = "space"
+    target_name: ClassVar[str] = "direction"
+
+    def __post_init__(self) -> None:
+        self._check_common()
+        object.__setattr__(self, "direction", direction_vector(self.direction))
+
+    def frame_refs(self) -> list[tuple[int, int]]:
+        return [(self.character, f[0]) for f in self.samples(1_000_000)]
+
+    def samples(self, step: int = 10) -> list[tuple[int, ...]]:
+        if self.frames is None:
+            return [(self.frame,)]
+        return [(f,) for f in _sample(*self.frames, step)]
+
+
+def _paired_samples(
+    frame: int | None,
+    frames: tuple[int, int] | None,
+    other_frame: int | None,
+    other_frames: tuple[int, int] | None,
+    step: int,
+) -> list[tuple[int, int]]:
+    if frames is None:
+        return [(int(frame), int(other_frame))]  # type: ignore[arg-type]
+    own = _sample(frames[0], frames[1], step)
+    if other_frames is None:
+        return [(f, f) for f in own]
+    a0, a1 = frames
+    b0, b1 = other_frames
+    return [(f, int(round(b0 + (f - a0) * (b1 - b0) / (a1 - a0)))) for f in own]
+
+
+@dataclasses.dataclass(frozen=True)
+class Relative(Constraint):
+    """Root of ``character`` at ``frame`` relative to ``other`` at ``other_frame`` (eqs. 1, 2).
+
+    Parameters
+    ----------
+    offset : (forward, left), metres
+        Position of ``character`` in the moving tangent frame of ``other``.
+    direction : (forward, left) or yaw angle, optional
+        Path direction of ``character`` in that frame (``None``: free).
+    frames, other_frames : (start, end), optional
+        Variational form: ``frames`` of ``character`` matched linearly to
+        ``other_frames`` of ``other`` (default: the same frame numbers).
+
+    Drag target: ``offset``.  The offset enters the matrix, so moving it
+    refactorises (still fast; positions pins are the cheap drag).
+    """
+
+    character: int
+    frame: int | None
+    other: int
+    other_frame: int | None
+    offset: tuple[float, float]
+    _: dataclasses.KW_ONLY
+    direction: Any = None
+    hard: bool = False
+    weight: float = 1.0
+    frames: tuple[int, int] | None = None
+    other_frames: tuple[int, int] | None = None
+
+    kind: ClassVar[str] = "space"
+    target_name: ClassVar[str] = "offset"
+    target_in_matrix: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        self._check_common()
+        object.__setattr__(self, "other", _index(self.other, "other"))
+        object.__setattr__(self, "offset", _pair(self.offset, "offset"))
+        if self.direction is not None:
+            object.__setattr__(self, "direction", direction_vector(self.direction))
+        if self.frames is None:
+            if self.other_frame is None:
+                raise ValueError("Relative: instant form needs `other_frame`")
+            if self.other_frames is not None:
+                raise ValueError("Relative: `other_frames` goes with `frames` (variational), not with `frame`")
+            object.__setattr__(self, "other_frame", _index(self.other_frame, "other_frame"))
+        else:
+            if self.other_frame is not None:
+                raise ValueError("Relative: variational form takes `other_frames=(start, end)`, not `other_frame`")
+            if self.other_frames is not None:
+                object.__setattr__(self, "other_frames", _interval(self.other_frames, "other_frames"))
+        if self.other == self.character and self.samples(1)[0][0] == self.samples(1)[0][1]:
+            raise ValueError("Relative: a character cannot be placed relative to itself at the same frame")
+
+    def frame_refs(self) -> list[tuple[int, int]]:
+        out = []
+        for a, b in self.samples(1_000_000):
+            out += [(self.character, a), (self.other, b)]
+        return out
+
+    def samples(self, step: int = 10) -> list[tuple[int, ...]]:
+        return _paired_samples(self.frame, self.frames, self.other_frame, self.other_frames, step)  # type: ignore[return-value]
+
+
+@dataclasses.dataclass(frozen=True)
+class AbsoluteTime(Constraint):
+    """Frame ``frame`` of ``character`` happens at reference time ``time`` (s): ``t_i = time``.
+
+    Variational form ``frames=(start, end)``: frame ``start`` at ``time`` and
+    the interval played at its original speed (``t_i = time + (i - start) h``).
+    """
+
+    character: int
+    frame: int | None
+    time: float
+    _: dataclasses.KW_ONLY
+    hard: bool = False
+    weight: float = 1.0
+    frames: tuple[int, int] | None = None
+
+    kind: ClassVar[str] = "time"
+    target_name: ClassVar[str] = "time"
+
+    def __post_init__(self) -> None:
+        self._check_common()
+        object.__setattr__(self, "time", _scalar(self.time, "time"))
+
+    def frame_refs(self) -> list[tuple[int, int]]:
+        return [(self.character, f[0]) for f in self.samples(1_000_000)]
+
+    def samples(self, step: int = 10) -> list[tuple[int, ...]]:
+        if self.frames is None:
+            return [(self.frame,)]
+        return [(f,) for f in _sample(*self.frames, step)]
+
+
+@dataclasses.dataclass(frozen=True)
+class Duration(Constraint):
+    """Frames ``frame`` to ``end_frame`` of ``character`` last ``duration`` s: ``t_end - t_frame = duration``."""
+
+    character: int
+    frame: int
+    end_frame: int
+    duration: float
+    _: dataclasses.KW_ONLY
+    hard: bool = False
+    weight: float = 1.0
+
+    kind: ClassVar[str] = "time"
+    target_name: ClassVar[str] = "duration"
+
+    def __post_init__(self) -> None:
+        if self.frame is None:
+            raise ValueError("Duration has no variational form: give `frame` and `end_frame`")
+        self._check_common(allow_variational=False)
+        object.__setattr__(self, "end_frame", _index(self.end_frame, "end_frame"))
+        if self.end_frame <= self.frame:
+            raise ValueError(
+                f"Degenerate interval for Duration: expected frame < end_frame, got {self.frame} and {self.end_frame}"
+            )
+        d = _scalar(self.duration, "duration")
+        if d <= 0:
+            raise ValueError(f"Expected `duration` > 0 s, got {self.duration!r}")
+        object.__setattr__(self, "duration", d)
+
+    @property
+    def frames(self) -> None:  # no variational form
+        return None
+
+    def frame_refs(self) -> list[tuple[int, int]]:
+        return [(self.character, self.frame), (self.character, self.end_frame)]
+
+    def samples(self, step: int = 10) -> list[tuple[int, ...]]:
+        return [(self.frame, self.end_frame)]
+
+
+@dataclasses.dataclass(frozen=True)
+class Sync(Constraint):
+    """Synchronise two characters: ``t[frame] = t_other[other_frame] + offset`` (s).
+
+    Variational form: ``frames`` of ``character`` matched linearly to
+    ``other_frames`` of ``other`` (default: the same frame numbers).
+    """
+
+    character: int
+    frame: int | None
+    other: int
+    other_frame: int | None
+    _: dataclasses.KW_ONLY
+    offset: float = 0.0
+    hard: bool = False
+    weight: float = 1.0
+    frames: tuple[int, int] | None = None
+    other_frames: tuple[int, int] | None = None
+
+    kind: ClassVar[str] = "time"
+    target_name: ClassVar[str] = "offset"
+
+    def __post_init__(self) -> None:
+        self._check_common()
+        object.__setattr__(self, "other", _index(self.other, "other"))
+        object.__setattr__(self, "offset", _scalar(self.offset, "offset"))
+        if self.frames is None:
+            if self.other_frame is None:
+                raise ValueError("Sync: instant form needs `other_frame`")
+            object.__setattr__(self, "other_frame", _index(self.other_frame, "other_frame"))
+        else:
+            if self.other_frame is not None:
+                raise ValueError("Sync: variational form takes `other_frames=(start, end)`, not `other_frame`")
+            if self.other_frames is not None:
+                object.__setattr__(self, "other_frames", _interval(self.other_frames, "other_frames"))
+        if self.other == self.character:
+            s = self.samples(1)[0]
+            if s[0] == s[1]:
+                raise ValueError("Sync: a frame cannot be synchronised with itself")
+
+    def frame_refs(self) -> list[tuple[int, int]]:
+        out = []
+        for a, b in self.samples(1_000_000):
+            out += [(self.character, a), (self.other, b)]
+        return out
+
+    def samples(self, step: int = 10) -> list[tuple[int, ...]]:
+        return _paired_samples(self.frame, self.frames, self.other_frame, self.other_frames, step)  # type: ignore[return-value]
+
+
+@dataclasses.dataclass(frozen=True)
+class EndEffectorConstraint:
+    """An end-effector constraint of :mod:`mocaplab.refine` attached to ``character``.
+
+    Path editing ignores it; the scene records it (``EditResult.end_effectors``)
+    and hands it to :func:`mocaplab.refine.refine` for full-body refinement
+    (Kim et al. 2009, section 4.3).  Frames inside ``constraint`` refer to the
+    character's own frames.
+    """
+
+    character: int
+    constraint: Any
+
+    kind: ClassVar[str] = "body"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "character", _index(self.character, "character"))
+
+    @property
+    def characters(self) -> tuple[int, ...]:
+        return (self.character,)
+
+    def frame_refs(self) -> list[tuple[int, int]]:
+        return []
+
+
+SPATIAL = (PinPosition, PinDirection, Relative)
+TEMPORAL = (AbsoluteTime, Duration, Sync)

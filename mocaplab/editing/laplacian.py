@@ -1,0 +1,612 @@
+"""Laplacian path editing in space (Kim et al. 2009, sections 4.1 and 4.2).
+
+Unknowns: the ground positions of every frame of every character, stacked
+in one vector ``p`` (character after character, frame after frame, ``x``
+then ``z``), so one sparse system edits the whole scene at once.
+
+Phase 1, shape preservation (equations 3 to 6)
+    minimise ``|A p|^2 + |B p - b|^2_W`` subject to ``H p = h``, where
+    ``A p = 0`` keeps each interior frame's Laplacian coordinates (eq. 3), ``B``
+    holds the soft constraints (rows scaled by the square root of their
+    weights) and ``H`` the hard ones.  The KKT system (eq. 6) is factorised
+    with SuperLU (:func:`scipy.sparse.linalg.splu`).
+Phase 2, scale compensation (equation 7)
+    ``v_i - v_{i-1} = vbar_i - vbar_{i-1}`` with ``vbar_i`` the phase-1 segment
+    ``pbar_{i+1} - pbar_i`` rescaled to its undeformed length: the matrix is
+    the fixed second-difference operator; only the right-hand side depends on
+    phase 1, so both phases are factorised once per constraint *structure*.
+Stationary sub-paths (section 4.2)
+    the equation-3 rows of their interior frames become hard constraints in
+    both phases (the segment moves as a similarity; phase 2's length terms keep
+    its scale), so a standing character does not skate.
+Tangent flips (section 4.2)
+    detected after the solve from jumps of ``phi_i = angle(t_i, that_i)``
+    between successive frames, and repaired (for the heading) by linear
+    interpolation of the neighbouring tangent directions.  The positions are
+    not changed, so the matrix never depends on the flips.
+
+Regularisation (our choice): ``regularization * |p - p_ref|^2`` is added to both
+phases (``p_ref``: the undeformed path in phase 1, the phase-1 result in
+phase 2), default 1e-8.  It makes the normal matrix positive definite when a
+character is under-constrained (a character with no constraint keeps its
+path; one tied by a single relative constraint keeps its orientation), and it
+is negligible against every other term.
+
+A drag that moves a target changes only ``b`` and ``h``: an update is two
+back-substitutions plus O(F) vector work.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from numpy.typing import NDArray
+
+from .constraints import ConstraintError, PinDirection, PinPosition, Relative
+from .paths import MotionPath, central_tangents, ground_angle, laplacian_coordinates, rot90, wrap_angle
+
+__all__ = [
+    "Layout",
+    "Rows",
+    "KKT",
+    "SpatialSolver",
+    "spatial_rows",
+    "shape_matrix",
+    "scale_matrix",
+    "rigid_rows",
+    "detect_tangent_flips",
+    "heading_changes",
+]
+
+Array = NDArray[np.float64]
+
+
+@dataclasses.dataclass(frozen=True)
+class Layout:
+    """Where each character's frames sit in the stacked unknown vectors.
+
+    ``offsets[k]`` is the global frame index of character ``k``'s frame 0;
+    spatial unknown ``2 * (offsets[k] + i) + c`` is coordinate ``c`` (0: x,
+    1: z) of frame ``i``; temporal unknown ``offsets[k] + i`` its time.
+    """
+
+    n_frames: tuple[int, ...]
+
+    @property
+    def offsets(self) -> NDArray[np.int64]:
+        return np.concatenate([[0], np.cumsum(self.n_frames)]).astype(np.int64)
+
+    @property
+    def total(self) -> int:
+        return int(sum(self.n_frames))
+
+    def frame(self, k: int, i: int) -> int:
+        return int(self.offsets[k]) + int(i)
+
+    def character_of(self) -> NDArray[np.int64]:
+        """Character index of every global frame, shape (total,)."""
+        return np.repeat(np.arange(len(self.n_frames)), self.n_frames)
+
+    def interior(self) -> NDArray[np.int64]:
+        """Global indices of frames with both neighbours in the same character."""
+        off = self.offsets
+        return np.concatenate([np.arange(off[k] + 1, off[k + 1] - 1) for k in range(len(self.n_frames))]).astype(
+            np.int64
+        )
+
+    def steps(self) -> NDArray[np.int64]:
+        """Global indices ``g`` of within-character steps ``g -> g + 1``."""
+        off = self.offsets
+        return np.concatenate([np.arange(off[k], off[k + 1] - 1) for k in range(len(self.n_frames))]).astype(np.int64)
+
+
+@dataclasses.dataclass
+class Rows:
+    """Linear rows ``sum(vals * x[cols]) = rhs`` produced by one constraint."""
+
+    cols: list[NDArray[np.int64]]
+    vals: list[Array]
+    rhs: Array
+
+    @property
+    def n(self) -> int:
+        return len(self.cols)
+
+
+def assemble(rows: Sequence[Rows], n: int, scales: Sequence[float] | None = None) -> tuple[sp.csr_matrix, Array]:
+    """Stack rows into a sparse matrix and right-hand side (each block scaled)."""
+    cols, vals, ridx, rhs = [], [], [], []
+    r = 0
+    for b, block in enumerate(rows):
+        s = 1.0 if scales is None else scales[b]
+        for c, v in zip(block.cols, block.vals, strict=True):
+            cols.append(c)
+            vals.append(v * s)
+            ridx.append(np.full(len(c), r))
+            r += 1
+        rhs.append(block.rhs * s)
+    if r == 0:
+        return sp.csr_matrix((0, n)), np.zeros(0)
+    m = sp.csr_matrix((np.concatenate(vals), (np.concatenate(ridx), np.concatenate(cols))), shape=(r, n))
+    m.sum_duplicates()
+    return m, np.concatenate(rhs)
+
+
+# --------------------------------------------------------------- matrices
+def shape_matrix(paths: Sequence[MotionPath], layout: Layout) -> sp.csr_matrix:
+    """Block-diagonal ``A`` of equation 4: two rows (x, z) per interior frame."""
+    g = layout.interior()
+    coords = np.concatenate([laplacian_coordinates(p.positions)[1:-1] for p in paths])
+    x, y = coords[:, 0], coords[:, 1]
+    r = np.arange(len(g))
+    one = np.ones(len(g))
+    # x row: p_i.x - p_{i-1}.x - x (dx) - y (dz),  d = p_{i+1} - p_{i-1}
+    # z row: p_i.z - p_{i-1}.z - x (dz) + y (dx)
+    rx, rz = 2 * r, 2 * r + 1
+    X = lambda f: 2 * f  # noqa: E731
+    Z = lambda f: 2 * f + 1  # noqa: E731
+    rows = [rx, rx, rx, rx, rx, rx, rz, rz, rz, rz, rz, rz]
+    cols = [
+        X(g),
+        X(g - 1),
+        X(g + 1),
+        X(g - 1),
+        Z(g + 1),
+        Z(g - 1),
+        Z(g),
+        Z(g - 1),
+        Z(g + 1),
+        Z(g - 1),
+        X(g + 1),
+        X(g - 1),
+    ]
+    vals = [one, -one, -x, x, -y, y, one, -one, -x, x, y, -y]
+    m = sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(2 * len(g), 2 * layout.total)
+    )
+    m.sum_duplicates()
+    return m
+
+
+def scale_matrix(layout: Layout) -> sp.csr_matrix:
+    """Block-diagonal second-difference matrix of equation 7 (two rows per interior frame)."""
+    g = layout.interior()
+    r = np.arange(len(g))
+    rows, cols, vals = [], [], []
+    for c in (0, 1):
+        for df, v in ((-1, 1.0), (0, -2.0), (1, 1.0)):
+            rows.append(2 * r + c)
+            cols.append(2 * (g + df) + c)
+            vals.append(np.full(len(g), v))
+    return sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(2 * len(g), 2 * layout.total)
+    )
+
+
+def rigid_rows(
+    A: sp.csr_matrix, layout: Layout, segments: Sequence[Sequence[tuple[int, int]]]
+) -> tuple[sp.csr_matrix, list[tuple[str, NDArray[np.int64]]]]:
+    """Rows of ``A`` for the interior frames of stationary segments, as hard rows.
+
+    Returns the row block and, for error messages, one ``(label, row indices)``
+    group per segment.
+    """
+    g_int = layout.interior()
+    pos = np.full(layout.total, -1, dtype=np.int64)
+    pos[g_int] = np.arange(len(g_int))
+    picks: list[NDArray[np.int64]] = []
+    groups: list[tuple[str, NDArray[np.int64]]] = []
+    n = 0
+    for k, segs in enumerate(segments):
+        for a, b in segs:
+            frames = layout.frame(k, 0) + np.arange(a + 1, b - 1)
+            r = pos[frames]
+            r = r[r >= 0]
+            if len(r) == 0:
+                continue
+            rr = np.stack([2 * r, 2 * r + 1], axis=1).reshape(-1)
+            picks.append(rr)
+            groups.append((f"rigid stationary segment of character {k}, frames {a}-{b - 1}", np.arange(n, n + len(rr))))
+            n += len(rr)
+    if not picks:
+        return sp.csr_matrix((0, A.shape[1])), []
+    return A[np.concatenate(picks)].tocsr(), groups
+
+
+# ------------------------------------------------------------ constraints
+class _TangentRows:
+    """Cached rows of each path's tangent operator."""
+
+    def __init__(self, paths: Sequence[MotionPath]) -> None:
+        self.paths = paths
+        self._ops: dict[int, sp.csr_matrix] = {}
+
+    def row(self, k: int, i: int) -> tuple[NDArray[np.int64], Array]:
+        if k not in self._ops:
+            self._ops[k] = self.paths[k].tangent_operator()
+        op = self._ops[k]
+        s, e = op.indptr[i], op.indptr[i + 1]
+        return op.indices[s:e].astype(np.int64), op.data[s:e].astype(float)
+
+
+def spatial_rows(c: Any, paths: Sequence[MotionPath], layout: Layout, tangents: _TangentRows, step: int) -> Rows:
+    """The linear rows (unweighted) of one spatial constraint."""
+    off = layout.offsets
+    cols: list[NDArray[np.int64]] = []
+    vals: list[Array] = []
+    rhs: list[float] = []
+
+    def var(k: int, i: Any, coord: int) -> Any:
+        return 2 * (off[k] + np.asarray(i)) + coord
+
+    for sample in c.samples(step):
+        if isinstance(c, PinPosition):
+            (i,) = sample
+            for coord in (0, 1):
+                cols.append(np.array([var(c.character, i, coord)]))
+                vals.append(np.array([1.0]))
+                rhs.append(c.position[coord])
+        elif isinstance(c, PinDirection):
+            (i,) = sample
+            fr, w = tangents.row(c.character, i)
+            L = float(np.linalg.norm(paths[c.character].tangents[i]))
+            for coord in (0, 1):
+                cols.append(var(c.character, fr, coord))
+                vals.append(w)
+                rhs.append(L * c.direction[coord])
+        elif isinstance(c, Relative):
+            i, j = sample
+            a, b = c.character, c.other
+            fb, wb = tangents.row(b, j)
+            Lb = float(np.linalg.norm(paths[b].tangents[j]))
+            cx, cy = c.offset[0] / Lb, c.offset[1] / Lb
+            # x: pa.x - pb.x - cx T.x - cy T.z = 0 ; z: pa.z - pb.z - cx T.z + cy T.x = 0
+            cols.append(np.concatenate([[var(a, i, 0), var(b, j, 0)], var(b, fb, 0), var(b, fb, 1)]))
+            vals.append(np.concatenate([[1.0, -1.0], -cx * wb, -cy * wb]))
+            cols.append(np.concatenate([[var(a, i, 1), var(b, j, 1)], var(b, fb, 1), var(b, fb, 0)]))
+            vals.append(np.concatenate([[1.0, -1.0], -cx * wb, cy * wb]))
+            rhs += [0.0, 0.0]
+            if c.direction is not None:
+                fa, wa = tangents.row(a, i)
+                La = float(np.linalg.norm(paths[a].tangents[i]))
+                dx, dy = c.direction[0] * La / Lb, c.direction[1] * La / Lb
+                cols.append(np.concatenate([var(a, fa, 0), var(b, fb, 0), var(b, fb, 1)]))
+                vals.append(np.concatenate([wa, -dx * wb, -dy * wb]))
+                cols.append(np.concatenate([var(a, fa, 1), var(b, fb, 1), var(b, fb, 0)]))
+                vals.append(np.concatenate([wa, -dx * wb, dy * wb]))
+                rhs += [0.0, 0.0]
+        else:  # pragma: no cover - filtered by the scene
+            raise TypeError(f"not a spatial constraint: {c!r}")
+    return Rows([np.asarray(x, dtype=np.int64).reshape(-1) for x in cols], vals, np.asarray(rhs, dtype=float))
+
+
+# -------------------------------------------------------------------- KKT
+def _dependent_groups(H: sp.csr_matrix, groups: Sequence[tuple[Any, NDArray[np.int64]]]) -> list[int] | None:
+    """Indices of a minimal set of row groups of ``H`` that are linearly dependent (None if H has full row rank)."""
+
+    def rank_def(sel: Sequence[int]) -> bool:
+        rows = np.concatenate([groups[s][1] for s in sel]) if sel else np.zeros(0, np.int64)
+        if len(rows) == 0:
+            return False
+        sub = H[rows]
+        cols = np.unique(sub.indices)
+        dense = sub[:, cols].toarray()
+        if dense.shape[0] > dense.shape[1]:
+            return True
+        return bool(np.linalg.matrix_rank(dense) < dense.shape[0])
+
+    # split into components of groups that share unknowns; check each alone
+    parent = list(range(len(groups)))
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    owner: dict[int, int] = {}
+    for gi, (_, rows) in enumerate(groups):
+        for col in np.unique(H[rows].indices):
+            col = int(col)
+            if col in owner:
+                ra, rb = find(owner[col]), find(gi)
+                if ra != rb:
+                    parent[rb] = ra
+            else:
+                owner[col] = gi
+    comps: dict[int, list[int]] = {}
+    for gi in range(len(groups)):
+        comps.setdefault(find(gi), []).append(gi)
+    for order in comps.values():
+        if len(order) == 1 and not rank_def(order):
+            continue
+        found = _minimal_dependent(order, rank_def)
+        if found is not None:
+            return found
+    return None
+
+
+def _minimal_dependent(order: list[int], rank_def: Any) -> list[int] | None:
+    if not rank_def(order):
+        return None
+    chosen: list[int] = []
+    culprit = None
+    for g in order:
+        if rank_def(chosen + [g]):
+            culprit = g
+            break
+        chosen.append(g)
+    if culprit is None:  # pragma: no cover - numerical corner
+        return order
+    needed = list(chosen)
+    for e in reversed(chosen):
+        trial = [x for x in needed if x != e]
+        if rank_def(trial + [culprit]):
+            needed = trial
+    return needed + [culprit]
+
+
+def check_hard_rows(H: sp.csr_matrix, groups: Sequence[tuple[Any, NDArray[np.int64]]], what: str) -> None:
+    """Raise :class:`ConstraintError` if the hard rows are linearly dependent.
+
+    ``groups`` are ``(label, rows)`` pairs where label is ``(index, constraint)``
+    for user constraints or a string for automatic ones.
+    """
+    if H.shape[0] == 0:
+        return
+    bad = _dependent_groups(H, groups)
+    if bad is None:
+        return
+    labels = [groups[b][0] for b in bad]
+    named = []
+    cons, idx = [], []
+    for lab in labels:
+        if isinstance(lab, tuple):
+            idx.append(lab[0])
+            cons.append(lab[1])
+            named.append(f"#{lab[0]} {lab[1]!r}")
+        else:
+            cons.append(lab)
+            named.append(str(lab))
+    raise ConstraintError(
+        f"Conflicting or redundant hard {what} constraints (linearly dependent, cannot all hold exactly): "
+        + "; ".join(named)
+        + ". Make one of them soft (hard=False) or remove it.",
+        cons,
+        idx,
+    )
+
+
+class KKT:
+    """A factorised augmented system ``[[N, H^T], [H, 0]]`` (equations 6 and 9).
+
+    Parameters
+    ----------
+    N : sparse (n, n)
+        Symmetric positive definite normal matrix.
+    H : sparse (m, n)
+        Hard constraint rows (full row rank: check with :func:`check_hard_rows`).
+    """
+
+    def __init__(self, N: sp.spmatrix, H: sp.spmatrix) -> None:
+        self.n = N.shape[0]
+        self.m = H.shape[0]
+        if self.m:
+            K = sp.bmat([[N, H.T], [H, None]], format="csc")
+        else:
+            K = sp.csc_matrix(N)
+        try:
+            self.lu = spla.splu(K, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+        except RuntimeError as exc:  # exactly singular
+            raise ConstraintError(f"The editing system is singular ({exc}); check the hard constraints") from None
+
+    def solve(self, r: Array, h: Array) -> Array:
+        rhs = np.concatenate([r, h]) if self.m else r
+        x = self.lu.solve(rhs)
+        return x[: self.n]
+
+
+# ----------------------------------------------------------------- solver
+@dataclasses.dataclass
+class SpatialFactors:
+    """Both phases' factorisations for one constraint structure."""
+
+    shape: KKT
+    scale: KKT | None
+    Bw: sp.csr_matrix
+    BwT: sp.csr_matrix
+    H: sp.csr_matrix  # user hard rows followed by rigid rows
+
+
+class SpatialSolver:
+    """Constant parts of the spatial problem for one set of characters.
+
+    Parameters
+    ----------
+    paths : sequence of MotionPath
+    segments : sequence of list of (start, stop)
+        Stationary segments per character (made rigid).
+    regularization : float
+    scale_compensation : bool
+    """
+
+    def __init__(
+        self,
+        paths: Sequence[MotionPath],
+        segments: Sequence[Sequence[tuple[int, int]]],
+        *,
+        regularization: float = 1e-8,
+        scale_compensation: bool = True,
+    ) -> None:
+        self.paths = list(paths)
+        self.layout = Layout(tuple(p.n_frames for p in paths))
+        self.p0 = np.concatenate([p.positions for p in paths]).reshape(-1)
+        self.A = shape_matrix(paths, self.layout)
+        self.AtA = (self.A.T @ self.A).tocsr()
+        self.Ahat = scale_matrix(self.layout)
+        self.AhatT = self.Ahat.T.tocsr()
+        self.AhtAh = (self.AhatT @ self.Ahat).tocsr()
+        self.R, self.rigid_groups = rigid_rows(self.A, self.layout, segments)
+        self.segments = [list(s) for s in segments]
+        self.eps = float(regularization)
+        self.scale_compensation = bool(scale_compensation)
+        self.tangent_rows = _TangentRows(self.paths)
+        # phase-2 helpers: undeformed segment lengths of within-character steps
+        steps = self.layout.steps()
+        P0 = self.p0.reshape(-1, 2)
+        self._steps = steps
+        self._L0 = np.linalg.norm(P0[steps + 1] - P0[steps], axis=1)
+        self._interior = self.layout.interior()
+        seg_of = np.full(self.layout.total, -1, dtype=np.int64)
+        seg_of[steps] = np.arange(len(steps))
+        self._seg_after = seg_of[self._interior]  # segment interior -> interior+1
+        self._seg_before = seg_of[self._interior - 1]
+        n = 2 * self.layout.total
+        self._I = sp.identity(n, format="csr") * self.eps
+
+    def factorize(
+        self, soft: Sequence[Rows], weights: Sequence[float], hard: Sequence[Rows], labels: Sequence[Any]
+    ) -> tuple[SpatialFactors, Array, Array]:
+        """Factorise both phases for a constraint structure.
+
+        Returns the factors and the (weighted) soft and hard right-hand sides.
+        """
+        n = 2 * self.layout.total
+        Bw, bw = assemble(soft, n, [float(np.sqrt(w)) for w in weights])
+        Hu, h = assemble(hard, n)
+        H = sp.vstack([Hu, self.R], format="csr")
+        groups: list[tuple[Any, NDArray[np.int64]]] = []
+        r = 0
+        for lab, block in zip(labels, hard, strict=True):
+            groups.append((lab, np.arange(r, r + block.n)))
+            r += block.n
+        for lab, rows in self.rigid_groups:
+            groups.append((lab, rows + r))
+        check_hard_rows(H, groups, "spatial")
+        BwT = Bw.T.tocsr()
+        BtB = (BwT @ Bw).tocsr()
+        shape = KKT(self.AtA + BtB + self._I, H)
+        scale = KKT(self.AhtAh + BtB + self._I, H) if self.scale_compensation else None
+        return SpatialFactors(shape, scale, Bw, BwT, H), bw, h
+
+    def solve(self, f: SpatialFactors, bw: Array, h: Array) -> tuple[Array, Array]:
+        """Phase 1 and phase 2 solutions, each shape (2 * total,)."""
+        hfull = np.concatenate([h, np.zeros(self.R.shape[0])])
+        Btb = f.BwT @ bw if len(bw) else 0.0
+        pbar = f.shape.solve(Btb + self.eps * self.p0, hfull)
+        if f.scale is None:
+            return pbar, pbar
+        rhs = self.AhatT @ self.scale_rhs(pbar)
+        phat = f.scale.solve(rhs + Btb + self.eps * pbar, hfull)
+        return pbar, phat
+
+    def scale_rhs(self, pbar: Array) -> Array:
+        """Right-hand side ``vbar_i - vbar_{i-1}`` of equation 7, shape (2 * n_interior,)."""
+        P = pbar.reshape(-1, 2)
+        seg = P[self._steps + 1] - P[self._steps]
+        ln = np.linalg.norm(seg, axis=1)
+        scale = np.divide(self._L0, ln, out=np.ones_like(ln), where=ln > 1e-15)
+        v = seg * scale[:, None]
+        return (v[self._seg_after] - v[self._seg_before]).reshape(-1)
+
+    # ---------------------------------------------------------- energies
+    def shape_energy(self, f: SpatialFactors, bw: Array, pbar: Array) -> float:
+        """Phase-1 objective ``|A p|^2 + |B p - b|^2_W`` at ``pbar``."""
+        r = self.A @ pbar
+        s = f.Bw @ pbar - bw if len(bw) else np.zeros(0)
+        return float(r @ r + s @ s)
+
+    def scale_energy(self, f: SpatialFactors, bw: Array, pbar: Array, phat: Array) -> float:
+        """Phase-2 objective ``|Ahat p - ahat|^2 + |B p - b|^2_W`` at ``phat``."""
+        r = self.Ahat @ phat - self.scale_rhs(pbar)
+        s = f.Bw @ phat - bw if len(bw) else np.zeros(0)
+        return float(r @ r + s @ s)
+
+
+# ------------------------------------------------------ tangent flipping
+def detect_tangent_flips(
+    tangents: Array, new_tangents: Array, *, threshold: float = np.pi / 2, valid: NDArray[np.bool_] | None = None
+) -> NDArray[np.bool_]:
+    """Frames whose deformed tangent flipped (section 4.2), shape (F,) bool.
+
+    ``phi_i`` is the signed angle from the undeformed tangent ``t_i`` to the
+    deformed one.  A jump ``|phi_{i+1} - phi_i| > threshold`` (between
+    successive valid frames) toggles between "flipped" and "not flipped";
+    the smaller of the two sets of frames is the flipped one.  Deformed
+    tangents of (almost) zero length count as flipped.  ``valid`` marks the
+    frames to examine (default all); others are never flipped.
+    """
+    F = len(tangents)
+    valid = np.ones(F, bool) if valid is None else np.asarray(valid, bool)
+    out = np.zeros(F, bool)
+    ln = np.linalg.norm(new_tangents, axis=1)
+    tiny = ln < 1e-9 * max(1.0, float(np.max(np.linalg.norm(tangents, axis=1), initial=0.0)))
+    idx = np.flatnonzero(valid & ~tiny)
+    out[valid & tiny] = True
+    if len(idx) < 2:
+        return out
+    phi = wrap_angle(ground_angle(new_tangents[idx]) - ground_angle(tangents[idx]))
+    jumps = np.abs(wrap_angle(np.diff(phi))) > threshold
+    if not jumps.any():
+        return out
+    state = np.concatenate([[0], np.cumsum(jumps) % 2]).astype(bool)
+    flipped = state if state.sum() <= (~state).sum() else ~state
+    out[idx[flipped]] = True
+    return out
+
+
+def _procrustes_angle(orig: Array, new: Array) -> float:
+    """Yaw angle of the best rotation taking centred ``orig`` onto centred ``new``."""
+    x = orig - orig.mean(axis=0)
+    y = new - new.mean(axis=0)
+    return float(np.arctan2(np.sum(y * rot90(x)), np.sum(y * x)))
+
+
+def heading_changes(
+    path: MotionPath,
+    new_positions: Array,
+    *,
+    segments: Sequence[tuple[int, int]] = (),
+    flip_threshold: float = np.pi / 2,
+) -> tuple[Array, NDArray[np.bool_], Array]:
+    """Turn of the tangent direction per frame after a deformation.
+
+    Returns
+    -------
+    dtheta : ndarray, shape (F,)
+        Yaw change (radians) of the path direction at each frame, continuous
+        (unwrapped).  Degenerate (stationary) and flipped frames take the
+        value interpolated from their neighbours; rigid stationary segments
+        take their best-fit rotation.
+    flipped : ndarray of bool, shape (F,)
+        Frames whose tangent flipped and was repaired.
+    tangents : ndarray, shape (F, 2)
+        Repaired unit tangent directions of the deformed path.
+    """
+    new_positions = np.asarray(new_positions, dtype=float)
+    t0 = path.tangents
+    t1 = central_tangents(new_positions)
+    valid = ~path.degenerate
+    flipped = detect_tangent_flips(t0, t1, threshold=flip_threshold, valid=valid)
+    good = valid & ~flipped
+    F = path.n_frames
+    if good.any():
+        idx = np.flatnonzero(good)
+        d = np.unwrap(wrap_angle(ground_angle(t1[idx]) - ground_angle(t0[idx])))
+        dtheta = np.interp(np.arange(F), idx, d)
+    else:
+        dtheta = np.full(F, _procrustes_angle(path.positions, new_positions))
+    for a, b in segments:
+        if b - a >= 2:
+            ang = _procrustes_angle(path.positions[a:b], new_positions[a:b])
+            ref = dtheta[a:b].mean()
+            dtheta[a:b] = ang + 2 * np.pi * np.round((ref - ang) / (2 * np.pi))
+    c, s = np.cos(dtheta), np.sin(dtheta)
+    u = t0 / np.linalg.norm(t0, axis=1, keepdims=True)
+    tang = c[:, None] * u + s[:, None] * rot90(u)
+    return dtheta, flipped, tang

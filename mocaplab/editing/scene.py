@@ -1,0 +1,765 @@
+"""Edit a scene of characters: :func:`edit` and the interactive :class:`SceneEditor`.
+
+``edit(characters, constraints)`` deforms every character's root path
+(:mod:`~mocaplab.editing.laplacian`) and time warp
+(:mod:`~mocaplab.editing.timewarp`) under the given constraints and returns an
+:class:`EditResult`.  :class:`SceneEditor` keeps the factorised systems
+between calls: dragging a constraint's target only changes right-hand sides,
+so an update costs a few back-substitutions.  ``edit`` is a one-shot
+``SceneEditor(...).result``; tests check that both agree.
+
+Back to full-body motion (``EditResult.motions``, computed on first access):
+each character's root moves to its edited ground position (height kept), its
+root orientation turns by the change of the path's tangent direction (so the
+heading relative to the path is kept), and the clip is resampled (slerp) on
+one shared reference clock from its time warp, so all characters play
+synchronised: ``motions[k]`` has one frame per clock tick ``clock[n]``,
+holding the first / last pose outside the character's own time span
+(``active[k]`` marks the ticks inside it).
+
+Options (keyword-only, for both :func:`edit` and :class:`SceneEditor`)
+----------------------------------------------------------------------
+scale_compensation : bool, default True
+    Run phase 2 (equation 7) after the shape-preserving phase.
+stationary : "auto", "speed", None, or per-character lists of (start, stop)
+    Stationary sub-paths made rigid (section 4.2).  "auto": root slower than
+    ``stationary_speed`` or both feet planted
+    (:func:`mocaplab.contacts.foot_contacts`) for at least
+    ``stationary_min_duration`` s; "speed": speed only; None: none.
+stationary_speed : float, default 0.15 (m/s)
+stationary_min_duration : float, default 0.3 (s)
+min_speed : float, default 0.1 (m/s)
+    Tangent degeneracy threshold (:class:`~mocaplab.editing.paths.MotionPath`).
+min_step, max_step : float, default 0.25 and 4.0
+    Time-step bounds as ratios of each clip's frame time (section 4.4).
+flip_threshold : float, default pi / 2
+    Tangent-flip detection threshold (radians per frame, section 4.2).
+variational_step : int, default 10
+    Sampling step of variational constraints (frames).
+regularization : float, default 1e-8
+start_times : sequence of float, optional
+    Reference time of each character's frame 0 before editing (default 0).
+clock_fps : float, optional
+    Rate of the shared clock of ``motions`` (default: character 0's fps).
+discrete : bool, default False
+    Section 5 discrete editing; delegated to :mod:`mocaplab.editing.graph`
+    (``graph.discrete_update(editor, result) -> EditResult``).
+refine : bool, default False
+    ``motions`` are the full-body refined ones (:meth:`EditResult.refined`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from collections.abc import Iterator, Sequence
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import quat
+from ..motion import Motion
+from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint
+from .energy import Energies
+from .laplacian import Rows, SpatialFactors, SpatialSolver, heading_changes, spatial_rows
+from .paths import MotionPath, laplacian_coordinates, stationary_segments
+from .timewarp import TimeFactors, TimeSolver, temporal_rows
+
+__all__ = ["edit", "SceneEditor", "EditResult"]
+
+Array = NDArray[np.float64]
+
+_OPTIONS = {
+    "scale_compensation": True,
+    "stationary": "auto",
+    "stationary_speed": 0.15,
+    "stationary_min_duration": 0.3,
+    "min_speed": 0.1,
+    "min_step": 0.25,
+    "max_step": 4.0,
+    "flip_threshold": math.pi / 2,
+    "variational_step": 10,
+    "regularization": 1e-8,
+    "start_times": None,
+    "clock_fps": None,
+    "discrete": False,
+    "refine": False,
+}
+
+
+def _characters(characters: Any) -> tuple[Motion, ...]:
+    if isinstance(characters, Motion):
+        characters = (characters,)
+    try:
+        chars = tuple(characters)
+    except TypeError:
+        raise TypeError(f"Expected `characters` as a sequence of Motion, got {type(characters).__name__}") from None
+    if not chars:
+        raise ValueError("Expected at least one character in `characters`, got none")
+    for k, m in enumerate(chars):
+        if not isinstance(m, Motion):
+            raise TypeError(f"Expected characters[{k}] to be a Motion, got {type(m).__name__}")
+        if m.n_frames < 3:
+            raise ValueError(f"Expected characters[{k}] to have at least 3 frames, got {m.n_frames}")
+    return chars
+
+
+class _Domain:
+    """One linear system (space or time) with its factorisation cache."""
+
+    def __init__(self, solver: Any, kind: str, make_rows: Any) -> None:
+        self.solver = solver
+        self.kind = kind
+        self.make_rows = make_rows
+        self.cache: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
+        self.key: tuple[Any, ...] | None = None
+        self.factors: Any = None
+        self.slices: dict[int, tuple[str, slice]] = {}
+        self.bw = np.zeros(0)
+        self.h = np.zeros(0)
+        self.factorizations = 0
+
+    def structure(self, items: Sequence[tuple[int, Any]]) -> tuple[Any, ...]:
+        return tuple((i, c.structure()) for i, c in items)
+
+    def set(self, items: Sequence[tuple[int, Any]]) -> None:
+        """Compile and factorise (or fetch from the cache) for these constraints."""
+        key = self.structure(items)
+        if key in self.cache:
+            self.cache.move_to_end(key)
+            self.key, self.factors, self.slices, ns, nh = self.cache[key]
+            bw, h = np.zeros(ns), np.zeros(nh)
+            for i, c in items:
+                self._write(bw, h, i, c)
+            self.bw, self.h = bw, h
+            return
+        soft: list[Rows] = []
+        weights: list[float] = []
+        hard: list[Rows] = []
+        labels: list[Any] = []
+        slices: dict[int, tuple[str, slice]] = {}
+        ns = nh = 0
+        for i, c in items:
+            rows = self.make_rows(c)
+            if c.hard:
+                hard.append(rows)
+                labels.append((i, c))
+                slices[i] = ("hard", slice(nh, nh + rows.n))
+                nh += rows.n
+            else:
+                soft.append(rows)
+                weights.append(c.weight)
+                slices[i] = ("soft", slice(ns, ns + rows.n))
+                ns += rows.n
+        factors, bw, h = self.solver.factorize(soft, weights, hard, labels)
+        self.factorizations += 1
+        self.key, self.factors, self.slices, self.bw, self.h = key, factors, slices, bw, h
+        self.cache[key] = (key, factors, slices, ns, nh)
+        if len(self.cache) > 4:
+            self.cache.popitem(last=False)
+
+    def _write(self, bw: Array, h: Array, i: int, c: Any) -> None:
+        which, sl = self.slices[i]
+        rhs = self.make_rows(c).rhs
+        if which == "soft":
+            bw[sl] = rhs * math.sqrt(c.weight)
+        else:
+            h[sl] = rhs
+
+    def snapshot(self) -> tuple[Any, ...]:
+        return (self.key, self.factors, self.slices, self.bw, self.h)
+
+    def restore(self, state: tuple[Any, ...]) -> None:
+        self.key, self.factors, self.slices, self.bw, self.h = state
+
+    def move(self, i: int, c: Any) -> None:
+        """Update the right-hand sides for constraint ``i``'s new target (structure unchanged)."""
+        bw, h = self.bw.copy(), self.h.copy()
+        self._write(bw, h, i, c)
+        self.bw, self.h = bw, h
+
+
+class SceneEditor:
+    """An interactive editing session over a scene of characters.
+
+    Parameters
+    ----------
+    characters : Motion or sequence of Motion
+        The input clips (never modified).
+    constraints : sequence of constraints
+        :mod:`~mocaplab.editing.constraints` objects.
+    **options
+        See the module docstring.
+
+    Notes
+    -----
+    Factorisations are cached per constraint *structure* (which constraints,
+    on which frames, hard or soft, weights, relative offsets).  :meth:`drag`
+    keeps the structure, so it costs two back-substitutions for space
+    (phases 1 and 2) or one per monotonicity round for time.  The space
+    system is not re-solved when only temporal constraints change, and vice
+    versa.
+
+    Examples
+    --------
+    >>> ed = SceneEditor([walk], [PinPosition(0, 0, start, hard=True), PinPosition(0, 100, goal)])  # doctest: +SKIP
+    >>> res = ed.drag(1, (2.0, 1.0))  # doctest: +SKIP
+    """
+
+    def __init__(self, characters: Any, constraints: Sequence[Any] = (), **options: Any) -> None:
+        unknown = sorted(set(options) - set(_OPTIONS))
+        if unknown:
+            raise TypeError(f"Unknown option(s) {unknown}; valid options are {sorted(_OPTIONS)}")
+        opts = dict(_OPTIONS)
+        opts.update(options)
+        self.options = opts
+        self.characters = _characters(characters)
+        K = len(self.characters)
+        self.paths = tuple(MotionPath.from_motion(m, min_speed=opts["min_speed"]) for m in self.characters)
+        self.segments = self._stationary(opts["stationary"])
+        step = int(opts["variational_step"])
+        if step < 1:
+            raise ValueError(f"Expected `variational_step` >= 1, got {step}")
+        starts = opts["start_times"]
+        if starts is None:
+            starts = [0.0] * K
+        starts = [float(s) for s in starts]
+        if len(starts) != K:
+            raise ValueError(f"Expected {K} `start_times`, got {len(starts)}")
+        self._space = SpatialSolver(
+            self.paths,
+            self.segments,
+            regularization=opts["regularization"],
+            scale_compensation=opts["scale_compensation"],
+        )
+        self._time = TimeSolver(
+            [m.n_frames for m in self.characters],
+            [m.dt for m in self.characters],
+            starts,
+            min_step=opts["min_step"],
+            max_step=opts["max_step"],
+            regularization=opts["regularization"],
+        )
+        layout = self._space.layout
+        tangents = self._space.tangent_rows
+        self._sd = _Domain(self._space, "space", lambda c: spatial_rows(c, self.paths, layout, tangents, step))
+        self._td = _Domain(self._time, "time", lambda c: temporal_rows(c, layout, self._time.dts, step))
+        self._constraints: tuple[Any, ...] = ()
+        self._space_sol: tuple[Array, Array] | None = None
+        self._time_sol: tuple[Array, tuple[int, ...]] | None = None
+        self._result: EditResult | None = None
+        self._set(tuple(constraints), changed=None)
+
+    # ------------------------------------------------------------ set-up
+    def _stationary(self, spec: Any) -> list[list[tuple[int, int]]]:
+        K = len(self.characters)
+        o = self.options
+        if spec is None or spec is False:
+            return [[] for _ in range(K)]
+        if isinstance(spec, str):
+            if spec not in ("auto", "speed"):
+                raise ValueError(f"Expected `stationary` 'auto', 'speed', None or per-character segments, got {spec!r}")
+            return [
+                stationary_segments(
+                    m,
+                    speed=o["stationary_speed"],
+                    min_duration=o["stationary_min_duration"],
+                    contacts="auto" if spec == "auto" else None,
+                )
+                for m in self.characters
+            ]
+        segs = list(spec)
+        if len(segs) != K:
+            raise ValueError(f"Expected `stationary` segments for {K} characters, got {len(segs)}")
+        out = []
+        for k, s in enumerate(segs):
+            cur = []
+            for a, b in s:
+                if not 0 <= a < b <= self.characters[k].n_frames:
+                    raise ValueError(f"Stationary segment ({a}, {b}) out of range for character {k}")
+                cur.append((int(a), int(b)))
+            out.append(cur)
+        return out
+
+    def _validate(self, constraints: Sequence[Any], offset: int = 0) -> None:
+        K = len(self.characters)
+        for i, c in enumerate(constraints, start=offset):
+            if not isinstance(c, SPATIAL + TEMPORAL + (EndEffectorConstraint,)):
+                raise TypeError(f"constraint #{i}: expected a mocaplab.editing constraint, got {type(c).__name__}")
+            for k in c.characters:
+                if not 0 <= k < K:
+                    raise ValueError(
+                        f"constraint #{i} {c!r}: unknown character {k} (the scene has {K} characters: 0..{K - 1})"
+                    )
+            for k, f in c.frame_refs():
+                n = self.characters[k].n_frames
+                if not 0 <= f < n:
+                    raise ValueError(
+                        f"constraint #{i} {c!r}: frame {f} out of range for character {k} ({n} frames: 0..{n - 1})"
+                    )
+            if isinstance(c, SPATIAL) and not isinstance(c, SPATIAL[0]):
+                needs = (
+                    [c.character]
+                    if not hasattr(c, "other")
+                    else [c.other] + ([c.character] if c.direction is not None else [])
+                )
+                for k in needs:
+                    if not self.paths[k].has_tangents:
+                        raise ConstraintError(
+                            f"constraint #{i} {c!r}: character {k} never moves, so its path has no tangent frame "
+                            "to measure directions or relative offsets in",
+                            [c],
+                            [i],
+                        )
+
+    def _set(self, constraints: tuple[Any, ...], changed: int | None) -> EditResult:
+        """Install constraints; ``changed`` = index whose target alone may have moved (fast path).
+
+        On any error the editor keeps its previous state.
+        """
+        saved = (self._sd.snapshot(), self._td.snapshot(), self._space_sol, self._time_sol)
+        try:
+            return self._install(constraints, changed)
+        except Exception:
+            self._sd.restore(saved[0])
+            self._td.restore(saved[1])
+            self._space_sol, self._time_sol = saved[2], saved[3]
+            raise
+
+    def _install(self, constraints: tuple[Any, ...], changed: int | None) -> EditResult:
+        old = self._constraints
+        fast = (
+            changed is not None
+            and len(old) == len(constraints)
+            and self._space_sol is not None
+            and type(old[changed]) is type(constraints[changed])
+        )
+        if fast:
+            assert changed is not None
+            c = constraints[changed]
+            self._validate([c], offset=changed)
+            dom = self._sd if isinstance(c, SPATIAL) else self._td if isinstance(c, TEMPORAL) else None
+            if dom is not None:
+                if old[changed].structure() == c.structure():
+                    dom.move(changed, c)
+                else:
+                    dom.set(
+                        [
+                            (i, x)
+                            for i, x in enumerate(constraints)
+                            if isinstance(x, SPATIAL if dom is self._sd else TEMPORAL)
+                        ]
+                    )
+                if dom is self._sd:
+                    self._space_sol = self._space.solve(self._sd.factors, self._sd.bw, self._sd.h)
+                else:
+                    self._time_sol = self._time.solve(self._td.factors, self._td.bw, self._td.h)
+        else:
+            self._validate(constraints)
+            self._sd.set([(i, c) for i, c in enumerate(constraints) if isinstance(c, SPATIAL)])
+            self._td.set([(i, c) for i, c in enumerate(constraints) if isinstance(c, TEMPORAL)])
+            self._space_sol = self._space.solve(self._sd.factors, self._sd.bw, self._sd.h)
+            self._time_sol = self._time.solve(self._td.factors, self._td.bw, self._td.h)
+        self._constraints = constraints
+        result = EditResult(self, constraints)
+        if self.options["discrete"]:
+            try:
+                from . import graph  # type: ignore[attr-defined]
+            except ImportError:
+                raise NotImplementedError(
+                    "discrete editing (Kim et al. 2009, section 5) is provided by mocaplab.editing.graph, "
+                    "which is not available yet"
+                ) from None
+            result = graph.discrete_update(self, result)
+        self._result = result
+        return result
+
+    # -------------------------------------------------------- public API
+    @property
+    def constraints(self) -> tuple[Any, ...]:
+        return self._constraints
+
+    @property
+    def result(self) -> EditResult:
+        """The current edit."""
+        assert self._result is not None
+        return self._result
+
+    @property
+    def factorizations(self) -> int:
+        """How many factorisations (space + time structures) were computed so far."""
+        return self._sd.factorizations + self._td.factorizations
+
+    def drag(self, constraint_index: int, new_target: Any) -> EditResult:
+        """Move constraint ``constraint_index``'s target (see :attr:`Constraint.target`) and re-solve."""
+        i = self._check_index(constraint_index)
+        c = self._constraints[i]
+        if not hasattr(c, "with_target"):
+            raise TypeError(f"constraint #{i} {c!r} has no draggable target")
+        new = list(self._constraints)
+        new[i] = c.with_target(new_target)
+        return self._set(tuple(new), changed=i)
+
+    def add(self, constraint: Any) -> int:
+        """Append a constraint and re-solve; returns its index."""
+        self._set(self._constraints + (constraint,), changed=None)
+        return len(self._constraints) - 1
+
+    def remove(self, index: int) -> EditResult:
+        """Remove constraint ``index`` (later indices shift down by one) and re-solve."""
+        i = self._check_index(index)
+        return self._set(self._constraints[:i] + self._constraints[i + 1 :], changed=None)
+
+    def replace(self, index: int, constraint: Any) -> EditResult:
+        """Put ``constraint`` in place of constraint ``index`` and re-solve."""
+        i = self._check_index(index)
+        new = list(self._constraints)
+        new[i] = constraint
+        same = type(constraint) is type(self._constraints[i])
+        return self._set(tuple(new), changed=i if same else None)
+
+    def set_constraints(self, constraints: Sequence[Any]) -> EditResult:
+        """Replace every constraint and re-solve."""
+        return self._set(tuple(constraints), changed=None)
+
+    def evaluate(self, characters: Any, constraints: Sequence[Any]) -> EditResult:
+        """A fresh continuous edit of other characters/constraints with this editor's options.
+
+        For section 5 (discrete editing) to score candidate transformations;
+        this editor's state is not changed.
+        """
+        opts = dict(self.options)
+        opts["discrete"] = False
+        return SceneEditor(characters, constraints, **opts).result
+
+    def _check_index(self, index: Any) -> int:
+        n = len(self._constraints)
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not -n <= index < n:
+            raise IndexError(f"Expected a constraint index in 0..{n - 1}, got {index!r}")
+        return int(index) % n
+
+
+def edit(characters: Any, constraints: Sequence[Any] = (), **options: Any) -> EditResult:
+    """Edit the paths and timing of ``characters`` under ``constraints``.
+
+    Parameters
+    ----------
+    characters : Motion or sequence of Motion
+    constraints : sequence of constraints
+    **options
+        See :mod:`mocaplab.editing.scene`.
+
+    Returns
+    -------
+    EditResult
+
+    Examples
+    --------
+    >>> from mocaplab.editing import edit, PinPosition  # doctest: +SKIP
+    >>> res = edit([walk], [PinPosition(0, 0, (0, 0), hard=True), PinPosition(0, 200, (1.0, 3.0))])  # doctest: +SKIP
+    >>> res.paths[0].shape  # doctest: +SKIP
+    (471, 2)
+    """
+    return SceneEditor(characters, constraints, **options).result
+
+
+class _Lazy(Sequence):
+    """A read-only sequence whose items are computed on first access."""
+
+    def __init__(self, n: int, make: Any) -> None:
+        self._n = n
+        self._make = make
+        self._items: dict[int, Any] = {}
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __getitem__(self, k: Any) -> Any:
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(self._n))]
+        if not -self._n <= k < self._n:
+            raise IndexError(f"character index {k} out of range for {self._n} characters")
+        k = int(k) % self._n
+        if k not in self._items:
+            self._items[k] = self._make(k)
+        return self._items[k]
+
+    def __iter__(self) -> Iterator[Any]:
+        return (self[k] for k in range(self._n))
+
+    def __repr__(self) -> str:
+        return f"<{self._n} lazily computed items>"
+
+
+def _ro(a: Array) -> Array:
+    a.flags.writeable = False
+    return a
+
+
+class EditResult:
+    """The outcome of an edit (immutable).
+
+    Attributes
+    ----------
+    paths : sequence of ndarray, shape (F_k, 2)
+        Edited ground positions ``(x, z)`` per character (after phase 2).
+    times : sequence of ndarray, shape (F_k,)
+        Reference time of each frame (the time warp), seconds.
+    motions : sequence of Motion
+        Full-body motions on the shared clock (lazy; see the module docstring).
+    clock : ndarray, shape (N,)
+        Reference times of the frames of ``motions``.
+    active : sequence of ndarray of bool, shape (N,)
+        Clock ticks within each character's own time span.
+    shape_paths : sequence of ndarray, shape (F_k, 2)
+        Phase-1 (shape-preserving) positions.
+    edited_motions : sequence of Motion
+        Full-body motions along the edited paths at their original frame
+        timing (no time warp; lazy).
+    tangents, heading_change, flips : per character, lazy
+        Repaired unit tangents (F_k, 2), yaw change of the path direction
+        (F_k,), and tangent-flip frames that were repaired (F_k,) bool.
+    stationary : sequence of list of (start, stop)
+        Rigid stationary segments per character.
+    constraints : tuple
+    end_effectors : sequence of tuple
+        End-effector constraints per character (for full-body refinement).
+    transformations : tuple
+        Discrete transformations applied (section 5; empty here).
+    """
+
+    def __init__(self, editor: SceneEditor, constraints: tuple[Any, ...]) -> None:
+        self._ed = editor
+        self.constraints = constraints
+        self.characters = editor.characters
+        self.original_paths = editor.paths
+        self.stationary = tuple(tuple(s) for s in editor.segments)
+        self.transformations: tuple[Any, ...] = ()
+        sp_, tm = editor._space_sol, editor._time_sol
+        assert sp_ is not None and tm is not None
+        self._pbar, self._phat = sp_
+        self._t, self.active_steps = tm
+        self._sfac: SpatialFactors = editor._sd.factors
+        self._sbw, self._sh, self._sslices = editor._sd.bw, editor._sd.h, editor._sd.slices
+        self._tfac: TimeFactors = editor._td.factors
+        self._tbw, self._th, self._tslices = editor._td.bw, editor._td.h, editor._td.slices
+        off = editor._space.layout.offsets
+        P = _ro(self._phat.reshape(-1, 2).copy())
+        Pb = _ro(self._pbar.reshape(-1, 2).copy())
+        T = _ro(self._t.copy())
+        K = len(self.characters)
+        self.paths = tuple(P[off[k] : off[k + 1]] for k in range(K))
+        self.shape_paths = tuple(Pb[off[k] : off[k + 1]] for k in range(K))
+        self.times = tuple(T[off[k] : off[k + 1]] for k in range(K))
+        ee: list[list[Any]] = [[] for _ in range(K)]
+        for c in constraints:
+            if isinstance(c, EndEffectorConstraint):
+                ee[c.character].append(c.constraint)
+        self.end_effectors = tuple(tuple(x) for x in ee)
+        self._headings = _Lazy(K, self._heading)
+        self.edited_motions = _Lazy(K, self._edited_motion)
+        self.motions = _Lazy(K, self._refined_motion if editor.options["refine"] else self._motion)
+        self._refined = _Lazy(K, self._refined_motion)
+
+    def __repr__(self) -> str:
+        return (
+            f"<EditResult: {len(self.paths)} characters, {len(self.constraints)} constraints, "
+            f"hard residual {self.hard_residual_space:.2g} m / {self.hard_residual_time:.2g} s>"
+        )
+
+    # ------------------------------------------------------- orientation
+    def _heading(self, k: int) -> tuple[Array, NDArray[np.bool_], Array]:
+        d, f, t = heading_changes(
+            self.original_paths[k],
+            self.paths[k],
+            segments=self.stationary[k],
+            flip_threshold=self._ed.options["flip_threshold"],
+        )
+        return _ro(d), _ro(f), _ro(t)
+
+    @property
+    def heading_change(self) -> Sequence[Array]:
+        """Yaw change of the path direction per frame, (F_k,) per character."""
+        return _Lazy(len(self.paths), lambda k: self._headings[k][0])
+
+    @property
+    def flips(self) -> Sequence[NDArray[np.bool_]]:
+        """Frames whose tangent flipped and was repaired, (F_k,) bool per character."""
+        return _Lazy(len(self.paths), lambda k: self._headings[k][1])
+
+    @property
+    def tangents(self) -> Sequence[Array]:
+        """Repaired unit tangent directions, (F_k, 2) per character."""
+        return _Lazy(len(self.paths), lambda k: self._headings[k][2])
+
+    # ------------------------------------------------------------ motions
+    def _edited_motion(self, k: int) -> Motion:
+        m = self.characters[k]
+        root = np.array(m.root_positions)
+        root[:, 0] = self.paths[k][:, 0]
+        root[:, 2] = self.paths[k][:, 1]
+        rot = np.array(m.rotations)
+        rot[:, 0] = quat.mul(quat.from_yaw(self._headings[k][0]), rot[:, 0])
+        return m.replace(rotations=rot, root_positions=root)
+
+    @cached_property
+    def clock_fps(self) -> float:
+        f = self._ed.options["clock_fps"]
+        return float(f) if f is not None else float(self.characters[0].fps)
+
+    @cached_property
+    def clock(self) -> Array:
+        """Shared reference clock of :attr:`motions`, shape (N,)."""
+        t0 = min(float(t[0]) for t in self.times)
+        t1 = max(float(t[-1]) for t in self.times)
+        n = int(math.floor((t1 - t0) * self.clock_fps + 1e-9)) + 1
+        return _ro(t0 + np.arange(n) / self.clock_fps)
+
+    @property
+    def active(self) -> Sequence[NDArray[np.bool_]]:
+        """Clock ticks inside each character's time span, (N,) bool per character."""
+        tol = 1e-9
+        return tuple(_ro((self.clock >= t[0] - tol) & (self.clock <= t[-1] + tol)) for t in self.times)
+
+    def _warp(self, k: int, motion: Motion) -> Motion:
+        t = self.times[k]
+        u = np.interp(self.clock, t, np.arange(len(t)))
+        out = motion.sample(u / motion.fps, fps=self.clock_fps)
+        return out.replace(name=motion.name)
+
+    def _motion(self, k: int) -> Motion:
+        return self._warp(k, self.edited_motions[k])
+
+    def _refined_motion(self, k: int) -> Motion:
+        try:
+            from ..refine import refine
+        except ImportError:
+            raise NotImplementedError("full-body refinement needs mocaplab.refine, which is not available") from None
+        contacts = None
+        try:
+            from ..contacts import foot_contacts
+        except ImportError:  # pragma: no cover
+            pass
+        else:
+            contacts = foot_contacts(self.characters[k])
+        m = refine(
+            self.edited_motions[k], contacts=contacts, end_effectors=self.end_effectors[k], reference=self.characters[k]
+        )
+        return self._warp(k, m)
+
+    def refined(self) -> Sequence[Motion]:
+        """Full-body refined motions on the shared clock (section 4.3, via :func:`mocaplab.refine.refine`).
+
+        Each edited motion (original timing) is refined with the foot contacts
+        of its input clip, its end-effector constraints and the input clip as
+        reference, then time-warped like :attr:`motions`.
+        """
+        return self._refined
+
+    # ------------------------------------------------------------ quality
+    def _hard_res(self, fac: Any, x: Array, h: Array, extra: int) -> float:
+        H = fac.H if hasattr(fac, "H") else fac.Hu
+        if H.shape[0] == 0:
+            return 0.0
+        full = np.concatenate([h, np.zeros(extra)])
+        return float(np.max(np.abs(H @ x - full)))
+
+    @cached_property
+    def hard_residual_space(self) -> float:
+        """Largest violation of a hard spatial constraint (incl. rigid segments), metres."""
+        return self._hard_res(self._sfac, self._phat, self._sh, self._ed._space.R.shape[0])
+
+    @cached_property
+    def hard_residual_time(self) -> float:
+        """Largest violation of a hard temporal constraint, seconds."""
+        return self._hard_res(self._tfac, self._t, self._th, 0)
+
+    def residuals(self) -> dict[int, float]:
+        """Largest absolute residual of each path constraint, by index (metres or seconds)."""
+        out: dict[int, float] = {}
+        for fac, x, bw, h, slices in (
+            (self._sfac, self._phat, self._sbw, self._sh, self._sslices),
+            (self._tfac, self._t, self._tbw, self._th, self._tslices),
+        ):
+            H = fac.H if hasattr(fac, "H") else fac.Hu
+            for i, (which, sl) in slices.items():
+                if which == "soft":
+                    w = math.sqrt(self.constraints[i].weight)
+                    r = (fac.Bw[sl] @ x - bw[sl]) / w
+                else:
+                    r = H[sl] @ x - h[sl]
+                out[i] = float(np.max(np.abs(r))) if len(r) else 0.0
+        return dict(sorted(out.items()))
+
+    def _soft_max(self, slices: dict[int, tuple[str, slice]]) -> float:
+        res = self.residuals()
+        vals = [res[i] for i, (w, _) in slices.items() if w == "soft"]
+        return max(vals, default=0.0)
+
+    @cached_property
+    def soft_residual_space(self) -> float:
+        """Largest residual of a soft spatial constraint, metres."""
+        return self._soft_max(self._sslices)
+
+    @cached_property
+    def soft_residual_time(self) -> float:
+        """Largest residual of a soft temporal constraint, seconds."""
+        return self._soft_max(self._tslices)
+
+    @cached_property
+    def shape_distortion(self) -> float:
+        """RMS change of the Laplacian coordinates (eq. 3) over interior moving frames (dimensionless)."""
+        sq, n = 0.0, 0
+        for path, new in zip(self.original_paths, self.paths, strict=True):
+            a = path.laplacian_coordinates()[1:-1]
+            b = laplacian_coordinates(new)[1:-1]
+            ok = ~path.degenerate[1:-1]
+            d = (a - b)[ok]
+            sq += float(np.sum(d * d))
+            n += int(ok.sum())
+        return math.sqrt(sq / n) if n else 0.0
+
+    @cached_property
+    def length_change(self) -> Array:
+        """Relative change of each path's arc length, shape (K,) (0 = unchanged)."""
+        out = []
+        for path, new in zip(self.original_paths, self.paths, strict=True):
+            L = float(np.sum(np.linalg.norm(np.diff(new, axis=0), axis=1)))
+            out.append(L / path.length - 1.0 if path.length > 0 else 0.0)
+        return _ro(np.array(out))
+
+    @cached_property
+    def min_time_step(self) -> float:
+        """Smallest ``t[i+1] - t[i]`` over all characters, seconds."""
+        return float(min(np.min(np.diff(t)) for t in self.times))
+
+    @cached_property
+    def min_time_step_ratio(self) -> float:
+        """Smallest ``(t[i+1] - t[i]) / h`` over all characters."""
+        return float(min(np.min(np.diff(t)) * m.fps for t, m in zip(self.times, self.characters, strict=True)))
+
+    @cached_property
+    def energies(self) -> Energies:
+        """The shape, scale and time energies of equation 10."""
+        sp_ = self._ed._space
+        shape = sp_.shape_energy(self._sfac, self._sbw, self._pbar)
+        scale = sp_.scale_energy(self._sfac, self._sbw, self._pbar, self._phat) if self._sfac.scale else 0.0
+        time = self._ed._time.energy(self._tfac, self._tbw, self._t)
+        return Energies(shape, scale, time)
+
+    def report(self) -> dict[str, Any]:
+        """The quality figures as a dict."""
+        return {
+            "hard_residual_space": self.hard_residual_space,
+            "hard_residual_time": self.hard_residual_time,
+            "soft_residual_space": self.soft_residual_space,
+            "soft_residual_time": self.soft_residual_time,
+            "shape_distortion": self.shape_distortion,
+            "length_change": self.length_change.tolist(),
+            "min_time_step": self.min_time_step,
+            "min_time_step_ratio": self.min_time_step_ratio,
+            "flipped_frames": [int(f.sum()) for f in self.flips],
+            "energies": {"shape": self.energies.shape, "scale": self.energies.scale, "time": self.energies.time},
+        }

@@ -1,0 +1,214 @@
+"""Interactive time warping (Kim et al. 2009, section 4.4, equations 8 and 9).
+
+Unknowns: the reference time ``t`` of every frame of every character,
+stacked (character after character).  One phase only (no scale compensation,
+which the paper finds harmful in 1D):
+
+    minimise ``|T t - h|^2 + |B t - b|^2_W``  subject to ``H t = h_hard``
+
+where ``T`` keeps every step ``t[i+1] - t[i]`` at the frame time ``h`` of its
+clip, ``B`` holds the soft temporal constraints and ``H`` the hard ones.
+
+Monotonicity ``h_min <= t[i+1] - t[i] <= h_max`` is enforced as in the paper:
+solve, then turn every violated step into the equality ``t[i+1] - t[i] =
+h_min`` (or ``h_max``), and repeat until no step is violated.  Inserted
+equalities are only ever added within one solve, so the loop ends after at
+most as many rounds as there are steps.  Each set of inserted equalities
+has its own factorisation, cached, so repeated drags with the same active set
+cost one back-substitution per round.  The bounds are reached with equality
+(``h_min > 0``, so time still strictly increases).
+
+Defaults (our choice; the paper gives no numbers): ``h_min = h / 4``,
+``h_max = 4 h`` (at most four times faster or slower than captured).
+Regularisation ``regularization * |t - t0|^2`` towards the undeformed clock
+(``t0 = start + i h``) keeps characters with no temporal constraint in place.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import OrderedDict
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from .constraints import AbsoluteTime, ConstraintError, Duration, Sync
+from .laplacian import KKT, Layout, Rows, assemble, check_hard_rows
+
+__all__ = ["TimeSolver", "TimeFactors", "temporal_rows", "uniformity_matrix"]
+
+Array = NDArray[np.float64]
+
+
+def uniformity_matrix(layout: Layout) -> sp.csr_matrix:
+    """``T`` of equation 8: one row ``t[g+1] - t[g]`` per within-character step."""
+    s = layout.steps()
+    r = np.arange(len(s))
+    return sp.csr_matrix(
+        (np.concatenate([np.ones(len(s)), -np.ones(len(s))]), (np.concatenate([r, r]), np.concatenate([s + 1, s]))),
+        shape=(len(s), layout.total),
+    )
+
+
+def temporal_rows(c: Any, layout: Layout, dts: Sequence[float], step: int) -> Rows:
+    """The linear rows (unweighted) of one temporal constraint."""
+    off = layout.offsets
+    cols: list[NDArray[np.int64]] = []
+    vals: list[Array] = []
+    rhs: list[float] = []
+    samples = c.samples(step)
+    for sample in samples:
+        if isinstance(c, AbsoluteTime):
+            (i,) = sample
+            cols.append(np.array([off[c.character] + i]))
+            vals.append(np.array([1.0]))
+            start = c.frames[0] if c.frames is not None else i
+            rhs.append(c.time + (i - start) * dts[c.character])
+        elif isinstance(c, Duration):
+            i, e = sample
+            cols.append(np.array([off[c.character] + e, off[c.character] + i]))
+            vals.append(np.array([1.0, -1.0]))
+            rhs.append(c.duration)
+        elif isinstance(c, Sync):
+            i, j = sample
+            cols.append(np.array([off[c.character] + i, off[c.other] + j]))
+            vals.append(np.array([1.0, -1.0]))
+            rhs.append(c.offset)
+        else:  # pragma: no cover - filtered by the scene
+            raise TypeError(f"not a temporal constraint: {c!r}")
+    return Rows([np.asarray(x, dtype=np.int64) for x in cols], vals, np.asarray(rhs, dtype=float))
+
+
+@dataclasses.dataclass
+class TimeFactors:
+    """Factorisations for one temporal constraint structure."""
+
+    N: sp.csr_matrix
+    Bw: sp.csr_matrix
+    BwT: sp.csr_matrix
+    Hu: sp.csr_matrix
+    groups: list[tuple[Any, NDArray[np.int64]]]
+    cache: OrderedDict[tuple[int, ...], KKT]
+    base: KKT
+
+
+class TimeSolver:
+    """Constant parts of the time-warp problem for one set of characters.
+
+    Parameters
+    ----------
+    n_frames : sequence of int
+    dts : sequence of float
+        Frame time ``h`` of each character's clip, seconds.
+    start_times : sequence of float
+        Reference time of each character's frame 0 before editing.
+    min_step, max_step : float
+        Bounds on ``t[i+1] - t[i]`` as ratios of ``h``.
+    regularization : float
+    cache_size : int
+        Factorisations kept per structure for sets of inserted equalities.
+    """
+
+    def __init__(
+        self,
+        n_frames: Sequence[int],
+        dts: Sequence[float],
+        start_times: Sequence[float],
+        *,
+        min_step: float = 0.25,
+        max_step: float = 4.0,
+        regularization: float = 1e-8,
+        cache_size: int = 16,
+    ) -> None:
+        if not 0 < min_step < 1 < max_step:
+            raise ValueError(f"Expected 0 < min_step < 1 < max_step, got min_step={min_step}, max_step={max_step}")
+        self.layout = Layout(tuple(int(n) for n in n_frames))
+        self.dts = np.asarray(dts, dtype=float)
+        self.t0 = np.concatenate(
+            [s + np.arange(n) * d for n, d, s in zip(self.layout.n_frames, self.dts, start_times, strict=True)]
+        )
+        self.T = uniformity_matrix(self.layout)
+        self.steps = self.layout.steps()
+        self.h = self.dts[self.layout.character_of()[self.steps]]
+        self.TtT = (self.T.T @ self.T).tocsr()
+        self.Tth = self.T.T @ self.h
+        self.hmin = min_step * self.h
+        self.hmax = max_step * self.h
+        self.eps = float(regularization)
+        self.cache_size = int(cache_size)
+        self._I = sp.identity(self.layout.total, format="csr") * self.eps
+
+    def factorize(
+        self, soft: Sequence[Rows], weights: Sequence[float], hard: Sequence[Rows], labels: Sequence[Any]
+    ) -> tuple[TimeFactors, Array, Array]:
+        n = self.layout.total
+        Bw, bw = assemble(soft, n, [float(np.sqrt(w)) for w in weights])
+        Hu, h = assemble(hard, n)
+        groups: list[tuple[Any, NDArray[np.int64]]] = []
+        r = 0
+        for lab, block in zip(labels, hard, strict=True):
+            groups.append((lab, np.arange(r, r + block.n)))
+            r += block.n
+        check_hard_rows(Hu, groups, "temporal")
+        BwT = Bw.T.tocsr()
+        N = (self.TtT + BwT @ Bw + self._I).tocsr()
+        base = KKT(N, Hu)
+        return TimeFactors(N, Bw, BwT, Hu, groups, OrderedDict(), base), bw, h
+
+    def _kkt(self, f: TimeFactors, active: tuple[int, ...]) -> KKT:
+        if not active:
+            return f.base
+        if active in f.cache:
+            f.cache.move_to_end(active)
+            return f.cache[active]
+        a = np.asarray(active, dtype=np.int64)
+        E = self.T[a]
+        H = sp.vstack([f.Hu, E], format="csr")
+        groups = list(f.groups) + [
+            (f"time-step bounds [h_min, h_max] of {len(a)} steps", np.arange(f.Hu.shape[0], H.shape[0]))
+        ]
+        try:
+            check_hard_rows(H, groups, "temporal")
+        except ConstraintError as exc:
+            raise ConstraintError(
+                "Hard temporal constraints cannot be met with time steps within [min_step, max_step] of the "
+                f"frame time: {exc}",
+                exc.constraints,
+                exc.indices,
+            ) from None
+        kkt = KKT(f.N, H)
+        f.cache[active] = kkt
+        if len(f.cache) > self.cache_size:
+            f.cache.popitem(last=False)
+        return kkt
+
+    def solve(self, f: TimeFactors, bw: Array, h: Array) -> tuple[Array, tuple[int, ...]]:
+        """Monotone time warp ``t`` (shape (total,)) and the inserted equalities (step rows)."""
+        r = self.Tth + (f.BwT @ bw if len(bw) else 0.0) + self.eps * self.t0
+        active: dict[int, float] = {}
+        tol = 1e-9 * self.h
+        for _ in range(len(self.steps) + 1):
+            key = tuple(sorted(active))
+            kkt = self._kkt(f, key)
+            hh = np.concatenate([h, [active[s] for s in key]]) if key else h
+            t = kkt.solve(r, hh)
+            dt = t[self.steps + 1] - t[self.steps]
+            low = np.flatnonzero(dt < self.hmin - tol)
+            high = np.flatnonzero(dt > self.hmax + tol)
+            new = [s for s in low if s not in active] + [s for s in high if s not in active]
+            if not new:
+                return t, key
+            for s in low:
+                active.setdefault(int(s), float(self.hmin[s]))
+            for s in high:
+                active.setdefault(int(s), float(self.hmax[s]))
+        raise RuntimeError("time-step bounds not met")  # pragma: no cover - bounded loop
+
+    def energy(self, f: TimeFactors, bw: Array, t: Array) -> float:
+        """Objective ``|T t - h|^2 + |B t - b|^2_W`` at ``t``."""
+        r = self.T @ t - self.h
+        s = f.Bw @ t - bw if len(bw) else np.zeros(0)
+        return float(r @ r + s @ s)

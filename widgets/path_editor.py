@@ -675,13 +675,17 @@ class PathEditor(_DragView):
     def _on_press(self, event: Any) -> None:
         if event.inaxes is not self.ax or event.button != 1 or self._toolbar_busy(self.canvas):
             return
+        self.last_error = None
         shift = "shift" in getattr(event, "modifiers", ()) or event.key == "shift"
         press = (float(event.x), float(event.y))
         handle = self._pick_handle(event)
         if handle is not None and not (shift and handle[1] == "pin"):
             index, kind, _ = handle
             c = self.editor.constraints[index]
-            anchor = (int(c.character), _frame_of(c)) if kind == "direction" else None
+            anchor = None
+            if kind == "direction":
+                k, f = int(c.character), _frame_of(c)
+                anchor = (k, f, np.array(self.result.paths[k][f], dtype=float))
             self._drag = _Drag(index, kind, press, created=False, anchor=anchor)
             self._describe(index, prefix="picked")
             return
@@ -696,7 +700,7 @@ class PathEditor(_DragView):
         path = np.asarray(self.result.paths[k], dtype=float)
         if shift:
             index = self._add(editing.PinDirection(k, f, _tangent(path, f)))
-            self._drag = _Drag(index, "direction", press, created=True, anchor=(k, f))
+            self._drag = _Drag(index, "direction", press, created=True, anchor=(k, f, path[f].copy()))
         else:
             index = self._add(editing.PinPosition(k, f, path[f].copy()))
             self._drag = _Drag(index, "pin", press, created=True)
@@ -715,14 +719,13 @@ class PathEditor(_DragView):
         if drag.kind == "pin":
             target = mouse
         else:
-            k, f = drag.anchor
-            path = np.asarray(self.result.paths[k], dtype=float)
-            d = mouse - path[f]
-            norm = np.linalg.norm(d)
-            if norm < 1e-12:
+            # the direction from where the pinned point was at press time to the mouse
+            # (the point itself may move while its direction turns)
+            k, f, base = drag.anchor
+            d = mouse - base
+            if np.linalg.norm(d) < 1e-12:
                 return
-            # keep the tangent's current length so only its direction changes
-            target = d / norm * max(np.linalg.norm(_tangent(path, f)), 1e-9)
+            target = d
         self._apply(_current_result(self.editor, self.editor.drag(drag.index, target)))
         self._redraw()
         self._describe(drag.index, prefix="drag")
@@ -732,12 +735,15 @@ class PathEditor(_DragView):
         drag, self._drag = self._drag, None
         if drag is None:
             return
-        if not drag.moved and not drag.created:
+        if self.last_error is not None:
+            pass  # keep the error of the failed update on show
+        elif not drag.moved and not drag.created:
             c = self.editor.constraints[drag.index]
             self._remove(drag.index)
             self._set_status(f"removed {_kind_of(c)} #{drag.index} (character {int(c.character)}, frame {_frame_of(c)})")
         elif drag.moved:
             self._describe(drag.index, prefix="moved")
+        self.result = _current_result(self.editor)
         self._update_viewer()
         self._fit_view(grow_only=True)
         self._redraw(final=True)
@@ -755,7 +761,9 @@ class PathEditor(_DragView):
         p = np.asarray(self.result.paths[k], dtype=float)
         if _is(c, "PinPosition"):
             target = np.asarray(c.position, dtype=float).reshape(2)
-            residual = float(np.max(np.linalg.norm(p[_frames(c)] - target, axis=-1)))
+            residual = _core_residual(self.result, index)
+            if residual is None:
+                residual = float(np.max(np.linalg.norm(p[_frames(c)] - target, axis=-1)))
             text = (
                 f"{prefix} PinPosition #{index} · character {k} frame {f} · "
                 f"target (x, z) = {_fmt_vec(target)} m · path {_fmt_vec(p[f])} m · residual {residual:.2e} m"
@@ -763,14 +771,26 @@ class PathEditor(_DragView):
         elif _is(c, "PinDirection"):
             d = np.asarray(c.direction, dtype=float).reshape(2)
             t = _tangent(p, f)
-            angle = np.degrees(np.arctan2(d[0] * t[1] - d[1] * t[0], d @ t))
+            angle = abs(float(np.degrees(np.arctan2(d[0] * t[1] - d[1] * t[0], d @ t))))
             text = (
                 f"{prefix} PinDirection #{index} · character {k} frame {f} · "
-                f"direction {_fmt_vec(d / max(np.linalg.norm(d), 1e-12))} · residual {abs(angle):.2e} deg"
+                f"direction {_fmt_vec(d / max(np.linalg.norm(d), 1e-12))} · tangent off by {angle:.2f} deg"
             )
+            residual = _core_residual(self.result, index)
+            if residual is not None:
+                text += f" · residual {residual:.2e} m"
         else:
             text = f"{prefix} {_kind_of(c)} #{index} · character {k} frame {f}"
         self._set_status(text)
+
+
+def _core_residual(result: Any, index: int) -> float | None:
+    """The editor's own residual of constraint ``index`` (``EditResult.residuals()``), if it reports one."""
+    residuals = getattr(result, "residuals", None)
+    if not callable(residuals):
+        return None
+    value = residuals().get(index)
+    return None if value is None else float(value)
 
 
 def _frames(c: Any) -> NDArray[np.int64]:

@@ -43,6 +43,7 @@ from mocaplab import editing
 from .path_editor import (
     Backend,
     _CanvasView,
+    _core_residual,
     _current_result,
     _Drag,
     _DragView,
@@ -263,6 +264,7 @@ class TimeTrackEditor(_DragView):
     def _on_press(self, event: Any) -> None:
         if event.inaxes is not self.ax or event.button != 1 or self._toolbar_busy(self.canvas):
             return
+        self.last_error = None
         press = (float(event.x), float(event.y))
         handle = self._pick_handle(event)
         if handle is not None:
@@ -301,12 +303,15 @@ class TimeTrackEditor(_DragView):
         drag, self._drag = self._drag, None
         if drag is None:
             return
-        if not drag.moved and not drag.created:
+        if self.last_error is not None:
+            pass  # keep the error of the failed update on show
+        elif not drag.moved and not drag.created:
             c = self.editor.constraints[drag.index]
             self._remove(drag.index)
             self._set_status(f"removed {_kind_of(c)} #{drag.index} (character {int(c.character)}, frame {_frame_of(c)})")
         elif drag.moved:
             self._describe(drag.index, prefix="moved")
+        self.result = _current_result(self.editor)
         self._fit_view(grow_only=True)
         self._redraw(final=True)
 
@@ -327,6 +332,8 @@ class TimeTrackEditor(_DragView):
         else:
             residual = float("nan")
             text = f"{prefix} {_kind_of(c)} #{index} · character {k} frame {f}"
+        core = _core_residual(self.result, index)
+        residual = residual if core is None else core
         self._set_status(f"{text} · residual {residual:.2e} s · min step {min_step:.4f} s")
 
 

@@ -1,0 +1,180 @@
+"""MotionViewer headless: static backend, off-screen rendering, widgets driven from Python."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pv = pytest.importorskip("pyvista")
+pytest.importorskip("ipywidgets")
+
+from mocaplab.widgets.viewer import MotionViewer, _SphereSet  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def walk(cmu):
+    return cmu("16_15")
+
+
+@pytest.fixture(scope="module")
+def viewer(walk):
+    v = MotionViewer(walk, backend="static", window_size=(320, 240))
+    v.widget  # noqa: B018 - builds the slider, play button and image
+    yield v
+    v.close()
+
+
+def _sphere_centres(v: MotionViewer, k: int = 0) -> np.ndarray:
+    c = v.characters[k]
+    n = c.positions.shape[1]
+    pts = np.asarray(c.joints.points).reshape(n, -1, 3)
+    return (pts - v._spheres.template[None]).mean(axis=1)
+
+
+def test_slider_moves_spheres_and_tubes_to_the_fk_of_that_frame(viewer, walk):
+    sk = walk.skeleton
+    actors_before = dict(viewer.plotter.actors)
+    meshes_before = [(c.bones, c.joints) for c in viewer.characters]
+    viewer.slider.value = 200
+    assert viewer.frame == 200 and viewer.character_frames() == [200]
+    fk = walk.global_positions()[200]
+    centres = _sphere_centres(viewer)
+    assert np.allclose(centres[: sk.n_joints], fk, atol=1e-9)
+    assert np.allclose(centres[sk.n_joints :], walk.end_site_positions()[200], atol=1e-9)
+    # each tube runs from its parent joint (bottom ring) to its joint (top ring)
+    c = viewer.characters[0]
+    rings = np.asarray(c.bones.points).reshape(len(c.segments), 2, viewer._sides, 3).mean(axis=2)
+    assert np.allclose(rings[: sk.n_joints - 1, 0], fk[sk.parents[1:]], atol=1e-9)
+    assert np.allclose(rings[: sk.n_joints - 1, 1], fk[1:], atol=1e-9)
+    radii = np.linalg.norm(
+        np.asarray(c.bones.points).reshape(len(c.segments), 2, viewer._sides, 3) - rings[:, :, None], axis=-1
+    )
+    assert np.allclose(radii, viewer.bone_radius)
+    # geometry changed in place: same actors, same meshes
+    assert dict(viewer.plotter.actors).keys() == actors_before.keys()
+    assert all(viewer.plotter.actors[k] is a for k, a in actors_before.items())
+    assert [(c.bones, c.joints) for c in viewer.characters] == meshes_before
+    assert viewer.characters[0].actors[1].mapper.dataset is viewer.characters[0].joints
+
+
+def test_screenshot_is_not_blank_and_follows_the_frame(viewer):
+    viewer.set_frame(0)
+    raw = viewer.screenshot()
+    assert raw.shape == (240, 320, 3) and raw.dtype == np.uint8
+    a = raw.astype(float)
+    assert a.std() > 10  # not a blank canvas
+    png_before = viewer._view.value
+    viewer.set_frame(300)
+    assert viewer.slider.value == 300  # set_frame drives the slider
+    b = viewer.screenshot().astype(float)
+    assert np.abs(a - b).mean() > 0.5
+    assert viewer._view.value != png_before  # the static image widget was re-rendered
+    assert "frame 300" in viewer._label.value
+
+
+def test_play_is_linked_to_the_slider(viewer):
+    assert viewer.play.max == viewer.slider.max == viewer.n_frames - 1
+    assert viewer.play.step == 4  # about 30 updates per second of a 120 fps clip
+    assert viewer.play.interval == 33
+    assert viewer.widget.children[0] is viewer._view
+
+
+def test_several_characters_of_different_lengths_and_rates(walk, cmu):
+    salsa = cmu("60_10")[:240]  # 60 fps, 4 s
+    short = walk[:120]  # 120 fps, 1 s
+    v = MotionViewer([short, salsa], backend="static", window_size=(320, 240), labels=["walk", "salsa"])
+    assert v.fps == pytest.approx(120.0, rel=1e-6) and v.fps == max(short.fps, salsa.fps)
+    assert v.n_frames == int(round(salsa.duration * v.fps)) + 1
+    v.set_time(2.0)
+    assert v.frame == 240
+    assert v.character_frames() == [119, 120]  # the walk holds its last pose
+    assert np.allclose(_sphere_centres(v, 1)[: salsa.n_joints], salsa.global_positions()[120], atol=1e-9)
+    assert np.allclose(_sphere_centres(v, 0)[: short.n_joints], short.global_positions()[119], atol=1e-9)
+    img = v.screenshot()
+    assert img.std() > 10
+    v.close()
+
+
+def test_overlays_follow_the_time(walk):
+    v = MotionViewer(walk, backend="static", window_size=(200, 150), ground=False)
+    com = walk.root_positions[:, None] * [1.0, 0.0, 1.0]  # (F, 1, 3)
+    v.add_points("com", com, color="red", radius=0.05)
+    v.add_lines("path", walk.root_positions * [1.0, 0.0, 1.0])  # (k, 3): static
+    counts = [3 + (i % 3) for i in range(walk.n_frames)]
+    ragged = [np.c_[np.cos(np.arange(k)), np.zeros(k), np.sin(np.arange(k))] for k in counts]
+    v.add_polygon("support", ragged, fill=True)
+    v.add_points("target", lambda t: np.array([[t, 1.0, 0.0], [np.nan, 0.0, 0.0]]))
+    v.set_frame(50)
+    assert np.allclose(v.overlay_points("com"), com[50])
+    spheres = _SphereSet(0.05)
+    assert np.allclose(np.asarray(v.overlays["com"].mesh.points), spheres.points(com[50]))
+    assert v.overlay_points("target").shape == (1, 3) and np.isclose(v.overlay_points("target")[0, 0], 50 / 120)
+    mesh = v.overlays["support"].mesh
+    assert mesh.n_points == counts[50] and mesh.n_cells == counts[50] - 1  # the outline + a fan of triangles
+    v.set_frame(51)
+    assert mesh is v.overlays["support"].mesh and mesh.n_points == counts[51]
+    actor = v.overlays["support"].actor
+    v.set_frame(52)
+    assert v.overlays["support"].actor is actor
+    assert v.overlays["path"].mesh.n_points == walk.n_frames
+    v.remove_overlay("path")
+    assert "path" not in v.overlays and "overlay:path" not in v.plotter.actors
+    with pytest.raises(KeyError, match="support"):
+        v.remove_overlay("nothing")
+    with pytest.raises(ValueError, match=r"\(F, k, 3\)"):
+        v.add_points("bad", np.zeros((10, 2)))
+    v.close()
+
+
+def test_callback_errors_are_shown_in_the_widget(walk):
+    v = MotionViewer(walk[:60], backend="none")
+    box = v.widget
+    assert v._view is None and len(box.children) == 2
+
+    def broken(t):
+        if t > 0.1:
+            raise RuntimeError("overlay exploded")
+        return np.zeros((1, 3))
+
+    v.add_points("broken", broken)
+    with pytest.raises(RuntimeError):
+        v.slider.value = 30
+    assert "overlay exploded" in v._status.value
+    v.remove_overlay("broken")
+    v.slider.value = 10
+    assert v._status.value == ""
+    v.close()
+
+
+def test_bad_arguments(walk):
+    with pytest.raises(ValueError, match="at least one"):
+        MotionViewer([])
+    with pytest.raises(TypeError, match=r"motions\[1\]"):
+        MotionViewer([walk, "walk"])
+    with pytest.raises(ValueError, match="backend"):
+        MotionViewer(walk, backend="vr")
+    with pytest.raises(ValueError, match="labels"):
+        MotionViewer(walk, backend="none", labels=["a", "b"])
+    v = MotionViewer(walk[:10], backend="none")
+    with pytest.raises(IndexError, match="frame"):
+        v.set_frame(10)
+    v.close()
+
+
+def test_backend_from_environment(walk, monkeypatch):
+    monkeypatch.setenv("MOCAPLAB_JUPYTER_BACKEND", "none")
+    v = MotionViewer(walk[:10])
+    assert v.backend == "none"
+    assert "backend 'none'" in repr(v)
+    v.close()
+
+
+def test_trame_backend_builds_an_updatable_view(walk):
+    pytest.importorskip("trame_pyvista")
+    v = MotionViewer(walk[:60], backend="trame", window_size=(320, 240))
+    box = v.widget
+    view = box.children[0]
+    assert hasattr(view, "viewer") and "index.html" in view.src  # pyvista's trame iframe widget
+    v.slider.value = 30
+    assert np.allclose(_sphere_centres(v)[: walk.n_joints], walk.global_positions()[30], atol=1e-9)
+    v.close()

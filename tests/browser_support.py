@@ -1,0 +1,506 @@
+"""Drive the lessons in JupyterLab with a real headless Chromium (used by ``test_browser.py``).
+
+Three pieces, each usable alone:
+
+* :class:`JupyterLabServer` starts ``jupyter lab`` on 127.0.0.1 with a random
+  free port and a random token in a folder, waits until it answers, and stops
+  it by process id (its whole process group, then any kernel it left behind).
+* :func:`launch_chromium` starts Debian's ``/usr/bin/chromium`` through
+  Playwright's Python package (no browser download: there is no internet).
+* :class:`LessonPage` opens one notebook in JupyterLab, runs all its cells with
+  the ``notebook:run-all-cells`` command, waits for the kernel, collects
+  console errors from the widget manager, and takes screenshots.
+
+Pixel helpers (:func:`image_std`, :func:`image_change`) compare screenshots:
+a canvas "is not blank" when its pixels vary, and a view "changed" when the
+mean absolute difference of two screenshots of it is above a small threshold.
+Both thresholds are in 8-bit grey levels.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import re
+import secrets
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+CHROMIUM = os.environ.get("MOCAPLAB_CHROMIUM", "/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--headless",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--disable-dev-shm-usage",
+]
+
+# Console errors that mean the front end lost a widget or its comm channel.
+WIDGET_ERROR = re.compile(r"widget|manager|\bcomm\b|comm_|comm ", re.IGNORECASE)
+
+
+def free_port() -> int:
+    """Return a TCP port on 127.0.0.1 that was free a moment ago."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _children_of(pid: int) -> list[int]:
+    """All descendants of ``pid`` (read from /proc; empty where /proc is missing)."""
+    parents: dict[int, int] = {}
+    for entry in Path("/proc").glob("[0-9]*"):
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        # the command name may contain spaces and parentheses: split after the last ')'
+        fields = stat[stat.rfind(")") + 2 :].split()
+        parents[int(entry.name)] = int(fields[1])
+    found: list[int] = []
+    frontier = [pid]
+    while frontier:
+        p = frontier.pop()
+        kids = [c for c, pp in parents.items() if pp == p]
+        found.extend(kids)
+        frontier.extend(kids)
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    # a zombie child still answers kill(0); reap it if it is ours
+    try:
+        done, _ = os.waitpid(pid, os.WNOHANG)
+        return done == 0
+    except ChildProcessError:
+        state = Path(f"/proc/{pid}/stat")
+        try:
+            return state.read_text().split(")")[-1].split()[0] != "Z"
+        except OSError:
+            return False
+
+
+class JupyterLabServer:
+    """A ``jupyter lab`` process serving ``root_dir`` on 127.0.0.1 with a token.
+
+    Parameters
+    ----------
+    root_dir : Path
+        Folder served (the notebooks are opened relative to it).
+    env : dict of str to str
+        Environment of the server and so of its kernels.
+    state_dir : Path
+        Where the server's config, runtime files, user settings, workspaces
+        and log go, so the run never touches the user's own Jupyter state.
+
+    Notes
+    -----
+    The server runs in its own session (process group). :meth:`stop` asks it
+    to shut its kernels down over the REST API, sends SIGTERM to the group,
+    waits, sends SIGKILL to the group, and finally kills by pid any
+    descendant (kernels run in their own process groups) still alive.
+    """
+
+    def __init__(self, root_dir: Path, *, env: dict[str, str], state_dir: Path) -> None:
+        self.root_dir = Path(root_dir)
+        self.env = dict(env)
+        self.state_dir = Path(state_dir)
+        self.token = secrets.token_hex(16)
+        self.port = 0
+        self.proc: subprocess.Popen[bytes] | None = None
+        self.log_path = self.state_dir / "jupyterlab.log"
+        self._log: Any = None
+        self._descendants: set[int] = set()
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    # -- start ---------------------------------------------------------------
+    def _write_settings(self) -> Path:
+        """User settings that keep pop-ups (news, update checks) off the page."""
+        settings = self.state_dir / "user-settings"
+        note = settings / "@jupyterlab" / "apputils-extension" / "notification.jupyterlab-settings"
+        note.parent.mkdir(parents=True, exist_ok=True)
+        note.write_text(json.dumps({"fetchNews": "false", "checkForUpdates": False}))
+        return settings
+
+    def start(self, *, timeout: float = 90.0) -> None:
+        """Start the server and wait until ``/api/status`` answers (retry on a port clash)."""
+        self.state_dir.mkdir(parents=True, exist_ok=True)
+        settings = self._write_settings()
+        env = dict(self.env)
+        for name in ("JUPYTER_CONFIG_DIR", "JUPYTER_DATA_DIR", "JUPYTER_RUNTIME_DIR", "IPYTHONDIR"):
+            key = name.lower()
+            (self.state_dir / key).mkdir(exist_ok=True)
+            env[name] = str(self.state_dir / key)
+        last_error = ""
+        for _attempt in range(3):
+            self.port = free_port()
+            cmd = [
+                sys.executable,
+                "-m",
+                "jupyterlab",
+                "--no-browser",
+                "--ServerApp.ip=127.0.0.1",
+                f"--ServerApp.port={self.port}",
+                "--ServerApp.port_retries=0",
+                f"--IdentityProvider.token={self.token}",
+                f"--ServerApp.root_dir={self.root_dir}",
+                "--LabApp.expose_app_in_browser=True",
+                f"--LabApp.user_settings_dir={settings}",
+                f"--LabApp.workspaces_dir={self.state_dir / 'workspaces'}",
+                "--LabApp.news_url=",
+            ]
+            if hasattr(os, "geteuid") and os.geteuid() == 0:  # CI containers run as root
+                cmd.append("--ServerApp.allow_root=True")
+            self._log = open(self.log_path, "ab")  # noqa: SIM115 - closed in stop()
+            self.proc = subprocess.Popen(
+                cmd,
+                cwd=self.root_dir,
+                env=env,
+                stdout=self._log,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                start_new_session=True,
+            )
+            deadline = time.monotonic() + timeout
+            while time.monotonic() < deadline:
+                if self.proc.poll() is not None:
+                    break
+                try:
+                    self.api("GET", "/api/status")
+                    return
+                except (urllib.error.URLError, ConnectionError, OSError):
+                    time.sleep(0.25)
+            last_error = self.log_tail()
+            self.stop()
+        raise RuntimeError(f"jupyter lab did not answer on 127.0.0.1; log tail:\n{last_error}")
+
+    # -- REST --------------------------------------------------------------
+    def api(self, method: str, path: str, body: Any = None, *, timeout: float = 10.0) -> Any:
+        """Call the server's REST API with the token; return the decoded JSON (or None)."""
+        data = None if body is None else json.dumps(body).encode()
+        req = urllib.request.Request(self.url + path, data=data, method=method)
+        req.add_header("Authorization", f"token {self.token}")
+        if data is not None:
+            req.add_header("Content-Type", "application/json")
+        with urllib.request.urlopen(req, timeout=timeout) as resp:
+            raw = resp.read()
+        return json.loads(raw) if raw else None
+
+    def shutdown_kernels(self) -> None:
+        """Shut down every kernel of the server (ignores a server already gone)."""
+        try:
+            for kernel in self.api("GET", "/api/kernels") or []:
+                self.api("DELETE", f"/api/kernels/{kernel['id']}", timeout=20.0)
+        except (urllib.error.URLError, ConnectionError, OSError, ValueError):
+            pass
+
+    def log_tail(self, n: int = 40) -> str:
+        try:
+            return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-n:])
+        except OSError:
+            return ""
+
+    # -- stop --------------------------------------------------------------
+    def stop(self) -> None:
+        """Stop the server and everything it started, by process id. Safe to call twice."""
+        proc, self.proc = self.proc, None
+        if proc is not None:
+            if proc.poll() is None:
+                self._descendants.update(_children_of(proc.pid))
+                self.shutdown_kernels()
+                self._descendants.update(_children_of(proc.pid))
+                try:
+                    os.killpg(proc.pid, signal.SIGTERM)
+                except ProcessLookupError:
+                    pass
+                try:
+                    proc.wait(timeout=15)
+                except subprocess.TimeoutExpired:
+                    try:
+                        os.killpg(proc.pid, signal.SIGKILL)
+                    except ProcessLookupError:
+                        pass
+                    proc.wait(timeout=10)
+            # the leader may be gone while group members linger
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
+        for pid in sorted(self._descendants):
+            if _alive(pid):
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+        self._descendants.clear()
+        if self._log is not None:
+            self._log.close()
+            self._log = None
+
+
+def server_env(data_dir: str | None) -> dict[str, str]:
+    """The environment of a student's JupyterLab: interactive backends, fast lessons.
+
+    ``MOCAPLAB_JUPYTER_BACKEND=trame`` makes the pyvista view interactive;
+    the Agg matplotlib backend and pyvista's forced off-screen mode set for
+    headless runs are removed, as a student would not have them.
+    """
+    env = dict(os.environ)
+    for name in ("MPLBACKEND", "PYVISTA_OFF_SCREEN", "JUPYTER_PLATFORM_DIRS", "PYTEST_CURRENT_TEST"):
+        env.pop(name, None)
+    env["MOCAPLAB_JUPYTER_BACKEND"] = "trame"
+    env["MOCAPLAB_FAST"] = "1"
+    if data_dir:
+        env["MOCAPLAB_DATA_DIR"] = data_dir
+    # the kernel runs the interpreter of this venv; put its scripts first
+    env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
+    return env
+
+
+def copy_lessons(src: Path, dst: Path) -> Path:
+    """Copy the lesson notebooks (and any data next to them) into ``dst``."""
+    shutil.copytree(src, dst, ignore=shutil.ignore_patterns(".ipynb_checkpoints", "__pycache__"))
+    return dst
+
+
+def launch_chromium(playwright: Any) -> Any:
+    """Launch Debian's Chromium headless through Playwright (never downloads a browser)."""
+    return playwright.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+
+
+# -- pixels ------------------------------------------------------------------
+def png_to_grey(png: bytes) -> np.ndarray:
+    """Decode a PNG screenshot to a float grey image in [0, 255], shape (H, W)."""
+    from PIL import Image
+
+    img = Image.open(io.BytesIO(png)).convert("L")
+    return np.asarray(img, dtype=float)
+
+
+def image_std(png: bytes) -> float:
+    """Standard deviation of the grey levels of a screenshot (0 for a blank one)."""
+    return float(png_to_grey(png).std())
+
+
+def image_change(before: bytes, after: bytes) -> float:
+    """Mean absolute grey-level difference of two screenshots (crops to the common size)."""
+    a, b = png_to_grey(before), png_to_grey(after)
+    h, w = min(a.shape[0], b.shape[0]), min(a.shape[1], b.shape[1])
+    return float(np.abs(a[:h, :w] - b[:h, :w]).mean())
+
+
+# -- one notebook in the browser ---------------------------------------------
+_CELL_STATE_JS = """
+() => {
+  const app = window.jupyterapp;
+  if (!app) return {phase: 'no-app'};
+  const panel = app.shell.currentWidget;
+  if (!panel || !panel.content || !panel.sessionContext) return {phase: 'no-notebook'};
+  const kernel = panel.sessionContext.session && panel.sessionContext.session.kernel;
+  const status = kernel ? kernel.status : 'none';
+  const cells = [];
+  const model = panel.content.model;
+  if (!model) return {phase: 'no-model', status};
+  for (let i = 0; i < model.cells.length; i++) {
+    const cell = model.cells.get(i);
+    if (cell.type !== 'code') continue;
+    const src = cell.sharedModel.getSource();
+    const errors = [];
+    for (let k = 0; k < cell.outputs.length; k++) {
+      const out = cell.outputs.get(k).toJSON();
+      if (out.output_type === 'error') errors.push(out.ename + ': ' + out.evalue);
+    }
+    cells.push({index: i, empty: src.trim() === '', count: cell.executionCount, errors});
+  }
+  const running = Array.from(panel.content.node.querySelectorAll('.jp-InputPrompt'))
+      .some(n => n.textContent.includes('*'));
+  return {phase: 'ok', status, running, cells};
+}
+"""
+
+
+class LessonPage:
+    """One notebook opened in JupyterLab in a fresh browser page.
+
+    Parameters
+    ----------
+    context : playwright BrowserContext
+    server : JupyterLabServer
+    notebook : str
+        Path of the notebook relative to the server's root.
+    shots : Path
+        Folder for the screenshots; files are named ``<stem>-<NN>-<label>.png``.
+    """
+
+    def __init__(self, context: Any, server: JupyterLabServer, notebook: str, shots: Path) -> None:
+        self.server = server
+        self.notebook = notebook
+        self.shots = Path(shots)
+        self.shots.mkdir(parents=True, exist_ok=True)
+        self.page = context.new_page()
+        self.console: list[str] = []
+        self.page_errors: list[str] = []
+        self._n_shots = 0
+        self.page.on("console", self._on_console)
+        self.page.on("pageerror", lambda err: self.page_errors.append(str(err)))
+
+    def _on_console(self, msg: Any) -> None:
+        if msg.type == "error":
+            self.console.append(msg.text)
+
+    # -- opening and running -----------------------------------------------
+    def open(self, *, timeout: float = 90.0) -> None:
+        """Open the notebook and wait for its kernel to be idle."""
+        url = f"{self.server.url}/lab/tree/{self.notebook}?token={self.server.token}"
+        self.page.goto(url, wait_until="domcontentloaded", timeout=timeout * 1000)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            ready = self.page.evaluate(
+                """() => {
+                     const app = window.jupyterapp;
+                     const p = app && app.shell.currentWidget;
+                     const k = p && p.sessionContext && p.sessionContext.session && p.sessionContext.session.kernel;
+                     return !!(k && k.status === 'idle' && p.content && p.content.model && p.content.model.cells.length > 0);
+                   }"""
+            )
+            if ready:
+                return
+            # a notebook without kernel metadata asks for a kernel: accept the default (Python 3)
+            accept = self.page.locator(".jp-Dialog .jp-Dialog-button.jp-mod-accept")
+            if accept.count():
+                accept.first.click()
+            self.page.wait_for_timeout(250)
+        self.screenshot("open-timeout")
+        raise AssertionError(f"{self.notebook}: kernel not idle after {timeout:.0f} s\n{self.server.log_tail()}")
+
+    def cell_state(self) -> dict[str, Any]:
+        return self.page.evaluate(_CELL_STATE_JS)
+
+    def run_all(self, *, timeout: float = 150.0) -> float:
+        """Run all cells (command ``notebook:run-all-cells``) and wait until all have run.
+
+        Returns the seconds it took. Fails with the cell's error (name and
+        value) if a cell raised, and with the kernel status on a timeout.
+        """
+        t0 = time.monotonic()
+        self.page.evaluate("() => window.jupyterapp.commands.execute('notebook:run-all-cells')")
+        deadline = t0 + timeout
+        state: dict[str, Any] = {}
+        while time.monotonic() < deadline:
+            self.page.wait_for_timeout(500)
+            state = self.cell_state()
+            if state.get("phase") != "ok":
+                continue
+            for cell in state["cells"]:
+                if cell["errors"]:
+                    raise AssertionError(f"{self.notebook}: cell {cell['index']} raised {cell['errors'][0]}")
+            if state["status"] in ("dead", "unknown"):
+                raise AssertionError(f"{self.notebook}: kernel {state['status']}\n{self.server.log_tail()}")
+            todo = [c for c in state["cells"] if not c["empty"] and c["count"] is None]
+            if not todo and not state["running"] and state["status"] == "idle":
+                return time.monotonic() - t0
+        raise AssertionError(f"{self.notebook}: cells not done after {timeout:.0f} s; last state {state}")
+
+    def stderr_tracebacks(self) -> list[str]:
+        """Tracebacks printed to a cell's output stream (a student sees them even if the cell "worked")."""
+        return self.page.evaluate(
+            """() => {
+                 const model = window.jupyterapp.shell.currentWidget.content.model;
+                 const found = [];
+                 for (let i = 0; i < model.cells.length; i++) {
+                   const cell = model.cells.get(i);
+                   if (cell.type !== 'code') continue;
+                   for (let k = 0; k < cell.outputs.length; k++) {
+                     const out = cell.outputs.get(k).toJSON();
+                     if (out.output_type !== 'stream') continue;
+                     const text = Array.isArray(out.text) ? out.text.join('') : String(out.text);
+                     if (!text.includes('Traceback (most recent call last)')) continue;
+                     const lines = text.replace(/\\x1b\\[[0-9;]*m/g, '').trim().split('\\n');
+                     found.push('cell ' + i + ': ' + lines[lines.length - 1].slice(0, 240));
+                   }
+                 }
+                 return found;
+               }"""
+        )
+
+    def kernel_eval(self, code: str, *, timeout: float = 30.0) -> str:
+        """Run ``code`` in the notebook's kernel (not in a cell); return its stdout."""
+        return self.page.evaluate(
+            """async ([code, timeout]) => {
+                 const p = window.jupyterapp.shell.currentWidget;
+                 const k = p.sessionContext.session.kernel;
+                 let text = '';
+                 const future = k.requestExecute({code, silent: false, store_history: false});
+                 future.onIOPub = (msg) => {
+                   if (msg.header.msg_type === 'stream') text += msg.content.text;
+                   if (msg.header.msg_type === 'error') text += 'ERROR ' + msg.content.ename + ': ' + msg.content.evalue;
+                 };
+                 await Promise.race([future.done, new Promise((_, rej) => setTimeout(() => rej(new Error('timeout')), timeout))]);
+                 return text;
+               }""",
+            [code, timeout * 1000],
+        )
+
+    # -- evidence ----------------------------------------------------------
+    def screenshot(self, label: str, locator: Any = None) -> Path:
+        """Save a screenshot (of the page, or of ``locator``) and return its path."""
+        self._n_shots += 1
+        stem = Path(self.notebook).stem
+        path = self.shots / f"{stem}-{self._n_shots:02d}-{label}.png"
+        if locator is None:
+            self.page.screenshot(path=str(path), full_page=False)
+        else:
+            locator.screenshot(path=str(path))
+        return path
+
+    def widget_errors(self) -> list[str]:
+        """Console errors that mention a widget, the widget manager or a comm, plus page errors."""
+        return [m for m in self.console if WIDGET_ERROR.search(m)] + self.page_errors
+
+    def close(self) -> None:
+        """Shut the notebook's kernel down (frees memory for the next lesson) and close the page."""
+        try:
+            self.page.evaluate(
+                "() => { const p = window.jupyterapp.shell.currentWidget;"
+                " return p && p.sessionContext && p.sessionContext.shutdown(); }"
+            )
+        except Exception:  # noqa: BLE001 - page may already be gone; the server stop cleans up
+            pass
+        self.page.close()
+
+
+def wait_until(predicate: Callable[[], Any], *, timeout: float, interval: float = 0.25, what: str = "") -> Any:
+    """Poll ``predicate`` until it returns a truthy value; raise AssertionError on timeout."""
+    deadline = time.monotonic() + timeout
+    value = None
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(interval)
+    raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what or predicate}; last value {value!r}")

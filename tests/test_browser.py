@@ -1,0 +1,490 @@
+"""The lessons work for a person in JupyterLab: end-to-end tests in headless Chromium.
+
+One JupyterLab server (127.0.0.1, random port, random token) serves a
+temporary copy of ``lessons/``; Debian's Chromium, driven by Playwright, opens
+each widget lesson, runs all its cells, waits for the widget, interacts with
+the mouse as a student would, and checks that the kernel received the edit
+(labels that only the kernel updates, and the widget's state read back from
+the kernel) and that the 3D view changed.  Every state is screenshotted into
+``browser-screenshots/`` at the repository root (or ``$MOCAPLAB_SCREENSHOTS``);
+the folder is named in the test output.  Console errors mentioning a widget,
+the widget manager or a comm fail the test.
+
+The server is started with ``MOCAPLAB_JUPYTER_BACKEND=trame`` so pyvista's
+view is the interactive trame iframe a student gets, not the static image of
+the nbval runs.  A lesson (or widget) that has not landed yet is skipped with
+a reason naming the missing piece.
+
+Run: ``pytest -m browser tests/test_browser.py`` (needs ``/usr/bin/chromium``;
+outside CI the module is skipped when it is missing).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from browser_support import (
+    CHROMIUM,
+    JupyterLabServer,
+    LessonPage,
+    copy_lessons,
+    image_change,
+    image_std,
+    launch_chromium,
+    png_to_grey,
+    server_env,
+)
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(300)]
+
+ROOT = Path(__file__).resolve().parents[1]
+# MOCAPLAB_BROWSER_LESSONS points the suite at another lesson folder (to debug a draft).
+LESSONS = Path(os.environ.get("MOCAPLAB_BROWSER_LESSONS", ROOT / "lessons")).resolve()
+WIDGETS = ROOT / "widgets"
+
+# A rendered 3D view "is not blank" when its grey levels vary at least this much.
+MIN_VIEW_STD = 4.0
+# A view "changed" when the mean absolute grey difference of two screenshots exceeds this.
+MIN_CHANGE = 0.3
+
+if not Path(CHROMIUM).exists():
+    if os.environ.get("CI"):
+        raise RuntimeError(f"browser tests need Chromium at {CHROMIUM} (apt-get install chromium)")
+    pytest.skip(f"Chromium not found at {CHROMIUM} (apt-get install chromium)", allow_module_level=True)
+sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright Python package is not installed")
+
+
+# ---------------------------------------------------------------- fixtures
+@pytest.fixture(scope="module")
+def shots_dir(pytestconfig: pytest.Config) -> Iterator[Path]:
+    """Folder for the screenshots (emptied of old PNGs first), named in the test output."""
+    folder = Path(os.environ.get("MOCAPLAB_SCREENSHOTS", ROOT / "browser-screenshots")).resolve()
+    if folder in (ROOT, LESSONS, ROOT / "tests"):
+        raise ValueError(f"MOCAPLAB_SCREENSHOTS must be a folder of its own, got {folder}")
+    folder.mkdir(parents=True, exist_ok=True)
+    for old in folder.glob("*.png"):
+        old.unlink()
+    reporter = pytestconfig.pluginmanager.get_plugin("terminalreporter")
+
+    capture = pytestconfig.pluginmanager.get_plugin("capturemanager")
+
+    def say(text: str) -> None:
+        if reporter is None or capture is None:  # pragma: no cover - pytest without its terminal
+            print(text)
+            return
+        with capture.global_and_fixture_disabled():
+            reporter.write_line(text)
+
+    say(f"\nbrowser screenshots: {folder}")
+    yield folder
+    say(f"\nbrowser screenshots written to {folder}: {len(list(folder.glob('*.png')))} files")
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[JupyterLabServer]:
+    """A JupyterLab server on a copy of lessons/, always stopped by process id afterwards."""
+    if not LESSONS.is_dir():
+        pytest.skip("no lessons/ folder")
+    base = tmp_path_factory.mktemp("browser")
+    root = copy_lessons(LESSONS, base / "lessons")
+    server = JupyterLabServer(root, env=server_env(os.environ.get("MOCAPLAB_DATA_DIR")), state_dir=base / "state")
+    try:
+        server.start()
+        yield server
+    finally:
+        server.stop()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    with sync_api.sync_playwright() as playwright:
+        chromium = launch_chromium(playwright)
+        try:
+            yield chromium
+        finally:
+            chromium.close()
+
+
+_TRACEBACKS: dict[str, list[str]] = {}
+
+
+@pytest.fixture
+def open_lesson(request: pytest.FixtureRequest) -> Iterator[Any]:
+    """``open_lesson("03", "PathEditor")`` opens that lesson in a fresh page, or skips naming what is missing.
+
+    The server and browser start only once a lesson is found. The page is
+    screenshotted and closed (its kernel shut down) after the test, and any
+    traceback printed in a cell's output is recorded for
+    :func:`test_no_tracebacks_in_lesson_outputs`.
+    """
+    pages: list[LessonPage] = []
+    contexts: list[Any] = []
+
+    def opener(number: str, *needs: str) -> LessonPage:
+        notebook = lesson_or_skip(number, *needs)
+        lab = request.getfixturevalue("lab")
+        browser = request.getfixturevalue("browser")
+        shots = request.getfixturevalue("shots_dir")
+        context = browser.new_context(viewport={"width": 1500, "height": 1100})
+        contexts.append(context)
+        page = LessonPage(context, lab, notebook.name, shots)
+        pages.append(page)
+        page.open()
+        return page
+
+    yield opener
+    for page in pages:
+        try:
+            page.screenshot("final")
+            _TRACEBACKS[page.notebook] = page.stderr_tracebacks()
+        except Exception:  # noqa: BLE001 - evidence only; the page may be gone
+            pass
+        page.close()
+    for context in contexts:
+        context.close()
+
+
+def lesson_or_skip(number: str, *needs: str) -> Path:
+    """The lesson ``NN_*.ipynb``; skip naming the missing piece if it or a needed widget is absent.
+
+    ``needs`` are widget class names the lesson must display (their module
+    must exist in ``widgets/`` and the notebook must mention the class).
+    """
+    found = sorted(LESSONS.glob(f"{number}_*.ipynb"))
+    modules = {
+        "MotionViewer": "viewer.py",
+        "PathEditor": "path_editor.py",
+        "TimeTrackEditor": "time_track.py",
+        "TouchUpStepper": "touchup.py",
+        "StaggeredExplorer": "staggered.py",
+    }
+    for name in needs:
+        if not (WIDGETS / modules[name]).exists():
+            pytest.skip(f"widget {name} (widgets/{modules[name]}) has not landed yet")
+    if not found:
+        pytest.skip(f"lesson {number} (lessons/{number}_*.ipynb) has not landed yet")
+    text = found[0].read_text()
+    for name in needs:
+        if name not in text:
+            pytest.skip(f"lesson {found[0].name} does not display {name} yet")
+    return found[0]
+
+
+# ---------------------------------------------------------------- 3D view
+def trame_frame(scope: Any) -> Any:
+    """The first pyvista trame iframe inside ``scope`` (a locator or page)."""
+    return scope.locator("iframe.pyvista").first
+
+
+def rendered_view(lesson: LessonPage, iframe: Any, *, timeout: float = 60.0) -> tuple[Any, bytes]:
+    """Wait until the trame view in ``iframe`` shows a rendered, non-blank image.
+
+    Returns the locator of the render surface (the largest visible ``img`` or
+    ``canvas`` in the iframe) and a screenshot of it. The toolbar overlaid
+    on the top of the view is left out of the blankness measure (top 20%).
+    """
+    iframe.wait_for(state="attached", timeout=timeout * 1000)
+    iframe.scroll_into_view_if_needed()
+    frame = iframe.content_frame
+    deadline = time.monotonic() + timeout
+    std = -1.0
+    while time.monotonic() < deadline:
+        surface = _largest_surface(frame)
+        if surface is not None:
+            png = surface.screenshot()
+            grey = png_to_grey(png)
+            std = float(grey[grey.shape[0] // 5 :].std())
+            if std > MIN_VIEW_STD:
+                return surface, png
+        lesson.page.wait_for_timeout(500)
+    lesson.screenshot("blank-3d-view", iframe)
+    raise AssertionError(f"the 3D view did not render within {timeout:.0f} s (grey std {std:.2f})")
+
+
+def _largest_surface(frame: Any) -> Any:
+    best, area = None, 0.0
+    for selector in ("img", "canvas"):
+        items = frame.locator(selector)
+        for i in range(items.count()):
+            item = items.nth(i)
+            try:
+                if not item.is_visible():
+                    continue
+                box = item.bounding_box()
+            except Exception:  # noqa: BLE001 - element replaced while we look
+                continue
+            if box and box["x"] > -box["width"] and box["width"] * box["height"] > area:
+                best, area = item, box["width"] * box["height"]
+    return best if area > 100 * 100 else None
+
+
+def wait_view_change(
+    lesson: LessonPage, surface_of: Any, before: bytes, *, timeout: float = 30.0
+) -> tuple[bytes, float]:
+    """Poll screenshots of ``surface_of()`` until they differ from ``before``; return the last and the change."""
+    deadline = time.monotonic() + timeout
+    change = 0.0
+    png = before
+    while time.monotonic() < deadline:
+        lesson.page.wait_for_timeout(400)
+        try:
+            png = surface_of().screenshot()
+        except Exception:  # noqa: BLE001 - the view may be rebuilding
+            continue
+        change = image_change(before, png)
+        if change > MIN_CHANGE:
+            return png, change
+    return png, change
+
+
+def mouse_drag(page: Any, start: tuple[float, float], end: tuple[float, float], *, steps: int = 12) -> None:
+    """Press at ``start``, move in ``steps`` to ``end``, release (page CSS pixels)."""
+    page.mouse.move(*start)
+    page.mouse.down()
+    for k in range(1, steps + 1):
+        s = k / steps
+        page.mouse.move(start[0] + s * (end[0] - start[0]), start[1] + s * (end[1] - start[1]))
+        page.wait_for_timeout(30)
+    page.mouse.up()
+
+
+def assert_no_widget_errors(lesson: LessonPage) -> None:
+    errors = lesson.widget_errors()
+    assert not errors, f"{lesson.notebook}: widget-manager errors in the browser console: {errors}"
+
+
+def set_slider(slider: Any, value: float | int) -> None:
+    """Type a value into an ipywidgets slider's editable readout (as a person can)."""
+    readout = slider.locator(".widget-readout")
+    readout.click()
+    readout.press("Control+a")
+    readout.type(str(value))
+    readout.press("Enter")
+
+
+def text_of(locator: Any) -> str:
+    return (locator.text_content() or "").strip()
+
+
+# ---------------------------------------------------------------- lessons
+def test_lesson_01_viewer_renders_and_is_interactive(open_lesson: Any) -> None:
+    lesson = open_lesson("01", "MotionViewer")
+    seconds = lesson.run_all()
+    page = lesson.page
+    iframe = trame_frame(page)
+    surface, first = rendered_view(lesson, iframe)
+    lesson.screenshot("viewer", iframe)
+    assert image_std(first) > MIN_VIEW_STD
+
+    # rotate the camera with the mouse: the kernel re-renders and streams a new image
+    box = surface.bounding_box()
+    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] * 0.6
+    mouse_drag(page, (cx, cy), (cx + 0.3 * box["width"], cy - 0.1 * box["height"]))
+    rotated, change = wait_view_change(lesson, lambda: _largest_surface(iframe.content_frame), first)
+    lesson.screenshot("viewer-rotated", iframe)
+    assert change > MIN_CHANGE, f"dragging in the 3D view did not change it (mean change {change:.3f})"
+
+    # move the frame slider: the kernel moves the skeleton and updates the time label
+    viewer_box = page.locator(".widget-vbox", has=page.locator("iframe.pyvista")).last
+    slider = viewer_box.locator(".widget-slider").first
+    label = viewer_box.locator(".widget-html", has_text="frame").last
+    label_before = text_of(label)
+    set_slider(slider, 40)
+    page.wait_for_function(
+        "([el, before]) => el.textContent.trim() !== before",
+        arg=[label.element_handle(), label_before],
+        timeout=30000,
+    )
+    moved, change = wait_view_change(lesson, lambda: _largest_surface(iframe.content_frame), rotated)
+    lesson.screenshot("viewer-frame-40", iframe)
+    assert change > MIN_CHANGE, f"moving the frame slider did not change the 3D view (mean change {change:.3f})"
+    assert "40" in text_of(label), f"time label did not follow the slider: {text_of(label)!r}"
+    assert_no_widget_errors(lesson)
+    print(f"lesson 01 ran in {seconds:.1f} s in JupyterLab")
+
+
+def _drag_handle(lesson: LessonPage, prefix: str, offset: tuple[float, float]) -> dict[str, Any]:
+    """Drag the first handle of the ``mocaplab-{prefix}-*`` editor by ``offset`` CSS pixels.
+
+    Returns the handle before, the status text before and after, and where the
+    mouse was released (CSS pixels from the canvas' top-left corner).
+    """
+    page = lesson.page
+    editor = page.locator(f".mocaplab-{prefix}-editor").first
+    editor.wait_for(timeout=60000)
+    canvas_widget = editor.locator(f".mocaplab-{prefix}-canvas").first
+    canvas = canvas_widget.locator(".jupyter-matplotlib-canvas-div canvas").last
+    canvas.wait_for(timeout=60000)
+    canvas.scroll_into_view_if_needed()
+    status = editor.locator(f".mocaplab-{prefix}-status").first
+    info = editor.locator(f".mocaplab-{prefix}-handles").first
+    handles = json.loads(info.text_content() or "[]")
+    if not handles:
+        raise AssertionError(f"the {prefix} editor of {lesson.notebook} shows no handle to drag")
+    handle = handles[0]
+    before = text_of(status)
+    box = canvas.bounding_box()
+    start = (box["x"] + handle["css"][0], box["y"] + handle["css"][1])
+    end = (start[0] + offset[0], start[1] + offset[1])
+    mouse_drag(page, start, end)
+    page.wait_for_function(
+        "([el, before]) => el.textContent.trim() !== before && /moved|drag/.test(el.textContent)",
+        arg=[status.element_handle(), before],
+        timeout=60000,
+    )
+    page.wait_for_timeout(300)
+    return {
+        "handle": handle,
+        "before": before,
+        "after": text_of(status),
+        "release_css": [handle["css"][0] + offset[0], handle["css"][1] + offset[1]],
+        "handles_after": json.loads(info.text_content() or "[]"),
+    }
+
+
+def _kernel_handles(lesson: LessonPage, class_name: str) -> list[dict[str, Any]]:
+    """The first ``class_name`` widget's handles as the kernel sees them."""
+    out = lesson.kernel_eval(
+        "import json as _j\n"
+        f"_w = [v for v in list(globals().values()) if type(v).__name__ == {class_name!r}]\n"
+        "print(_j.dumps(_w[0].handle_positions() if _w else None))\n"
+        "del _w, _j\n"
+    )
+    assert not out.startswith("ERROR"), out
+    value = json.loads(out.strip().splitlines()[-1])
+    if value is None:
+        raise AssertionError(f"no {class_name} object in the user namespace of {lesson.notebook}")
+    return value
+
+
+def test_lesson_03_drag_a_path_handle(open_lesson: Any) -> None:
+    lesson = open_lesson("03", "PathEditor")
+    lesson.run_all()
+    page = lesson.page
+    editor = page.locator(".mocaplab-path-editor").first
+    editor.wait_for(timeout=60000)
+    iframe = trame_frame(editor)
+    _, view_before = rendered_view(lesson, iframe)
+    src_before = iframe.get_attribute("src")
+    lesson.screenshot("path-editor-before", editor)
+
+    result = _drag_handle(lesson, "path", (70.0, -45.0))
+    lesson.screenshot("path-editor-dragged", editor)
+    after = result["after"]
+    assert "residual" in after, f"status label shows no residual after the drag: {after!r}"
+    assert re.search(r"target \(x, z\) = ", after), f"status label shows no target position: {after!r}"
+
+    # the kernel holds the handle where the mouse let go (within a few pixels)
+    kernel = _kernel_handles(lesson, "PathEditor")
+    moved = next(h for h in kernel if h["index"] == result["handle"]["index"])
+    dx = moved["css"][0] - result["release_css"][0]
+    dy = moved["css"][1] - result["release_css"][1]
+    assert abs(dx) < 4 and abs(dy) < 4, f"kernel handle at {moved['css']}, mouse released at {result['release_css']}"
+    assert moved["data"] != result["handle"]["data"]
+
+    # the 3D view shows the edited motion (the viewer is rebuilt on release)
+    def surface() -> Any:
+        return _largest_surface(trame_frame(page.locator(".mocaplab-path-editor").first).content_frame)
+
+    new_iframe = trame_frame(editor)
+    rendered_view(lesson, new_iframe)
+    view_after, change = wait_view_change(lesson, surface, view_before, timeout=45)
+    lesson.screenshot("path-editor-3d-after", editor)
+    assert change > MIN_CHANGE, (
+        f"the 3D view did not change after the path edit (mean change {change:.3f}; "
+        f"iframe src {src_before} -> {new_iframe.get_attribute('src')})"
+    )
+    assert_no_widget_errors(lesson)
+
+
+def test_lesson_04_drag_a_time_handle(open_lesson: Any) -> None:
+    lesson = open_lesson("04", "TimeTrackEditor")
+    lesson.run_all()
+    editor = lesson.page.locator(".mocaplab-time-editor").first
+    editor.wait_for(timeout=60000)
+    editor.scroll_into_view_if_needed()
+    lesson.screenshot("time-editor-before", editor)
+    result = _drag_handle(lesson, "time", (60.0, 0.0))
+    lesson.screenshot("time-editor-dragged", editor)
+    assert result["after"] != result["before"]
+    kernel = _kernel_handles(lesson, "TimeTrackEditor")
+    moved = next(h for h in kernel if h["index"] == result["handle"]["index"])
+    assert abs(moved["css"][0] - result["release_css"][0]) < 4, (
+        f"kernel time handle at {moved['css']}, mouse released at {result['release_css']}"
+    )
+    assert_no_widget_errors(lesson)
+
+
+def _number(text: str) -> float:
+    found = re.findall(r"[-+]?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?", text)
+    if not found:
+        raise AssertionError(f"no number in label {text!r}")
+    return float(found[0])
+
+
+def test_lesson_09_touchup_step_lowers_mean_zmp_distance(open_lesson: Any) -> None:
+    lesson = open_lesson("09", "TouchUpStepper")
+    lesson.run_all()
+    page = lesson.page
+    button = page.locator(".mocaplab-touchup-step").first
+    button.wait_for(timeout=60000)
+    button.scroll_into_view_if_needed()
+    mean = page.locator(".mocaplab-touchup-mean").first
+    before_text = text_of(mean)
+    before = _number(before_text)
+    lesson.screenshot("touchup-before", page.locator(".mocaplab-touchup-step").first.locator("xpath=../.."))
+    button.click()
+    page.wait_for_function(
+        "([el, before]) => el.textContent.trim() !== before",
+        arg=[mean.element_handle(), before_text],
+        timeout=90000,
+    )
+    after = _number(text_of(mean))
+    lesson.screenshot("touchup-after-step", page.locator(".mocaplab-touchup-step").first.locator("xpath=../.."))
+    assert after < before, f"mean ZMP distance did not fall: {before_text!r} -> {text_of(mean)!r}"
+    assert_no_widget_errors(lesson)
+
+
+@pytest.mark.parametrize("number", ["11", "13"])
+def test_staggered_toggle_changes_curves(open_lesson: Any, number: str) -> None:
+    lesson = open_lesson(number, "StaggeredExplorer")
+    lesson.run_all()
+    page = lesson.page
+    toggle = page.locator(".mocaplab-staggered-toggle").first
+    toggle.wait_for(timeout=60000)
+    explorer = page.locator(".mocaplab-staggered-explorer").first
+    scope = explorer if explorer.count() else toggle.locator("xpath=ancestor::div[contains(@class,'widget-vbox')][1]")
+    canvas = scope.locator(".jupyter-matplotlib-canvas-div canvas").first
+    canvas.scroll_into_view_if_needed()
+    before = canvas.screenshot()
+    lesson.screenshot("staggered-before", scope)
+    _press_toggle(toggle)
+    after, change = wait_view_change(lesson, lambda: canvas, before, timeout=60)
+    lesson.screenshot("staggered-toggled", scope)
+    assert change > MIN_CHANGE, f"toggling the refinements did not change the curves (mean change {change:.3f})"
+    assert_no_widget_errors(lesson)
+
+
+def _press_toggle(toggle: Any) -> None:
+    """Click a ToggleButton, a Checkbox, or the first option of ToggleButtons."""
+    for selector in ("button", "input[type=checkbox]"):
+        inner = toggle.locator(selector)
+        if inner.count():
+            inner.first.click()
+            return
+    toggle.click()
+
+
+def test_no_tracebacks_in_lesson_outputs() -> None:
+    """No lesson opened above printed a traceback into a cell output (runs last: file order)."""
+    if not _TRACEBACKS:
+        pytest.skip("no lesson was opened in the browser")
+    bad = {name: found for name, found in _TRACEBACKS.items() if found}
+    assert not bad, f"tracebacks printed in lesson outputs in JupyterLab: {bad}"

@@ -13,8 +13,6 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from . import quat
-
 __all__ = ["fk", "velocities"]
 
 
@@ -46,6 +44,8 @@ def fk(
     -------
     global_rotations : ndarray, shape (F, J, 4)
     global_positions : ndarray, shape (F, J, 3)
+        New arrays (transposed views of component-major buffers, so not
+        C-contiguous; ``np.ascontiguousarray`` them if that matters).
 
     Examples
     --------
@@ -55,23 +55,54 @@ def fk(
     >>> pos[0, 1].tolist()
     [0.0, 1.0, 0.0]
     """
+    rotations = np.asarray(rotations, dtype=float)
+    root_positions = np.asarray(root_positions, dtype=float)
+    offsets = np.asarray(offsets, dtype=float)
+    parents = np.asarray(parents, dtype=np.int64)
+    if rotations.ndim != 3 or rotations.shape[2] != 4:
+        raise ValueError(f"Expected `rotations` of shape (F, J, 4), got {rotations.shape}")
     n_frames, n_joints = rotations.shape[:2]
-    # work joint-major, (J, F, k), so each level gathers contiguous blocks
-    lrot = np.ascontiguousarray(np.swapaxes(rotations, 0, 1))
-    ltr = None if translations is None else np.ascontiguousarray(np.swapaxes(translations, 0, 1))
-    grot = np.empty((n_joints, n_frames, 4))
-    gpos = np.empty((n_joints, n_frames, 3))
-    grot[0] = lrot[0]
-    gpos[0] = root_positions
+    if root_positions.shape != (n_frames, 3):
+        raise ValueError(f"Expected `root_positions` of shape ({n_frames}, 3), got {root_positions.shape}")
+    if offsets.shape != (n_joints, 3) or parents.shape != (n_joints,):
+        raise ValueError(
+            f"Expected `offsets` ({n_joints}, 3) and `parents` ({n_joints},), got {offsets.shape} and {parents.shape}"
+        )
+    # Component-major layout, (4, J, F) and (3, J, F): each quaternion or
+    # vector component of a set of joints is one contiguous (n, F) block, so
+    # the products below run on contiguous memory without temporaries of
+    # strided views.  The results are returned as transposed views.
+    lq = np.ascontiguousarray(rotations.transpose(2, 1, 0))
+    lt = None if translations is None else np.ascontiguousarray(np.asarray(translations, dtype=float).transpose(2, 1, 0))
+    gq = np.empty_like(lq)
+    gp = np.empty((3, n_joints, n_frames))
+    gq[:, 0] = lq[:, 0]
+    gp[:, 0] = root_positions.T
     # joints of equal depth have their parents done already: one vectorised
     # step per level of the tree instead of one per joint
     for level in _levels(parents):
         p = parents[level]
-        local = offsets[level][:, None, :] if ltr is None else ltr[level]
-        pr = grot[p]
-        grot[level] = quat.mul(pr, lrot[level])
-        gpos[level] = gpos[p] + quat.rotate(pr, local)
-    return np.swapaxes(grot, 0, 1), np.swapaxes(gpos, 0, 1)
+        ax, ay, az, aw = gq[:, p]  # parents' global rotations, (n, F) each
+        bx, by, bz, bw = lq[:, level]
+        # global rotation: Hamilton product parent * local
+        gq[0, level] = aw * bx + ax * bw + ay * bz - az * by
+        gq[1, level] = aw * by - ax * bz + ay * bw + az * bx
+        gq[2, level] = aw * bz + ax * by - ay * bx + az * bw
+        gq[3, level] = aw * bw - ax * bx - ay * by - az * bz
+        # position: parent + parent rotation applied to the local translation,
+        # v' = v + w t + u x t with t = 2 u x v
+        if lt is None:
+            vx, vy, vz = offsets[level].T[:, :, None]  # (n, 1), the same every frame
+        else:
+            vx, vy, vz = lt[:, level]
+        tx = 2.0 * (ay * vz - az * vy)
+        ty = 2.0 * (az * vx - ax * vz)
+        tz = 2.0 * (ax * vy - ay * vx)
+        px, py, pz = gp[:, p]
+        gp[0, level] = px + vx + aw * tx + (ay * tz - az * ty)
+        gp[1, level] = py + vy + aw * ty + (az * tx - ax * tz)
+        gp[2, level] = pz + vz + aw * tz + (ax * ty - ay * tx)
+    return gq.transpose(2, 1, 0), gp.transpose(2, 1, 0)
 
 
 def _levels(parents: NDArray[np.int64]) -> list[NDArray[np.int64]]:

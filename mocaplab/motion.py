@@ -46,6 +46,45 @@ def _frozen(a: ArrayLike, dtype: Any = float) -> NDArray[Any]:
     return out
 
 
+class _Owned:
+    """A freshly built array handed to a constructor without a defensive copy.
+
+    Only for code inside mocaplab that builds an array, passes it as
+    ``_owned(array)`` and keeps no other reference to it: the constructor
+    validates it as usual and makes it read-only in place instead of copying.
+    """
+
+    __slots__ = ("array",)
+
+    def __init__(self, array: NDArray[Any]):
+        self.array = array
+
+
+def _owned(array: NDArray[Any]) -> Any:
+    """Wrap a fresh array for :class:`Motion` without a copy (see :class:`_Owned`)."""
+    return _Owned(array)
+
+
+def _take(value: Any, dtype: Any = float) -> tuple[NDArray[Any], bool]:
+    """``(array, fresh)``: the value as an array, and whether nobody else holds it."""
+    if isinstance(value, _Owned):
+        arr = np.asarray(value.array, dtype=dtype)
+        return arr, True
+    arr = np.asarray(value, dtype=dtype)
+    # a conversion from a list, or a dtype change, made a private copy already
+    fresh = isinstance(value, (list, tuple)) or (
+        isinstance(value, np.ndarray) and arr is not value and not np.may_share_memory(arr, value)
+    )
+    return arr, fresh
+
+
+def _freeze(arr: NDArray[Any], fresh: bool) -> NDArray[Any]:
+    if not fresh or not arr.flags.c_contiguous and not arr.flags.f_contiguous:
+        arr = np.array(arr, copy=True)
+    arr.flags.writeable = False
+    return arr
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Skeleton:
     """A joint hierarchy with rest offsets.
@@ -233,35 +272,41 @@ class Motion:
         if not isinstance(self.skeleton, Skeleton):
             raise TypeError(f"Expected `skeleton` to be a Skeleton, got {type(self.skeleton).__name__}")
         n = self.skeleton.n_joints
-        rot = np.asarray(self.rotations, dtype=float)
+        rot, rot_fresh = _take(self.rotations)
         if rot.ndim != 3 or rot.shape[1:] != (n, 4) or rot.shape[0] < 1:
             raise ValueError(f"Expected `rotations` of shape (F, {n}, 4) with F >= 1, got {rot.shape}")
         frames = rot.shape[0]
-        root = np.asarray(self.root_positions, dtype=float)
+        root, root_fresh = _take(self.root_positions)
         if root.shape != (frames, 3):
             raise ValueError(f"Expected `root_positions` of shape ({frames}, 3), got {root.shape}")
-        if not (np.all(np.isfinite(rot)) and np.all(np.isfinite(root))):
+        # squared norms: finite exactly when every component is (or overflow,
+        # which the unit check below reports)
+        sq = np.einsum("fji,fji->fj", rot, rot)
+        lo, hi = float(sq.min()), float(sq.max())
+        finite_rot = np.isfinite(lo) and np.isfinite(hi) or bool(np.isfinite(rot).all())
+        if not (finite_rot and np.isfinite(root).all()):
             raise ValueError("Expected finite `rotations` and `root_positions`, got NaN or inf")
-        norms = np.sqrt(np.einsum("...i,...i->...", rot, rot))
-        if np.any(np.abs(norms - 1.0) > 1e-3):
+        if lo < (1.0 - 1e-3) ** 2 or hi > (1.0 + 1e-3) ** 2:
+            norms = np.sqrt(sq)
             worst = np.unravel_index(np.argmax(np.abs(norms - 1.0)), norms.shape)
             raise ValueError(
                 f"Expected unit quaternions in `rotations`, got norm {norms[worst]:.6g} "
                 f"at frame {worst[0]}, joint {self.skeleton.names[worst[1]]!r}"
             )
-        if np.any(np.abs(norms - 1.0) > 1e-14):
-            rot = rot / norms[..., None]
+        if lo < 1.0 - 2e-14 or hi > 1.0 + 2e-14:
+            rot = rot / np.sqrt(sq)[..., None]
+            rot_fresh = True
         fps = float(self.fps)
         if not np.isfinite(fps) or fps <= 0:
             raise ValueError(f"Expected `fps` > 0, got {self.fps!r}")
         tr = self.translations
         if tr is not None:
-            tr = np.asarray(tr, dtype=float)
-            if tr.shape != (frames, n, 3) or not np.all(np.isfinite(tr)):
+            tr, tr_fresh = _take(tr)
+            if tr.shape != (frames, n, 3) or not np.isfinite(tr).all():
                 raise ValueError(f"Expected finite `translations` of shape ({frames}, {n}, 3), got {tr.shape}")
-            tr = _frozen(tr)
-        object.__setattr__(self, "rotations", _frozen(rot))
-        object.__setattr__(self, "root_positions", _frozen(root))
+            tr = _freeze(tr, tr_fresh)
+        object.__setattr__(self, "rotations", _freeze(rot, rot_fresh))
+        object.__setattr__(self, "root_positions", _freeze(root, root_fresh))
         object.__setattr__(self, "fps", fps)
         object.__setattr__(self, "translations", tr)
         object.__setattr__(self, "name", str(self.name))
@@ -335,7 +380,14 @@ class Motion:
 
     # ------------------------------------------------------------- editing
     def replace(self, **changes: Any) -> Motion:
-        """A new Motion with some fields replaced (validated again)."""
+        """A new Motion with some fields replaced (validated again).
+
+        Arrays that are not replaced are shared with this motion (they are
+        read-only), not copied.
+        """
+        for key in ("rotations", "root_positions", "translations"):
+            if key not in changes and getattr(self, key) is not None:
+                changes[key] = _Owned(getattr(self, key))
         return dataclasses.replace(self, **changes)
 
     def __getitem__(self, frames: slice) -> Motion:
@@ -349,9 +401,9 @@ class Motion:
         if idx.size == 0:
             raise ValueError(f"Slice {frames} selects no frames of a {self.n_frames}-frame motion")
         return self.replace(
-            rotations=self.rotations[idx],
-            root_positions=self.root_positions[idx],
-            translations=None if self.translations is None else self.translations[idx],
+            rotations=_Owned(self.rotations[idx]),
+            root_positions=_Owned(self.root_positions[idx]),
+            translations=None if self.translations is None else _Owned(self.translations[idx]),
             fps=self.fps / step,
         )
 
@@ -393,7 +445,7 @@ class Motion:
         esp = swap[sk.end_site_parents]
         # keep end sites attached to the mirrored joint with that joint's mirrored offset
         eso = np.empty_like(sk.end_site_offsets)
-        for e, (p, off) in enumerate(zip(sk.end_site_parents, sk.end_site_offsets)):
+        for e, (p, off) in enumerate(zip(sk.end_site_parents, sk.end_site_offsets, strict=True)):
             partner = np.flatnonzero(sk.end_site_parents == swap[p])
             eso[e] = (sk.end_site_offsets[partner[0]] if partner.size else off) * flip
         new_sk = dataclasses.replace(

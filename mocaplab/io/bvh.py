@@ -30,8 +30,9 @@ from os import PathLike
 
 import numpy as np
 from numpy.typing import NDArray
+
 from .. import quat
-from ..motion import VALID_CHANNELS, Motion, Skeleton
+from ..motion import VALID_CHANNELS, Motion, Skeleton, _owned
 from . import euler
 from .errors import MocapFormatError
 
@@ -58,6 +59,20 @@ class _Joint:
     end_sites: list[list[float]] = field(default_factory=list)
 
 
+def _to_float(tok: str) -> float | None:
+    """``float(tok)`` for plain ASCII number tokens, else None.
+
+    Python's ``float`` also accepts digit separators (``1_000``) and non-ASCII
+    digits, which no motion file means; numpy's reader rejects them too.
+    """
+    if not tok.isascii() or "_" in tok:
+        return None
+    try:
+        return float(tok)
+    except ValueError:
+        return None
+
+
 class _Tokens:
     """Whitespace tokens of the hierarchy section with their line numbers."""
 
@@ -68,14 +83,14 @@ class _Tokens:
             for tok in text.split():
                 self.items.append((tok, number))
         self.pos = 0
-        self.last_line = stop
+        self.last_line = max(stop, 1)
 
     def peek(self) -> tuple[str, int] | None:
         return self.items[self.pos] if self.pos < len(self.items) else None
 
     def next(self, expected: str) -> tuple[str, int]:
         if self.pos >= len(self.items):
-            raise MocapFormatError(self.path, self.last_line, expected, "end of the hierarchy")
+            raise MocapFormatError(self.path, self.last_line, expected, "end of the hierarchy (truncated file?)")
         item = self.items[self.pos]
         self.pos += 1
         return item
@@ -83,103 +98,138 @@ class _Tokens:
     def expect(self, word: str) -> int:
         tok, line = self.next(repr(word))
         if tok != word:
-            raise MocapFormatError(self.path, line, repr(word), repr(tok))
+            raise MocapFormatError(self.path, line, repr(word), repr(tok[:40]))
         return line
 
     def number(self, what: str) -> float:
         tok, line = self.next(what)
-        try:
-            value = float(tok)
-        except ValueError:
-            raise MocapFormatError(self.path, line, what, repr(tok)) from None
+        value = _to_float(tok)
+        if value is None:
+            raise MocapFormatError(self.path, line, what, repr(tok[:40]))
         if not math.isfinite(value):
-            raise MocapFormatError(self.path, line, f"a finite {what}", repr(tok))
+            raise MocapFormatError(self.path, line, f"a finite {what}", repr(tok[:40]))
         return value
 
 
-def _read_text(path: str) -> str:
+def read_text(path: str, what: str = "a text file") -> str:
+    """The text of a motion file, or MocapFormatError for binary or undecodable bytes.
+
+    A UTF-8 byte-order mark is dropped.  Line numbers in errors count ``\n``.
+    """
     try:
         with open(path, "rb") as fh:
             raw = fh.read()
     except IsADirectoryError:
-        raise MocapFormatError(path, 0, "a BVH file", "a directory") from None
+        raise MocapFormatError(path, 0, what, "a directory") from None
     if b"\x00" in raw:
         line = raw[: raw.index(b"\x00")].count(b"\n") + 1
         raise MocapFormatError(path, line, "text", "binary data (NUL byte)")
     try:
-        return raw.decode("utf-8")
+        return raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         line = raw[: exc.start].count(b"\n") + 1
         raise MocapFormatError(path, line, "UTF-8 or ASCII text", f"undecodable byte 0x{raw[exc.start]:02x}") from None
 
 
-def _parse_joint(tok: _Tokens, joints: list[_Joint], parent: int, keyword_line: int) -> None:
+_read_text = read_text  # former private name
+
+
+def split_lines(text: str) -> list[str]:
+    """Lines of ``text`` for LF, CRLF or CR line endings (no other separators)."""
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    return text.split("\n")
+
+
+_KEYWORDS = ("{", "}", "OFFSET", "CHANNELS", "JOINT", "End", "ROOT")
+
+
+def _parse_hierarchy(tok: _Tokens) -> list[_Joint]:
+    """Joints in file order, from the tokens after ``HIERARCHY`` (no recursion)."""
     path = tok.path
-    parts = []
+    joints: list[_Joint] = []
+    names: set[str] = set()
+    t, line = tok.next("'ROOT'")
+    if t != "ROOT":
+        raise MocapFormatError(path, line, "'ROOT'", repr(t[:40]))
+    # stack of open joints; a joint block is entered right after its keyword
+    stack: list[int] = []
+    keyword_line = line
+    parent = -1
     while True:
-        t, line = tok.next("a joint name followed by '{'")
-        if t == "{":
-            break
-        if t in ("}", "OFFSET", "CHANNELS", "JOINT"):
-            raise MocapFormatError(path, line, "a joint name followed by '{'", repr(t))
-        parts.append(t)
-    if not parts:
-        raise MocapFormatError(path, keyword_line, "a joint name", "none")
-    name = " ".join(parts)
-    if any(j.name == name for j in joints):
-        raise MocapFormatError(path, keyword_line, "unique joint names", f"a second joint named {name!r}")
-    tok.expect("OFFSET")
-    offset = [tok.number("an OFFSET number") for _ in range(3)]
-    joint = _Joint(name, parent, offset, line=keyword_line)
-    index = len(joints)
-    joints.append(joint)
-    nxt = tok.peek()
-    if nxt is not None and nxt[0] == "CHANNELS":
-        tok.next("CHANNELS")
-        t, line = tok.next("a channel count")
-        try:
-            count = int(t)
-        except ValueError:
-            raise MocapFormatError(path, line, "an integer channel count", repr(t)) from None
-        if not 0 <= count <= 6:
-            raise MocapFormatError(path, line, "a channel count between 0 and 6", str(count))
-        names = []
-        for _ in range(count):
-            c, cline = tok.next(f"{count} channel names")
-            if c not in VALID_CHANNELS:
-                if c in ("JOINT", "End", "}", "{") or c.lstrip("-").replace(".", "").isdigit():
-                    raise MocapFormatError(
-                        path, cline, f"{count} channel names after 'CHANNELS {count}'", f"only {len(names)}"
-                    )
-                raise MocapFormatError(
-                    path, cline, "a channel name (X/Y/Z position or rotation)", repr(c)
-                )
-            if c in names:
-                raise MocapFormatError(path, cline, "each channel once per joint", f"{c} twice")
-            names.append(c)
+        parts = []
+        while True:
+            t, line = tok.next("a joint name followed by '{'")
+            if t == "{":
+                break
+            if t in _KEYWORDS:
+                raise MocapFormatError(path, line, "a joint name followed by '{'", repr(t))
+            parts.append(t)
+        if not parts:
+            raise MocapFormatError(path, keyword_line, "a joint name", "none")
+        name = " ".join(parts)
+        if name in names:
+            raise MocapFormatError(path, keyword_line, "unique joint names", f"a second joint named {name!r}")
+        names.add(name)
+        tok.expect("OFFSET")
+        offset = [tok.number("an OFFSET number") for _ in range(3)]
+        joint = _Joint(name, parent, offset, line=keyword_line)
+        joints.append(joint)
+        stack.append(len(joints) - 1)
         nxt = tok.peek()
-        if nxt is not None and nxt[0] in VALID_CHANNELS:
-            raise MocapFormatError(path, nxt[1], f"{count} channel names as declared", f"more ({nxt[0]!r})")
-        joint.channels = tuple(names)
-    while True:
-        t, line = tok.next("'JOINT', 'End Site' or '}'")
-        if t == "}":
-            return
-        if t == "JOINT":
-            _parse_joint(tok, joints, index, line)
-        elif t == "End":
-            tok.expect("Site")
-            tok.expect("{")
-            tok.expect("OFFSET")
-            joint.end_sites.append([tok.number("an OFFSET number") for _ in range(3)])
-            tok.expect("}")
-        else:
-            raise MocapFormatError(path, line, "'JOINT', 'End Site' or '}'", repr(t))
+        if nxt is not None and nxt[0] == "CHANNELS":
+            joint.channels = _parse_channels(tok)
+        # children, end sites and closing braces until the next JOINT (or the end)
+        while True:
+            t, line = tok.next("'JOINT', 'End Site' or '}'")
+            if t == "}":
+                stack.pop()
+                if not stack:
+                    return joints
+            elif t == "JOINT":
+                keyword_line = line
+                parent = stack[-1]
+                break
+            elif t == "End":
+                tok.expect("Site")
+                tok.expect("{")
+                tok.expect("OFFSET")
+                joints[stack[-1]].end_sites.append([tok.number("an OFFSET number") for _ in range(3)])
+                tok.expect("}")
+            else:
+                raise MocapFormatError(path, line, "'JOINT', 'End Site' or '}'", repr(t[:40]))
+
+
+def _parse_channels(tok: _Tokens) -> tuple[str, ...]:
+    path = tok.path
+    tok.next("CHANNELS")
+    t, line = tok.next("a channel count")
+    count = int(t) if t.isascii() and t.isdigit() else None
+    if count is None:
+        raise MocapFormatError(path, line, "an integer channel count", repr(t[:40]))
+    if not 0 <= count <= 6:
+        raise MocapFormatError(path, line, "a channel count between 0 and 6", str(count))
+    names: list[str] = []
+    for _ in range(count):
+        c, cline = tok.next(f"{count} channel names")
+        if c not in VALID_CHANNELS:
+            if c in _KEYWORDS or _to_float(c) is not None:
+                raise MocapFormatError(
+                    path, cline, f"{count} channel names after 'CHANNELS {count}'", f"only {len(names)}"
+                )
+            raise MocapFormatError(path, cline, "a channel name (X/Y/Z position or rotation)", repr(c[:40]))
+        if c in names:
+            raise MocapFormatError(path, cline, "each channel once per joint", f"{c} twice")
+        names.append(c)
+    nxt = tok.peek()
+    if nxt is not None and nxt[0] in VALID_CHANNELS:
+        raise MocapFormatError(path, nxt[1], f"{count} channel names as declared", f"more ({nxt[0]!r})")
+    return tuple(names)
 
 
 def _header_value(path: str, lines: list[str], i: int, label: str) -> str:
     if i >= len(lines):
-        raise MocapFormatError(path, i + 1, f"'{label}' line", "end of file (truncated)")
+        raise MocapFormatError(path, len(lines), f"'{label}' line", "end of file (truncated)")
     text = lines[i].strip()
     if not text.startswith(label):
         raise MocapFormatError(path, i + 1, f"'{label} <value>'", repr(text[:40]))
@@ -189,8 +239,7 @@ def _header_value(path: str, lines: list[str], i: int, label: str) -> str:
 def parse_bvh(path: str | PathLike[str]) -> tuple[list[_Joint], float, NDArray[np.float64]]:
     """Parse a BVH file into joints, frame time and the raw channel matrix (F, C)."""
     path = os.fspath(path)
-    text = _read_text(path)
-    lines = text.splitlines()
+    lines = split_lines(read_text(path, "a BVH file"))
     first = next((i for i, s in enumerate(lines) if s.strip()), None)
     if first is None:
         raise MocapFormatError(path, 1, "'HIERARCHY'", "an empty file")
@@ -200,33 +249,29 @@ def parse_bvh(path: str | PathLike[str]) -> tuple[list[_Joint], float, NDArray[n
     stop = motion_line if motion_line is not None else len(lines)
     tok = _Tokens(path, lines, stop)
     tok.pos = 1  # skip HIERARCHY
-    joints: list[_Joint] = []
-    t, line = tok.next("'ROOT'")
-    if t != "ROOT":
-        raise MocapFormatError(path, line, "'ROOT'", repr(t))
-    _parse_joint(tok, joints, -1, line)
+    joints = _parse_hierarchy(tok)
     extra = tok.peek()
     if extra is not None:
         if extra[0] == "}":
             raise MocapFormatError(path, extra[1], "'MOTION' after the hierarchy", "an unbalanced '}'")
-        raise MocapFormatError(path, extra[1], "'MOTION' after the hierarchy", repr(extra[0]))
+        raise MocapFormatError(path, extra[1], "'MOTION' after the hierarchy", repr(extra[0][:40]))
     if motion_line is None:
         raise MocapFormatError(path, len(lines), "a 'MOTION' section", "end of file")
+    n_channels = sum(len(j.channels) for j in joints)
+    if n_channels == 0:
+        raise MocapFormatError(path, joints[0].line, "at least one CHANNELS entry in the hierarchy", "none")
     frames_text = _header_value(path, lines, motion_line + 1, "Frames:")
-    try:
-        n_frames = int(frames_text)
-    except ValueError:
-        raise MocapFormatError(path, motion_line + 2, "an integer frame count", repr(frames_text)) from None
+    n_frames = int(frames_text) if frames_text.isascii() and frames_text.isdigit() else None
+    if n_frames is None:
+        raise MocapFormatError(path, motion_line + 2, "an integer frame count", repr(frames_text[:40]))
     if n_frames < 1:
         raise MocapFormatError(path, motion_line + 2, "a frame count of at least 1", str(n_frames))
     ft_text = _header_value(path, lines, motion_line + 2, "Frame Time:")
-    try:
-        frame_time = float(ft_text)
-    except ValueError:
-        raise MocapFormatError(path, motion_line + 3, "a number of seconds per frame", repr(ft_text)) from None
-    if not (math.isfinite(frame_time) and frame_time > 0):
-        raise MocapFormatError(path, motion_line + 3, "a positive, finite Frame Time", ft_text)
-    n_channels = sum(len(j.channels) for j in joints)
+    frame_time = _to_float(ft_text)
+    if frame_time is None:
+        raise MocapFormatError(path, motion_line + 3, "a number of seconds per frame", repr(ft_text[:40]))
+    if not (math.isfinite(frame_time) and frame_time > 0 and math.isfinite(1.0 / frame_time)):
+        raise MocapFormatError(path, motion_line + 3, "a positive, finite Frame Time", ft_text[:40])
     data = _parse_rows(path, lines, motion_line + 3, n_frames, n_channels)
     return joints, frame_time, data
 
@@ -238,37 +283,33 @@ def _parse_rows(path: str, lines: list[str], start: int, n_frames: int, n_channe
     # Fast path: numpy's C reader checks that every row has the same number of
     # columns and that every token is a number; anything it rejects is
     # re-read row by row below to say exactly what is wrong and where.
-    if len(rows) == n_frames and n_channels > 0:
+    if len(rows) == n_frames:
         try:
             flat = np.loadtxt(rows, dtype=np.float64, ndmin=2, comments=None)
         except ValueError:
             flat = None
-        if flat is not None and flat.shape == (n_frames, n_channels) and np.all(np.isfinite(flat)):
+        if flat is not None and flat.shape == (n_frames, n_channels) and np.isfinite(flat).all():
             return flat
-    # Slow path: row by row, to say exactly what is wrong and where.
+    # Slow path: row by row, to say exactly what is wrong and where.  Blank
+    # lines between rows are allowed.
     out = np.empty((n_frames, n_channels))
     count = 0
     for i, row in enumerate(rows):
         number = start + i + 1
         toks = row.split()
         if not toks:
-            if count < n_frames:
-                raise MocapFormatError(path, number, f"a frame row of {n_channels} numbers", "an empty line")
             continue
         if count >= n_frames:
             raise MocapFormatError(path, number, f"{n_frames} frame rows as declared by 'Frames:'", "more rows")
         if len(toks) != n_channels:
             raise MocapFormatError(path, number, f"{n_channels} numbers in frame row {count + 1}", f"{len(toks)}")
-        try:
-            vals = [float(x) for x in toks]
-        except ValueError:
-            bad = next(x for x in toks if not _is_float(x))
-            raise MocapFormatError(path, number, "a number", repr(bad[:30])) from None
-        arr = np.asarray(vals)
-        if not np.all(np.isfinite(arr)):
-            bad = toks[int(np.flatnonzero(~np.isfinite(arr))[0])]
-            raise MocapFormatError(path, number, "a finite number", repr(bad))
-        out[count] = arr
+        vals = [_to_float(x) for x in toks]
+        for x, v in zip(toks, vals, strict=True):
+            if v is None:
+                raise MocapFormatError(path, number, "a number", repr(x[:30]))
+            if not math.isfinite(v):
+                raise MocapFormatError(path, number, "a finite number", repr(x[:30]))
+        out[count] = vals
         count += 1
     if count < n_frames:
         raise MocapFormatError(
@@ -277,27 +318,41 @@ def _parse_rows(path: str, lines: list[str], start: int, n_frames: int, n_channe
     return out
 
 
-def _is_float(x: str) -> bool:
-    try:
-        float(x)
-    except ValueError:
-        return False
-    return True
-
-
 def estimate_scale(skeleton_in_file_units: Skeleton) -> tuple[float, str]:
     """Guess metres per file unit from a skeleton's rest-pose size.
 
-    Returns ``(scale, unit_name)``; see the module docstring for the rule.
+    Parameters
+    ----------
+    skeleton_in_file_units : Skeleton
+        Offsets in the file's unit.
+
+    Returns
+    -------
+    scale : float
+        Metres per file unit, one of :data:`CANDIDATE_UNITS`.
+    unit : str
+        Its name.  A skeleton of zero (or non-finite) size gives ``(1.0, "metres")``.
+
+    Notes
+    -----
+    The extent of the rest pose (all rotations zero; joints and end sites) is
+    its largest side along x, y or z; the unit making that extent closest to
+    1.7 m in ratio (``|log(extent * unit / 1.7)|`` smallest) wins.
     """
     sk = skeleton_in_file_units
     rest = Motion(sk, np.tile([0.0, 0.0, 0.0, 1.0], (1, sk.n_joints, 1)), sk.offsets[None, 0], 1.0)
-    pts = np.concatenate([rest.global_positions()[0], rest.end_site_positions()[0]])
-    extent = float(np.max(np.ptp(pts, axis=0)))
-    if extent <= 0:
+    with np.errstate(all="ignore"):
+        pts = np.concatenate([rest.global_positions()[0], rest.end_site_positions()[0]])
+        extent = float(np.max(np.ptp(pts, axis=0)))
+    scores = {}
+    for unit, metres in CANDIDATE_UNITS.items():
+        size = extent * metres
+        if math.isfinite(size) and size > 0:
+            scores[unit] = abs(math.log(size / TYPICAL_HEIGHT_M))
+    if not scores:
         return 1.0, "metres"
-    best = min(CANDIDATE_UNITS.items(), key=lambda kv: abs(math.log(extent * kv[1] / TYPICAL_HEIGHT_M)))
-    return best[1], best[0]
+    best = min(scores, key=scores.__getitem__)
+    return CANDIDATE_UNITS[best], best
 
 
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
@@ -310,17 +365,34 @@ def load_bvh(path: str | PathLike[str], *, scale: float | None = None, name: str
     ----------
     path : str or path-like
     scale : float, optional
-        Metres per file unit.  If omitted it is estimated (see module notes)
-        and a ``UserWarning`` says which unit was assumed.
+        Metres per file unit.  If omitted it is estimated (see
+        :func:`estimate_scale`) and a ``UserWarning`` says which unit was
+        assumed.
     name : str, optional
         Label for the motion (default: the file stem).
+
+    Returns
+    -------
+    Motion
+        Joints in file order with the file's names and channel orders, end
+        sites, root positions from the root's position channels, local
+        rotations from the rotation channels (``Motion.translations`` when a
+        non-root joint has position channels), ``fps = 1 / Frame Time``.
 
     Raises
     ------
     MocapFormatError
         For any malformed file, naming the file, line and expectation.
+    ValueError
+        For a ``scale`` that is not a positive finite number.
+
+    Examples
+    --------
+    >>> walk = load_bvh("16_15.bvh", scale=0.0254 / 0.45)  # doctest: +SKIP
     """
     path = os.fspath(path)
+    if scale is not None and not (isinstance(scale, (int, float, np.floating)) and math.isfinite(scale) and scale > 0):
+        raise ValueError(f"Expected `scale` > 0 (metres per file unit), got {scale!r}")
     joints, frame_time, data = parse_bvh(path)
     n = len(joints)
     offsets = np.array([j.offset for j in joints])
@@ -342,19 +414,17 @@ def load_bvh(path: str | PathLike[str], *, scale: float | None = None, name: str
             UserWarning,
             stacklevel=2,
         )
-    if not (math.isfinite(scale) and scale > 0):
-        raise ValueError(f"Expected `scale` > 0 (metres per file unit), got {scale!r}")
+    scale = float(scale)
     n_frames = data.shape[0]
-    rotations = np.empty((n_frames, n, 4))
-    rotations[...] = (0.0, 0.0, 0.0, 1.0)
-    root = np.broadcast_to(offsets[0], (n_frames, 3)).copy()
+    root = np.empty((n_frames, 3))
+    root[:] = offsets[0]
     translations = None
     groups: dict[str, list[tuple[int, list[int]]]] = {}
     col = 0
     for ji, j in enumerate(joints):
         rot_cols, order = [], ""
         for c in j.channels:
-            if c.endswith("rotation"):
+            if c[1] == "r":  # Xrotation, ...
                 rot_cols.append(col)
                 order += c[0]
             else:
@@ -363,28 +433,78 @@ def load_bvh(path: str | PathLike[str], *, scale: float | None = None, name: str
                     root[:, axis] = data[:, col]
                 else:
                     if translations is None:
-                        translations = np.broadcast_to(offsets, (n_frames, n, 3)).copy()
+                        translations = np.empty((n_frames, n, 3))
+                        translations[:] = offsets
                     translations[:, ji, axis] = data[:, col]
             col += 1
         if order:
             groups.setdefault(order, []).append((ji, rot_cols))
+    rotations = None
     for order, members in groups.items():
         idx = [m[0] for m in members]
         cols = np.array([m[1] for m in members])  # (G, len(order))
-        angles = data[:, cols]  # (F, G, k)
-        rotations[:, idx] = euler.to_quat(order, angles, degrees=True)
+        first = int(cols[0, 0])
+        if np.array_equal(cols.ravel(), np.arange(first, first + cols.size)):
+            # consecutive columns (the usual layout): a view, no gather copy
+            angles = data[:, first : first + cols.size].reshape(n_frames, len(idx), len(order))
+        else:
+            angles = data[:, cols]  # (F, G, k)
+        q = euler.to_quat(order, angles, degrees=True)
+        if len(idx) == n and len(groups) == 1 and idx == list(range(n)):
+            rotations = q
+        else:
+            if rotations is None:
+                rotations = np.zeros((n_frames, n, 4))
+                rotations[..., 3] = 1.0
+            rotations[:, idx] = q
+    if rotations is None:
+        rotations = np.zeros((n_frames, n, 4))
+        rotations[..., 3] = 1.0
+    root *= scale
+    if translations is not None:
+        translations *= scale
+    scaled_offsets = offsets * scale
+    scaled_ends = raw_skeleton.end_site_offsets * scale
+    big = [
+        what
+        for what, arr in (
+            ("OFFSET", scaled_offsets),
+            ("End Site OFFSET", scaled_ends),
+            ("root position", root),
+            ("joint position", translations),
+        )
+        if arr is not None and not np.isfinite(arr).all()
+    ]
+    if big:
+        raise MocapFormatError(path, 0, f"{big[0]} values that stay finite in metres (scale {scale:g})", "an overflow")
+    skeleton = raw_skeleton.scaled(scale)
     return Motion(
-        skeleton=raw_skeleton.scaled(scale),
-        rotations=rotations,
-        root_positions=root * scale,
+        skeleton=skeleton,
+        rotations=_owned(rotations),
+        root_positions=_owned(root),
         fps=1.0 / frame_time,
-        translations=None if translations is None else translations * scale,
+        translations=None if translations is None else _owned(translations),
         name=name if name is not None else os.path.splitext(os.path.basename(path))[0],
     )
 
 
-def _fmt(values: NDArray[np.float64], precision: int) -> list[str]:
-    return [" ".join(f"{v:.{precision}f}" for v in row) for row in values]
+def _dfs_order(parents: NDArray[np.int64]) -> list[int]:
+    """Joints in depth-first order (children by index), the order BVH writes them."""
+    children: list[list[int]] = [[] for _ in parents]
+    for j in range(1, len(parents)):
+        children[int(parents[j])].append(j)
+    order: list[int] = []
+    stack = [0]
+    while stack:
+        j = stack.pop()
+        order.append(j)
+        stack.extend(reversed(children[j]))
+    return order
+
+
+def _writable_name(name: str) -> bool:
+    toks = name.split()
+    return bool(toks) and " ".join(toks) == name and not any(t in _KEYWORDS or t == "Site" for t in toks)
 
 
 def save_bvh(
@@ -404,45 +524,71 @@ def save_bvh(
     scale : float
         Metres per file unit (default 0.01: the file is in centimetres).
     precision : int
-        Decimals written for every number.
+        Decimals written for every number (default 6).
     channels : list of tuple of str, optional
         Channel order per joint; defaults to ``motion.skeleton.channels``.
-        Joints whose channels lack a rotation axis they need, or non-root
-        joints with animated translations but no position channels, are
-        written with the channels they need added.
+
+    Notes
+    -----
+    * Joints are written depth first (children in index order), which is the
+      order :func:`load_bvh` reads them back in; a skeleton built in another
+      order (say breadth first) comes back reordered, with the same names.
+    * A joint whose channels cannot hold its motion gets the channels it
+      needs: three rotation channels (``Zrotation Yrotation Xrotation``) if
+      it rotates but has fewer, and ``Xposition Yposition Zposition`` if its
+      position (the root's path, or a non-root joint's animated translation)
+      differs from its OFFSET on some axis without a channel.
+    * Rotations are written as Euler angles in each joint's channel order
+      (scipy), unwrapped over time so curves have no 360-degree jumps.
+
+    Raises
+    ------
+    ValueError
+        For a non-positive ``scale``, bad ``channels`` or joint names that a
+        BVH file cannot hold (empty, with leading, trailing or repeated
+        whitespace, or with a BVH keyword or brace as a word).
     """
+    if not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"Expected `scale` > 0 (metres per file unit), got {scale!r}")
     sk = motion.skeleton
-    chans = [tuple(c) for c in (channels or sk.channels)]
+    bad_names = [n for n in sk.names if not _writable_name(n)]
+    if bad_names:
+        raise ValueError(f"Joint names {bad_names[:3]} cannot be written to a BVH file (see save_bvh notes)")
+    chans = [tuple(c) for c in (channels if channels is not None else sk.channels)]
     if len(chans) != sk.n_joints:
         raise ValueError(f"Expected channels for {sk.n_joints} joints, got {len(chans)}")
-    rot_needed = np.any(np.abs(quat.angle(motion.rotations)) > 1e-9, axis=0)
-    for j in range(sk.n_joints):
-        c = chans[j]
-        rot = tuple(x for x in c if x.endswith("rotation"))
-        if rot_needed[j] and len(rot) < 3:
-            chans[j] = tuple(x for x in c if x.endswith("position")) + ("Zrotation", "Yrotation", "Xrotation")
-        if j == 0 and not any(x.endswith("position") for x in chans[0]):
-            chans[0] = ("Xposition", "Yposition", "Zposition") + chans[0]
-        if j > 0 and motion.translations is not None:
-            moving = np.ptp(motion.translations[:, j], axis=0).max() > 0 or not np.allclose(
-                motion.translations[0, j], sk.offsets[j]
-            )
-            if moving and not any(x.endswith("position") for x in chans[j]):
-                chans[j] = ("Xposition", "Yposition", "Zposition") + chans[j]
+    for j, c in enumerate(chans):
+        if any(x not in VALID_CHANNELS for x in c) or len(set(c)) != len(c):
+            raise ValueError(f"Invalid channels {c} for joint {sk.names[j]!r}")
     n_frames = motion.n_frames
-    columns = []
+    rot_needed = np.any(quat.angle(motion.rotations) > 1e-9, axis=0)
     for j in range(sk.n_joints):
         c = chans[j]
-        rot_order = "".join(x[0] for x in c if x.endswith("rotation"))
-        angles = None
-        if rot_order:
-            if len(rot_order) == 3:
-                angles = euler.from_quat(rot_order, motion.rotations[:, j])
-            else:
-                # fewer than three rotation channels: only reached when the
-                # joint never rotates (see above), so the angles are zero
-                angles = np.zeros((n_frames, len(rot_order)))
-            angles = np.unwrap(angles, period=360.0, axis=0) if n_frames > 1 else angles
+        if rot_needed[j] and sum(x[1] == "r" for x in c) < 3:
+            c = tuple(x for x in c if x[1] == "p") + ("Zrotation", "Yrotation", "Xrotation")
+        if j == 0:
+            pos = motion.root_positions
+        elif motion.translations is not None:
+            pos = motion.translations[:, j]
+        else:
+            pos = None
+        if pos is not None:
+            have = {x[0] for x in c if x[1] == "p"}
+            varies = [a for a, i in _AXIS.items() if np.any(pos[:, i] != sk.offsets[j, i])]
+            if any(a not in have for a in varies):
+                c = ("Xposition", "Yposition", "Zposition") + tuple(x for x in c if x[1] == "r")
+        chans[j] = c
+    order = _dfs_order(sk.parents)
+    columns = []
+    for j in order:
+        c = chans[j]
+        rot_order = "".join(x[0] for x in c if x[1] == "r")
+        angles = np.zeros((n_frames, len(rot_order)))
+        if len(rot_order) == 3:
+            angles = euler.from_quat(rot_order, motion.rotations[:, j])
+            if n_frames > 1:
+                angles = np.unwrap(angles, period=360.0, axis=0)
+        # (fewer than three rotation channels only when the joint never rotates)
         if j == 0:
             pos = motion.root_positions
         elif motion.translations is not None:
@@ -451,40 +597,45 @@ def save_bvh(
             pos = np.broadcast_to(sk.offsets[j], (n_frames, 3))
         k = 0
         for x in c:
-            if x.endswith("rotation"):
-                assert angles is not None
+            if x[1] == "r":
                 columns.append(angles[:, k])
                 k += 1
             else:
                 columns.append(pos[:, _AXIS[x[0]]] / scale)
     data = np.stack(columns, axis=1) if columns else np.zeros((n_frames, 0))
 
+    num = f"%.{precision}f"
     out: list[str] = ["HIERARCHY"]
-    children = [sk.children(j) for j in range(sk.n_joints)]
-    end_sites = [sk.end_site_offsets[sk.end_site_parents == j] for j in range(sk.n_joints)]
-
-    def write(j: int, depth: int) -> None:
+    children: list[list[int]] = [[] for _ in range(sk.n_joints)]
+    for j in range(1, sk.n_joints):
+        children[int(sk.parents[j])].append(j)
+    ends: list[list[NDArray[np.float64]]] = [[] for _ in range(sk.n_joints)]
+    for p, e in zip(sk.end_site_parents, sk.end_site_offsets, strict=True):
+        ends[int(p)].append(e / scale)
+    triple = f"{num} {num} {num}"
+    # iterative depth-first writer: ("open", j, depth) or ("close", j, depth)
+    stack: list[tuple[str, int, int]] = [("open", 0, 0)]
+    while stack:
+        what, j, depth = stack.pop()
         pad = "\t" * depth
+        if what == "close":
+            for e in ends[j]:
+                out.append(f"{pad}\tEnd Site")
+                out.append(pad + "\t{")
+                out.append(f"{pad}\t\tOFFSET " + triple % tuple(e))
+                out.append(pad + "\t}")
+            out.append(pad + "}")
+            continue
         out.append(f"{pad}{'ROOT' if j == 0 else 'JOINT'} {sk.names[j]}")
         out.append(pad + "{")
-        off = sk.offsets[j] / scale
-        out.append(f"{pad}\tOFFSET {off[0]:.{precision}f} {off[1]:.{precision}f} {off[2]:.{precision}f}")
+        out.append(f"{pad}\tOFFSET " + triple % tuple(sk.offsets[j] / scale))
         out.append(f"{pad}\tCHANNELS {len(chans[j])}" + "".join(" " + x for x in chans[j]))
-        for c in children[j]:
-            write(c, depth + 1)
-        for e in end_sites[j]:
-            e = e / scale
-            out.append(f"{pad}\tEnd Site")
-            out.append(pad + "\t{")
-            out.append(f"{pad}\t\tOFFSET {e[0]:.{precision}f} {e[1]:.{precision}f} {e[2]:.{precision}f}")
-            out.append(pad + "\t}")
-        out.append(pad + "}")
-
-    write(0, 0)
+        stack.append(("close", j, depth))
+        stack.extend(("open", c, depth + 1) for c in reversed(children[j]))
     out.append("MOTION")
     out.append(f"Frames: {n_frames}")
     out.append(f"Frame Time: {1.0 / motion.fps:.10g}")
-    out.extend(_fmt(data, precision))
-    tmp = os.fspath(path)
-    with open(tmp, "w", encoding="ascii", newline="\n") as fh:
+    row = " ".join([num] * data.shape[1])
+    out.extend(row % tuple(values) for values in data.tolist())
+    with open(os.fspath(path), "w", encoding="utf-8", newline="\n") as fh:
         fh.write("\n".join(out) + "\n")

@@ -1,0 +1,674 @@
+"""Acclaim ASF/AMC files (the CMU motion capture database's native format).
+
+An ASF file describes a skeleton of *bones*; an AMC file gives, frame by
+frame, the values of each bone's degrees of freedom.  :func:`load_asf_amc`
+reads a pair into a :class:`~mocaplab.motion.Motion`.
+
+How the Acclaim skeleton becomes a Motion
+-----------------------------------------
+* **Joints** are the ``root`` followed by the bones in depth-first order of
+  the ``:hierarchy`` section (children in the order listed).  Joint ``b``
+  sits at the *start* of bone ``b`` and is named after it (``root``,
+  ``lhipjoint``, ``lfemur``, ...).  For the CMU files this is exactly the
+  joint order of the CMU BVH conversions (``Hips``, ``LHipJoint``,
+  ``LeftUpLeg``, ...; see :data:`CMU_BVH_NAMES`).
+* **Offsets.** Bones hanging from the root start at the root.  A bone's
+  child starts at its end: child offset = parent bone ``direction * length``.
+  Each leaf bone gets an End Site at its end.  ASF directions are in the
+  world frame of the rest pose, so the rest pose (all rotations identity) is
+  the ASF pose.
+* **Rotations** (the Acclaim rule): the local rotation of bone ``b`` is
+  ``L = C M C^-1``, where ``C`` is the bone's ``axis`` rotation and ``M``
+  the rotation of its AMC values.  Rotation angles listed in an order (the
+  ``axis`` string ``XYZ``, a bone's ``dof rx ry rz`` or the root's
+  ``order``) are applied in that order about fixed axes, so ``XYZ`` means
+  ``Rz @ Ry @ Rx``; ``axis`` values are read in the order of its axis
+  string.  Bones with no dofs keep the identity.  The root uses its
+  ``orientation`` and ``axis`` for ``C`` and the rotation entries of
+  ``order`` for ``M``.
+* **Root position** = the AMC translation values (``TX TY TZ`` entries of
+  the root ``order``); an axis without a translation dof takes the ASF
+  ``position``.
+* **Units.** ``:units length v`` means lengths are in units of
+  ``1 / v`` inch (the CMU files say ``length 0.45``), so the scale is
+  ``0.0254 / v`` metres per unit; ``angle deg`` or ``angle rad`` sets the
+  unit of ASF angles and of AMC values unless the AMC file says
+  ``:DEGREES`` or ``:RADIANS`` itself.
+* **Frames.** AMC frame numbers must count up by one.  In a
+  ``:FULLY-SPECIFIED`` file every bone with dofs must appear in every frame;
+  otherwise a missing bone keeps its value from the previous frame (zero in
+  the first).  The Acclaim format carries no frame rate: ``fps`` (default
+  120, the CMU capture rate) labels the result.
+
+Bone translation and length dofs (``tx ty tz l``) are not supported (no CMU
+file has them) and raise :class:`~mocaplab.io.MocapFormatError`, like every
+other problem in either file: it names the file, the line and what was
+expected.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from os import PathLike
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import quat
+from ..motion import Motion, Skeleton, _owned
+from . import euler
+from .bvh import _to_float, read_text, split_lines
+from .errors import MocapFormatError
+
+__all__ = ["load_asf_amc", "parse_asf", "parse_amc", "Asf", "AsfBone", "CMU_BVH_NAMES", "INCH_M"]
+
+INCH_M = 0.0254
+
+#: Joint names of the CMU BVH conversions (cgspeed) for the ASF bone names.
+CMU_BVH_NAMES: dict[str, str] = {
+    "root": "Hips",
+    "lhipjoint": "LHipJoint",
+    "lfemur": "LeftUpLeg",
+    "ltibia": "LeftLeg",
+    "lfoot": "LeftFoot",
+    "ltoes": "LeftToeBase",
+    "rhipjoint": "RHipJoint",
+    "rfemur": "RightUpLeg",
+    "rtibia": "RightLeg",
+    "rfoot": "RightFoot",
+    "rtoes": "RightToeBase",
+    "lowerback": "LowerBack",
+    "upperback": "Spine",
+    "thorax": "Spine1",
+    "lowerneck": "Neck",
+    "upperneck": "Neck1",
+    "head": "Head",
+    "lclavicle": "LeftShoulder",
+    "lhumerus": "LeftArm",
+    "lradius": "LeftForeArm",
+    "lwrist": "LeftHand",
+    "lhand": "LeftFingerBase",
+    "lfingers": "LeftHandIndex1",
+    "lthumb": "LThumb",
+    "rclavicle": "RightShoulder",
+    "rhumerus": "RightArm",
+    "rradius": "RightForeArm",
+    "rwrist": "RightHand",
+    "rhand": "RightFingerBase",
+    "rfingers": "RightHandIndex1",
+    "rthumb": "RThumb",
+}
+
+_ROT_DOFS = ("rx", "ry", "rz")
+_ROOT_DOFS = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+
+@dataclass
+class AsfBone:
+    """One ``begin ... end`` block of an ASF ``:bonedata`` section (file units)."""
+
+    name: str
+    direction: tuple[float, float, float]
+    length: float
+    axis: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    axis_order: str = "XYZ"
+    dofs: tuple[str, ...] = ()
+    line: int = 0
+
+
+@dataclass
+class Asf:
+    """A parsed ASF skeleton (file units and angle unit as written)."""
+
+    path: str
+    length_unit: float
+    degrees: bool
+    root_order: tuple[str, ...]
+    root_axis_order: str
+    root_position: tuple[float, float, float]
+    root_orientation: tuple[float, float, float]
+    bones: dict[str, AsfBone]
+    #: joint order: "root" then bones depth first
+    order: list[str] = field(default_factory=list)
+    #: parent joint index of each entry of ``order``
+    parents: list[int] = field(default_factory=list)
+
+    @property
+    def scale(self) -> float:
+        """Metres per ASF length unit, ``0.0254 / length``."""
+        return INCH_M / self.length_unit
+
+
+# ---------------------------------------------------------------------- ASF
+
+
+def _numbers(path: str, line: int, toks: list[str], count: int, what: str) -> list[float]:
+    if len(toks) < count:
+        raise MocapFormatError(path, line, f"{count} numbers for {what}", f"{len(toks)}")
+    out = []
+    for t in toks[:count]:
+        v = _to_float(t)
+        if v is None:
+            raise MocapFormatError(path, line, f"a number for {what}", repr(t[:40]))
+        if not math.isfinite(v):
+            raise MocapFormatError(path, line, f"a finite number for {what}", repr(t[:40]))
+        out.append(v)
+    return out
+
+
+def _axis_order(path: str, line: int, tok: str) -> str:
+    up = tok.upper()
+    if len(up) != 3 or set(up) != {"X", "Y", "Z"}:
+        raise MocapFormatError(path, line, "an axis order such as 'XYZ'", repr(tok[:40]))
+    return up
+
+
+def parse_asf(path: str | PathLike[str]) -> Asf:
+    """Parse an ASF file (no unit conversion); see :func:`load_asf_amc`."""
+    path = os.fspath(path)
+    lines = split_lines(read_text(path, "an ASF file"))
+    if not any(s.strip() for s in lines):
+        raise MocapFormatError(path, 1, "an ASF skeleton (':root', ':bonedata', ':hierarchy')", "an empty file")
+    section = ""
+    seen: dict[str, int] = {}
+    length_unit = 1.0
+    degrees = True
+    root_order: tuple[str, ...] | None = None
+    root_axis = "XYZ"
+    root_position = (0.0, 0.0, 0.0)
+    root_orientation = (0.0, 0.0, 0.0)
+    bones: dict[str, AsfBone] = {}
+    bone: dict[str, object] | None = None
+    bone_line = 0
+    in_hierarchy = False
+    hierarchy_done = False
+    children: dict[str, list[str]] = {}
+    child_parent: dict[str, str] = {}
+
+    def close_bone(number: int) -> None:
+        nonlocal bone
+        assert bone is not None
+        for key in ("name", "direction", "length"):
+            if key not in bone:
+                raise MocapFormatError(path, number, f"a '{key}' line in the bone beginning on line {bone_line}", "none")
+        name = str(bone["name"])
+        if name in bones or name == "root":
+            raise MocapFormatError(path, bone_line, "unique bone names (other than 'root')", f"a second {name!r}")
+        direction = np.asarray(bone["direction"], dtype=float)
+        norm = float(np.linalg.norm(direction))
+        if not (math.isfinite(norm) and norm > 0):
+            raise MocapFormatError(path, bone_line, f"a non-zero direction for bone {name!r}", "zero")
+        length = float(bone["length"])  # type: ignore[arg-type]
+        if length < 0:
+            raise MocapFormatError(path, bone_line, f"a length >= 0 for bone {name!r}", f"{length:g}")
+        bones[name] = AsfBone(
+            name=name,
+            direction=tuple(direction / norm),  # type: ignore[arg-type]
+            length=length,
+            axis=tuple(bone.get("axis", (0.0, 0.0, 0.0))),  # type: ignore[arg-type]
+            axis_order=str(bone.get("axis_order", "XYZ")),
+            dofs=tuple(bone.get("dofs", ())),  # type: ignore[arg-type]
+            line=bone_line,
+        )
+        bone = None
+
+    for number, text in enumerate(lines, start=1):
+        toks = text.split()
+        if not toks or toks[0].startswith("#"):
+            continue
+        key = toks[0]
+        if key.startswith(":"):
+            if bone is not None:
+                raise MocapFormatError(path, number, f"'end' closing the bone beginning on line {bone_line}", repr(key))
+            if in_hierarchy:
+                raise MocapFormatError(path, number, "'end' closing the hierarchy", repr(key))
+            section = key.lower()
+            seen.setdefault(section, number)
+            if section == "name" or section == "version":
+                pass
+            continue
+        if section == ":units":
+            if key == "length":
+                (length_unit,) = _numbers(path, number, toks[1:], 1, "the length unit")
+                if length_unit <= 0:
+                    raise MocapFormatError(path, number, "a positive length unit", toks[1])
+            elif key == "angle":
+                unit = toks[1].lower() if len(toks) > 1 else ""
+                if unit in ("deg", "degree", "degrees"):
+                    degrees = True
+                elif unit in ("rad", "radian", "radians"):
+                    degrees = False
+                else:
+                    raise MocapFormatError(path, number, "'angle deg' or 'angle rad'", repr(text.strip()[:40]))
+            # mass and other units do not matter here
+        elif section == ":root":
+            if key == "order":
+                dofs = tuple(t.lower() for t in toks[1:])
+                bad = [t for t in dofs if t not in _ROOT_DOFS]
+                if bad or len(set(dofs)) != len(dofs):
+                    raise MocapFormatError(
+                        path, number, "root order entries from TX TY TZ RX RY RZ, each once", repr(" ".join(toks[1:])[:60])
+                    )
+                root_order = dofs
+            elif key == "axis":
+                if len(toks) < 2:
+                    raise MocapFormatError(path, number, "an axis order such as 'XYZ'", "none")
+                root_axis = _axis_order(path, number, toks[1])
+            elif key == "position":
+                root_position = tuple(_numbers(path, number, toks[1:], 3, "the root position"))  # type: ignore[assignment]
+            elif key == "orientation":
+                root_orientation = tuple(_numbers(path, number, toks[1:], 3, "the root orientation"))  # type: ignore[assignment]
+            else:
+                raise MocapFormatError(path, number, "'order', 'axis', 'position' or 'orientation'", repr(key[:40]))
+        elif section == ":bonedata":
+            if bone is None:
+                if key != "begin":
+                    raise MocapFormatError(path, number, "'begin' opening a bone", repr(key[:40]))
+                bone = {}
+                bone_line = number
+                continue
+            if key == "end":
+                close_bone(number)
+            elif key == "begin":
+                raise MocapFormatError(path, number, f"'end' closing the bone beginning on line {bone_line}", "'begin'")
+            elif key == "name":
+                if len(toks) != 2:
+                    raise MocapFormatError(path, number, "'name <bone>'", repr(text.strip()[:40]))
+                bone["name"] = toks[1]
+            elif key == "direction":
+                bone["direction"] = _numbers(path, number, toks[1:], 3, "the bone direction")
+            elif key == "length":
+                bone["length"] = _numbers(path, number, toks[1:], 1, "the bone length")[0]
+            elif key == "axis":
+                bone["axis"] = _numbers(path, number, toks[1:], 3, "the bone axis")
+                bone["axis_order"] = _axis_order(path, number, toks[4]) if len(toks) > 4 else "XYZ"
+            elif key == "dof":
+                dofs = tuple(t.lower() for t in toks[1:])
+                bad = [t for t in dofs if t not in _ROT_DOFS]
+                if bad:
+                    raise MocapFormatError(
+                        path,
+                        number,
+                        "rotation dofs rx, ry, rz (bone translation and length dofs are not supported)",
+                        repr(bad[0][:40]),
+                    )
+                if len(set(dofs)) != len(dofs):
+                    raise MocapFormatError(path, number, "each dof once", repr(" ".join(toks[1:])[:40]))
+                bone["dofs"] = dofs
+            # id, limits (and their continuation lines), bodymass, cofmass: not needed
+        elif section == ":hierarchy":
+            if hierarchy_done:
+                raise MocapFormatError(path, number, "a new section after the hierarchy's 'end'", repr(key[:40]))
+            if not in_hierarchy:
+                if key != "begin":
+                    raise MocapFormatError(path, number, "'begin' opening the hierarchy", repr(key[:40]))
+                in_hierarchy = True
+                continue
+            if key == "end":
+                in_hierarchy = False
+                hierarchy_done = True
+                continue
+            parent = key
+            if parent != "root" and parent not in bones:
+                raise MocapFormatError(path, number, "a bone defined in ':bonedata' (or 'root')", repr(parent[:40]))
+            for child in toks[1:]:
+                if child not in bones:
+                    raise MocapFormatError(path, number, "a bone defined in ':bonedata'", repr(child[:40]))
+                if child in child_parent:
+                    raise MocapFormatError(
+                        path, number, f"one parent for bone {child!r}", f"{child_parent[child]!r} and {parent!r}"
+                    )
+                child_parent[child] = parent
+                children.setdefault(parent, []).append(child)
+        # other sections (:version, :name, :documentation, :skin, ...) are ignored
+    last = len(lines)
+    if bone is not None:
+        raise MocapFormatError(path, last, f"'end' closing the bone beginning on line {bone_line}", "end of file")
+    if in_hierarchy:
+        raise MocapFormatError(path, last, "'end' closing the hierarchy", "end of file (truncated?)")
+    for required in (":root", ":bonedata", ":hierarchy"):
+        if required not in seen:
+            raise MocapFormatError(path, last, f"a '{required}' section", "none")
+    if not hierarchy_done:
+        raise MocapFormatError(path, last, "'begin' ... 'end' in the ':hierarchy' section", "none")
+    if root_order is None:
+        raise MocapFormatError(path, seen[":root"], "an 'order' line in ':root'", "none")
+    # depth-first order from the root, children as listed (iterative)
+    order: list[str] = []
+    parents: list[int] = []
+    stack: list[tuple[str, int]] = [("root", -1)]
+    while stack:
+        name, parent_index = stack.pop()
+        order.append(name)
+        parents.append(parent_index)
+        here = len(order) - 1
+        for child in reversed(children.get(name, [])):
+            stack.append((child, here))
+    missing = [b for b in bones if b not in set(order)]
+    if missing:
+        b = bones[missing[0]]
+        raise MocapFormatError(path, b.line, f"bone {b.name!r} attached to the hierarchy below 'root'", "no path from the root")
+    return Asf(
+        path=path,
+        length_unit=length_unit,
+        degrees=degrees,
+        root_order=root_order,
+        root_axis_order=root_axis,
+        root_position=root_position,
+        root_orientation=root_orientation,
+        bones=bones,
+        order=order,
+        parents=parents,
+    )
+
+
+# ---------------------------------------------------------------------- AMC
+
+
+def _dof_count(asf: Asf) -> dict[str, int]:
+    counts = {"root": len(asf.root_order)}
+    for name, b in asf.bones.items():
+        counts[name] = len(b.dofs)
+    return counts
+
+
+def parse_amc(path: str | PathLike[str], asf: Asf) -> tuple[dict[str, NDArray[np.float64]], int, bool | None]:
+    """Parse an AMC file against its skeleton.
+
+    Returns
+    -------
+    values : dict of str to ndarray, shape (F, n_dofs)
+        AMC values per bone (``root`` included), in the bone's dof order, in
+        the file's angle unit; bones without dofs are absent.
+    n_frames : int
+    degrees : bool or None
+        ``True``/``False`` if the file says ``:DEGREES``/``:RADIANS``, else None.
+    """
+    path = os.fspath(path)
+    lines = split_lines(read_text(path, "an AMC file"))
+    counts = _dof_count(asf)
+    degrees: bool | None = None
+    fully = False
+    start = None
+    for i, text in enumerate(lines):
+        s = text.strip()
+        if not s or s.startswith("#"):
+            continue
+        if s.startswith(":"):
+            word = s.split()[0].upper()
+            if word == ":FULLY-SPECIFIED":
+                fully = True
+            elif word == ":DEGREES":
+                degrees = True
+            elif word == ":RADIANS":
+                degrees = False
+            continue
+        start = i
+        break
+    if start is None:
+        what = "an empty file" if not any(s.strip() for s in lines) else "end of file"
+        raise MocapFormatError(path, max(len(lines), 1), "AMC frames (a frame number, then one line per bone)", what)
+    body = lines[start:]
+    while body and not body[-1].strip():
+        body.pop()
+    result = _fast_amc(body, counts)
+    if result is None:
+        result = _slow_amc(path, body, start, counts, fully)
+    values, n_frames = result
+    return values, n_frames, degrees
+
+
+def _frame_number(s: str) -> int | None:
+    return int(s) if s.isascii() and s.isdigit() else None
+
+
+def _fast_amc(body: list[str], counts: dict[str, int]) -> tuple[dict[str, NDArray[np.float64]], int] | None:
+    """Read a regular file (every frame the same bone lines in the same order,
+    no comments or blank lines) as one table; None if the file is not that
+    regular or anything in it is wrong, so that :func:`_slow_amc` reads it
+    line by line and reports the problem precisely.
+
+    Each bone's name is replaced by ``nan`` at the start of its lines, the
+    lines of a frame are joined into one row and numpy reads the table.  The
+    name columns must then be NaN and the value columns finite: a line with a
+    wrong name or a wrong number of values breaks that pattern.
+    """
+    if not body or _frame_number(body[0].strip()) is None:
+        return None
+    k = 1
+    while k < len(body) and _frame_number(body[k].strip()) is None:
+        k += 1
+    if len(body) % k:
+        return None
+    n_frames = len(body) // k
+    first = _frame_number(body[0].strip())
+    assert first is not None
+    if [s.strip() for s in body[0::k]] != [str(first + f) for f in range(n_frames)]:
+        return None
+    names = [body[r].split(None, 1)[0] if body[r].strip() else "" for r in range(1, k)]
+    if len(set(names)) != len(names) or sorted(names) != sorted(n for n, c in counts.items() if c > 0):
+        return None
+    columns = [body[0::k]]
+    for r, name in enumerate(names, start=1):
+        column = ("\n" + "\n".join(body[r::k])).replace("\n" + name, "\nnan")
+        columns.append(column.split("\n")[1:])
+    rows = list(map(" ".join, zip(*columns, strict=True)))
+    try:
+        table = np.loadtxt(rows, dtype=np.float64, ndmin=2, comments=None)
+    except ValueError:
+        return None
+    width = 1 + sum(1 + counts[n] for n in names)
+    if table.shape != (n_frames, width):
+        return None
+    out: dict[str, NDArray[np.float64]] = {}
+    col = 1
+    for name in names:
+        n = counts[name]
+        if not np.isnan(table[:, col]).all():
+            return None
+        values = table[:, col + 1 : col + 1 + n]
+        if not np.isfinite(values).all():
+            return None
+        out[name] = np.ascontiguousarray(values)
+        col += 1 + n
+    return out, n_frames
+
+
+def _slow_amc(
+    path: str, body: list[str], start: int, counts: dict[str, int], fully: bool
+) -> tuple[dict[str, NDArray[np.float64]], int]:
+    """Line-by-line reading with precise errors."""
+    dof_bones = [n for n, c in counts.items() if c > 0]
+    tokens: dict[str, list[str]] = {n: [] for n in dof_bones}
+    lines_of: dict[str, list[int]] = {n: [] for n in dof_bones}
+    frame = None  # current frame number
+    frame_line = 0
+    present: set[str] = set()
+    n_frames = 0
+
+    def finish_frame(at: int) -> None:
+        missing = [n for n in dof_bones if n not in present]
+        if missing and fully:
+            raise MocapFormatError(
+                path, at, f"a line for bone {missing[0]!r} in frame {frame} (the file is :FULLY-SPECIFIED)", "none"
+            )
+        for n in missing:  # keep the previous value (zero in the first frame)
+            prev = tokens[n][-counts[n] :] if n_frames > 1 else ["0"] * counts[n]
+            tokens[n].extend(prev)
+            lines_of[n].append(frame_line)
+
+    for i, text in enumerate(body):
+        number = start + i + 1
+        toks = text.split()
+        if not toks or toks[0].startswith("#"):
+            continue
+        if len(toks) == 1 and toks[0] not in counts:
+            value = _frame_number(toks[0])
+            if value is None:
+                raise MocapFormatError(path, number, "a frame number or a bone line", repr(toks[0][:40]))
+            if frame is not None:
+                finish_frame(number - 1)
+                if value != frame + 1:
+                    raise MocapFormatError(path, number, f"frame number {frame + 1}", str(value))
+            frame = value
+            frame_line = number
+            present = set()
+            n_frames += 1
+            continue
+        name = toks[0]
+        if frame is None:
+            raise MocapFormatError(path, number, "a frame number", repr(text.strip()[:40]))
+        if name not in counts:
+            raise MocapFormatError(path, number, "a bone of the ASF skeleton", repr(name[:40]))
+        n = counts[name]
+        if len(toks) - 1 != n:
+            raise MocapFormatError(path, number, f"{n} values for bone {name!r}", str(len(toks) - 1))
+        if n == 0:
+            continue
+        if name in present:
+            raise MocapFormatError(path, number, f"bone {name!r} once in frame {frame}", "a second line")
+        present.add(name)
+        for t in toks[1:]:
+            v = _to_float(t)
+            if v is None:
+                raise MocapFormatError(path, number, "a number", repr(t[:30]))
+            if not math.isfinite(v):
+                raise MocapFormatError(path, number, "a finite number", repr(t[:30]))
+        tokens[name].extend(toks[1:])
+        lines_of[name].append(number)
+    if frame is None:
+        raise MocapFormatError(path, start + len(body), "AMC frames", "none")
+    finish_frame(start + len(body))
+    return {n: np.array(tokens[n], dtype=float).reshape(n_frames, counts[n]) for n in dof_bones}, n_frames
+
+
+# ------------------------------------------------------------------ loading
+
+
+def _fixed_axes_quat(order: str, angles: NDArray[np.float64], degrees: bool) -> NDArray[np.float64]:
+    """Rotations applying ``angles`` about fixed axes in the order ``order``.
+
+    Fixed-axis (extrinsic) ``"XYZ"`` is ``Rz @ Ry @ Rx``, the intrinsic
+    ``"ZYX"`` of :func:`mocaplab.io.euler.to_quat` with the angles reversed.
+    """
+    return euler.to_quat(order[::-1], angles[..., ::-1], degrees=degrees)
+
+
+def load_asf_amc(
+    asf_path: str | PathLike[str],
+    amc_path: str | PathLike[str],
+    *,
+    name: str | None = None,
+    fps: float = 120.0,
+    scale: float | None = None,
+) -> Motion:
+    """Read an Acclaim skeleton (ASF) and motion (AMC) into a Motion.
+
+    Parameters
+    ----------
+    asf_path, amc_path : str or path-like
+    name : str, optional
+        Label (default: the AMC file stem).
+    fps : float
+        Frame rate; the format has none (120 for the CMU database).
+    scale : float, optional
+        Metres per ASF length unit; default from the ASF's ``:units length``
+        (``0.0254 / length``, 0.056444 m for the CMU files).
+
+    Returns
+    -------
+    Motion
+        Joints ``root`` then the bones in depth-first hierarchy order, named
+        as in the ASF, in metres (see the module notes for every convention).
+
+    Raises
+    ------
+    MocapFormatError
+        For any malformed ASF or AMC file (file, line and expectation).
+
+    Examples
+    --------
+    >>> walk = load_asf_amc("16.asf", "16_15.amc")  # doctest: +SKIP
+    >>> walk.skeleton.names[:3]                      # doctest: +SKIP
+    ('root', 'lhipjoint', 'lfemur')
+    """
+    if not (isinstance(fps, (int, float, np.floating)) and math.isfinite(fps) and fps > 0):
+        raise ValueError(f"Expected `fps` > 0, got {fps!r}")
+    if scale is not None and not (isinstance(scale, (int, float, np.floating)) and math.isfinite(scale) and scale > 0):
+        raise ValueError(f"Expected `scale` > 0 (metres per ASF unit), got {scale!r}")
+    asf = parse_asf(asf_path)
+    values, n_frames, amc_degrees = parse_amc(amc_path, asf)
+    amc_deg = asf.degrees if amc_degrees is None else amc_degrees
+    unit = asf.scale if scale is None else float(scale)
+    names = asf.order
+    n = len(names)
+    parents = np.array(asf.parents, dtype=np.int64)
+
+    # skeleton: joint b at the start of bone b
+    ends = np.zeros((n, 3))  # bone vector (direction * length), file units
+    for j, b in enumerate(names[1:], start=1):
+        bone = asf.bones[b]
+        ends[j] = np.asarray(bone.direction) * bone.length
+    offsets = np.zeros((n, 3))
+    offsets[0] = asf.root_position
+    for j in range(1, n):
+        offsets[j] = ends[parents[j]] if parents[j] > 0 else 0.0
+    has_child = np.zeros(n, dtype=bool)
+    has_child[parents[1:]] = True
+    leaves = [j for j in range(1, n) if not has_child[j]]
+
+    # local rotations L = C M C^-1, grouped by dof order
+    rotations = np.zeros((n_frames, n, 4))
+    rotations[..., 3] = 1.0
+    axes_q = np.zeros((n, 4))
+    axes_q[:, 3] = 1.0
+    groups: dict[str, list[int]] = {}
+    for j, b in enumerate(names):
+        if b == "root":
+            axes_q[j] = _fixed_axes_quat(asf.root_axis_order, np.asarray(asf.root_orientation), asf.degrees)
+            order = "".join(d[1].upper() for d in asf.root_order if d[0] == "r")
+        else:
+            bone = asf.bones[b]
+            axes_q[j] = _fixed_axes_quat(bone.axis_order, np.asarray(bone.axis), asf.degrees)
+            order = "".join(d[1].upper() for d in bone.dofs)
+        if order:
+            groups.setdefault(order, []).append(j)
+    for order, joints in groups.items():
+        cols = []
+        for j in joints:
+            b = names[j]
+            v = values[b]
+            if b == "root":
+                v = v[:, [k for k, d in enumerate(asf.root_order) if d[0] == "r"]]
+            cols.append(v)
+        angles = np.stack(cols, axis=1)  # (F, G, k)
+        m = _fixed_axes_quat(order, angles, amc_deg)
+        c = axes_q[joints]
+        rotations[:, joints] = quat.mul(quat.mul(c, m), quat.inv(c))
+    root = np.empty((n_frames, 3))
+    root[:] = asf.root_position
+    if "root" in values:
+        for k, d in enumerate(asf.root_order):
+            if d[0] == "t":
+                root[:, "xyz".index(d[1])] = values["root"][:, k]
+    root *= unit
+    scaled = offsets * unit
+    end_offsets = ends[leaves] * unit
+    if not (np.isfinite(root).all() and np.isfinite(scaled).all() and np.isfinite(end_offsets).all()):
+        raise MocapFormatError(asf.path, 0, f"lengths that stay finite in metres (scale {unit:g})", "an overflow")
+    skeleton = Skeleton(
+        names=names,
+        parents=parents,
+        offsets=scaled,
+        end_site_parents=np.array(leaves, dtype=np.int64),
+        end_site_offsets=end_offsets.reshape(-1, 3),
+    )
+    return Motion(
+        skeleton=skeleton,
+        rotations=_owned(rotations),
+        root_positions=_owned(root),
+        fps=float(fps),
+        name=name if name is not None else os.path.splitext(os.path.basename(os.fspath(amc_path)))[0],
+    )

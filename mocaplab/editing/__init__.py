@@ -55,6 +55,7 @@ Editing (:mod:`mocaplab.editing.scene`)
     character's own span, ``.active[k] (N,) bool``), ``.shape_paths[k]``
     (phase-1 result), ``.tangents[k]``, ``.heading_change[k] (F_k,)``,
     ``.flips[k] (F_k,) bool`` (repaired tangent flips), ``.stationary[k]``,
+    ``.edited_motions[k]`` (edited, not time-warped), ``.residuals() -> {index: max |r|}``,
     ``.constraints``, ``.transformations`` (section 5 discrete edits; empty),
     ``.end_effectors[k]``, ``.report() -> dict`` and attributes
     ``hard_residual_space, hard_residual_time, soft_residual_space,
@@ -62,8 +63,9 @@ Editing (:mod:`mocaplab.editing.scene`)
     ``.energies -> Energies(shape, scale, time)``, ``.refined()``.
     Options: ``scale_compensation=True, stationary="auto", min_step=0.25,
     max_step=4.0`` (ratios of the frame time), ``flip_threshold=pi/2,
-    variational_step=10, regularization=1e-8, clock_fps=None, start_times=None,
-    discrete=False, refine=False``.
+    variational_step=10, clock_fps=None, start_times=None, discrete=False,
+    refine=False``.  Modes no constraint determines (a character's
+    placement, its time shift) keep their undeformed values exactly.
 
 Energy (:mod:`mocaplab.editing.energy`)
     ``deformation_energy(result, *, cs=1.0, ct=1.0, reference=None) -> float`` (eq. 10).

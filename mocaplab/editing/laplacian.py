@@ -17,20 +17,27 @@ Phase 2, scale compensation (equation 7)
     phase 1, so both phases are factorised once per constraint *structure*.
 Stationary sub-paths (section 4.2)
     the equation-3 rows of their interior frames become hard constraints in
-    both phases (the segment moves as a similarity; phase 2's length terms keep
-    its scale), so a standing character does not skate.
+    phase 1 (the segment moves as a similarity); in phase 2 each of its steps
+    is held by a hard row ``p_{i+1} - p_i = vbar_i`` (the phase-1 step
+    rescaled to its undeformed length), so the segment moves rigidly and a
+    standing character does not skate.  Only right-hand sides depend on
+    phase 1, so the matrices stay fixed.
 Tangent flips (section 4.2)
     detected after the solve from jumps of ``phi_i = angle(t_i, that_i)``
     between successive frames, and repaired (for the heading) by linear
     interpolation of the neighbouring tangent directions.  The positions are
     not changed, so the matrix never depends on the flips.
 
-Regularisation (our choice): ``regularization * |p - p_ref|^2`` is added to both
-phases (``p_ref``: the undeformed path in phase 1, the phase-1 result in
-phase 2), default 1e-8.  It makes the normal matrix positive definite when a
-character is under-constrained (a character with no constraint keeps its
-path; one tied by a single relative constraint keeps its orientation), and it
-is negligible against every other term.
+Free modes (our choice): the Laplacian energies only see a path up to a
+similarity (phase 1: translation, rotation, scale) or an index-affine map
+(phase 2), so a character that the constraints do not pin down makes the
+system singular.  Instead of a Tikhonov term (which at 120 fps biases the
+result far more than the weak Laplacian energy allows), we find exactly which
+of those modes no constraint touches (an SVD of the constraints restricted to
+the modes, per group of linked characters) and fix only them with hard
+"gauge" rows: they keep their reference value (the undeformed path in phase
+1, the phase-1 result in phase 2).  Nothing that a constraint determines is
+biased; a character with no constraint keeps its path.
 
 A drag that moves a target changes only ``b`` and ``h``: an update is two
 back-substitutions plus O(F) vector work.
@@ -46,11 +53,16 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
+from scipy.ndimage import uniform_filter1d
+from scipy.sparse.csgraph import connected_components
 
 from .constraints import ConstraintError, PinDirection, PinPosition, Relative
 from .paths import MotionPath, central_tangents, ground_angle, laplacian_coordinates, rot90, wrap_angle
 
 __all__ = [
+    "gauge_rows",
+    "similarity_modes",
+    "affine_modes",
     "Layout",
     "Rows",
     "KKT",
@@ -285,6 +297,104 @@ def spatial_rows(c: Any, paths: Sequence[MotionPath], layout: Layout, tangents: 
     return Rows([np.asarray(x, dtype=np.int64).reshape(-1) for x in cols], vals, np.asarray(rhs, dtype=float))
 
 
+# ------------------------------------------------------------ free modes
+def _mode_matrix(blocks: list[tuple[int, Array]], n: int, dim: int) -> sp.csc_matrix:
+    """Columns from per-character dense blocks ``(first unknown, (len, m) block)``."""
+    rows, cols, vals = [], [], []
+    c = 0
+    for start, blk in blocks:
+        r, m = blk.shape
+        rows.append(np.repeat(np.arange(start, start + r), m))
+        cols.append(np.tile(np.arange(c, c + m), r))
+        vals.append(blk.reshape(-1))
+        c += m
+    return sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, c))
+
+
+def similarity_modes(paths: Sequence[MotionPath], layout: Layout) -> tuple[sp.csc_matrix, NDArray[np.int64]]:
+    """Orthonormal basis of the null space of ``A`` (2D similarities of each path).
+
+    Columns per character: x and z translation, scaling about the centroid,
+    rotation about the centroid.  A path whose frames all coincide uses the
+    index-affine basis instead.  Returns the (2 total, 4 K) matrix and the
+    character of each column.
+    """
+    blocks = []
+    for k, p in enumerate(paths):
+        F = p.n_frames
+        u = p.positions - p.positions.mean(axis=0)
+        tx = np.zeros((F, 2))
+        tx[:, 0] = 1.0
+        tz = np.zeros((F, 2))
+        tz[:, 1] = 1.0
+        if np.linalg.norm(u) < 1e-9:
+            s = (np.arange(F) - (F - 1) / 2.0)[:, None]
+            extra = [s * [1.0, 0.0], s * [0.0, 1.0]]
+        else:
+            extra = [u, rot90(u)]
+        cols = [tx, tz] + extra
+        cols = [c.reshape(-1) / np.linalg.norm(c) for c in cols]
+        blocks.append((2 * int(layout.offsets[k]), np.stack(cols, axis=1)))
+    return _mode_matrix(blocks, 2 * layout.total, 4), np.repeat(np.arange(len(paths)), 4)
+
+
+def affine_modes(layout: Layout) -> tuple[sp.csc_matrix, NDArray[np.int64]]:
+    """Orthonormal basis of the null space of the second-difference matrix (index-affine maps)."""
+    blocks = []
+    for k, F in enumerate(layout.n_frames):
+        s = np.arange(F) - (F - 1) / 2.0
+        cols = []
+        for c in (0, 1):
+            one = np.zeros((F, 2))
+            one[:, c] = 1.0
+            lin = np.zeros((F, 2))
+            lin[:, c] = s
+            cols += [one, lin]
+        cols = [c.reshape(-1) / max(np.linalg.norm(c), 1e-300) for c in cols]
+        blocks.append((2 * int(layout.offsets[k]), np.stack(cols, axis=1)))
+    return _mode_matrix(blocks, 2 * layout.total, 4), np.repeat(np.arange(len(layout.n_frames)), 4)
+
+
+def gauge_rows(Q: sp.csc_matrix, owner: NDArray[np.int64], C: sp.spmatrix, n_chars: int) -> sp.csr_matrix:
+    """Rows fixing the modes in ``Q``'s span that no row of ``C`` touches.
+
+    ``Q`` (n, q) has orthonormal columns spanning the null space of the
+    energy; ``owner[j]`` is the character of column ``j``.  The modes free of
+    ``C`` are ``Q V`` with ``V`` an orthonormal basis of the null space of
+    ``C Q``, computed separately for each group of characters linked by rows
+    of ``C`` (so gauge rows never couple unrelated characters).
+    """
+    CQ = (sp.csr_matrix(C) @ Q).toarray() if C.shape[0] else np.zeros((0, Q.shape[1]))
+    scale = max(1.0, float(np.abs(CQ).max(initial=0.0)))
+    touched = np.abs(CQ) > 1e-13 * scale
+    # characters linked by a row
+    inc = sp.csr_matrix(
+        (np.ones(int(touched.sum())), (np.nonzero(touched)[0], owner[np.nonzero(touched)[1]])),
+        shape=(CQ.shape[0], n_chars),
+    )
+    adj = (inc.T @ inc).tocsr()
+    ncomp, label = connected_components(adj, directed=False)
+    out: list[sp.csr_matrix] = []
+    for comp in range(ncomp):
+        chars = np.flatnonzero(label == comp)
+        cols = np.flatnonzero(np.isin(owner, chars))
+        rows = np.flatnonzero(touched[:, cols].any(axis=1))
+        if len(rows) == 0:
+            V = np.eye(len(cols))
+        else:
+            sub = CQ[np.ix_(rows, cols)]
+            _, sv, vt = np.linalg.svd(sub, full_matrices=True)
+            tol = 1e-10 * max(float(sv.max(initial=0.0)), 1e-300)
+            rank = int(np.sum(sv > tol))
+            V = vt[rank:].T
+        if V.shape[1] == 0:
+            continue
+        out.append(sp.csr_matrix((Q[:, cols] @ V).T))
+    if not out:
+        return sp.csr_matrix((0, Q.shape[0]))
+    return sp.vstack(out, format="csr")
+
+
 # -------------------------------------------------------------------- KKT
 def _dependent_groups(H: sp.csr_matrix, groups: Sequence[tuple[Any, NDArray[np.int64]]]) -> list[int] | None:
     """Indices of a minimal set of row groups of ``H`` that are linearly dependent (None if H has full row rank)."""
@@ -421,6 +531,9 @@ class SpatialFactors:
     Bw: sp.csr_matrix
     BwT: sp.csr_matrix
     H: sp.csr_matrix  # user hard rows followed by rigid rows
+    G1: sp.csr_matrix  # phase-1 gauge rows (fixed to the undeformed path)
+    g1: Array
+    G2: sp.csr_matrix  # phase-2 gauge rows (fixed to the phase-1 result)
 
 
 class SpatialSolver:
@@ -431,7 +544,6 @@ class SpatialSolver:
     paths : sequence of MotionPath
     segments : sequence of list of (start, stop)
         Stationary segments per character (made rigid).
-    regularization : float
     scale_compensation : bool
     """
 
@@ -440,7 +552,6 @@ class SpatialSolver:
         paths: Sequence[MotionPath],
         segments: Sequence[Sequence[tuple[int, int]]],
         *,
-        regularization: float = 1e-8,
         scale_compensation: bool = True,
     ) -> None:
         self.paths = list(paths)
@@ -452,10 +563,33 @@ class SpatialSolver:
         self.AhatT = self.Ahat.T.tocsr()
         self.AhtAh = (self.AhatT @ self.Ahat).tocsr()
         self.R, self.rigid_groups = rigid_rows(self.A, self.layout, segments)
+        # phase 2: rigid segments keep their phase-1 segment vectors rescaled to
+        # the undeformed lengths (a rotation of the undeformed segment)
+        rigid_steps = [
+            self.layout.frame(k, 0) + np.arange(a, b - 1)
+            for k, segs in enumerate(segments)
+            for a, b in segs
+            if b - a >= 2
+        ]
+        rs = np.concatenate(rigid_steps).astype(np.int64) if rigid_steps else np.zeros(0, np.int64)
+        n2 = len(rs)
+        rr = np.arange(2 * n2)
+        cc = np.stack([2 * rs, 2 * rs + 1], axis=1).reshape(-1)
+        self.R2 = sp.csr_matrix(
+            (
+                np.concatenate([np.ones(2 * n2), -np.ones(2 * n2)]),
+                (np.concatenate([rr, rr]), np.concatenate([cc + 2, cc])),
+            ),
+            shape=(2 * n2, 2 * self.layout.total),
+        )
+        steps_index = np.full(self.layout.total, -1, dtype=np.int64)
+        steps_index[self.layout.steps()] = np.arange(len(self.layout.steps()))
+        self._rigid_step_rows = steps_index[rs]
         self.segments = [list(s) for s in segments]
-        self.eps = float(regularization)
         self.scale_compensation = bool(scale_compensation)
         self.tangent_rows = _TangentRows(self.paths)
+        self.Q1, self.owner1 = similarity_modes(self.paths, self.layout)
+        self.Q2, self.owner2 = affine_modes(self.layout)
         # phase-2 helpers: undeformed segment lengths of within-character steps
         steps = self.layout.steps()
         P0 = self.p0.reshape(-1, 2)
@@ -466,8 +600,6 @@ class SpatialSolver:
         seg_of[steps] = np.arange(len(steps))
         self._seg_after = seg_of[self._interior]  # segment interior -> interior+1
         self._seg_before = seg_of[self._interior - 1]
-        n = 2 * self.layout.total
-        self._I = sp.identity(n, format="csr") * self.eps
 
     def factorize(
         self, soft: Sequence[Rows], weights: Sequence[float], hard: Sequence[Rows], labels: Sequence[Any]
@@ -477,6 +609,7 @@ class SpatialSolver:
         Returns the factors and the (weighted) soft and hard right-hand sides.
         """
         n = 2 * self.layout.total
+        K = len(self.paths)
         Bw, bw = assemble(soft, n, [float(np.sqrt(w)) for w in weights])
         Hu, h = assemble(hard, n)
         H = sp.vstack([Hu, self.R], format="csr")
@@ -490,29 +623,47 @@ class SpatialSolver:
         check_hard_rows(H, groups, "spatial")
         BwT = Bw.T.tocsr()
         BtB = (BwT @ Bw).tocsr()
-        shape = KKT(self.AtA + BtB + self._I, H)
-        scale = KKT(self.AhtAh + BtB + self._I, H) if self.scale_compensation else None
-        return SpatialFactors(shape, scale, Bw, BwT, H), bw, h
+        C = sp.vstack([Bw, H], format="csr")
+        G1 = gauge_rows(self.Q1, self.owner1, C, K)
+        shape = KKT(self.AtA + BtB, sp.vstack([H, G1], format="csr"))
+        G2 = sp.csr_matrix((0, n))
+        scale = None
+        if self.scale_compensation:
+            H2 = sp.vstack([Hu, self.R2], format="csr")
+            if self.R2.shape[0]:
+                check_hard_rows(
+                    H2,
+                    groups[: len(hard)] + [("rigid stationary segments", np.arange(Hu.shape[0], H2.shape[0]))],
+                    "spatial",
+                )
+            G2 = gauge_rows(self.Q2, self.owner2, sp.vstack([Bw, H2], format="csr"), K)
+            scale = KKT(self.AhtAh + BtB, sp.vstack([H2, G2], format="csr"))
+        return SpatialFactors(shape, scale, Bw, BwT, H, G1, G1 @ self.p0, G2), bw, h
 
     def solve(self, f: SpatialFactors, bw: Array, h: Array) -> tuple[Array, Array]:
         """Phase 1 and phase 2 solutions, each shape (2 * total,)."""
-        hfull = np.concatenate([h, np.zeros(self.R.shape[0])])
-        Btb = f.BwT @ bw if len(bw) else 0.0
-        pbar = f.shape.solve(Btb + self.eps * self.p0, hfull)
+        zr = np.zeros(self.R.shape[0])
+        Btb = f.BwT @ bw if len(bw) else np.zeros(2 * self.layout.total)
+        pbar = f.shape.solve(Btb, np.concatenate([h, zr, f.g1]))
         if f.scale is None:
             return pbar, pbar
-        rhs = self.AhatT @ self.scale_rhs(pbar)
-        phat = f.scale.solve(rhs + Btb + self.eps * pbar, hfull)
+        a, v = self._scale_terms(pbar)
+        rhs = self.AhatT @ a
+        r2 = v[self._rigid_step_rows].reshape(-1)
+        phat = f.scale.solve(rhs + Btb, np.concatenate([h, r2, f.G2 @ pbar]))
         return pbar, phat
 
     def scale_rhs(self, pbar: Array) -> Array:
         """Right-hand side ``vbar_i - vbar_{i-1}`` of equation 7, shape (2 * n_interior,)."""
+        return self._scale_terms(pbar)[0]
+
+    def _scale_terms(self, pbar: Array) -> tuple[Array, Array]:
         P = pbar.reshape(-1, 2)
         seg = P[self._steps + 1] - P[self._steps]
         ln = np.linalg.norm(seg, axis=1)
         scale = np.divide(self._L0, ln, out=np.ones_like(ln), where=ln > 1e-15)
         v = seg * scale[:, None]
-        return (v[self._seg_after] - v[self._seg_before]).reshape(-1)
+        return (v[self._seg_after] - v[self._seg_before]).reshape(-1), v
 
     # ---------------------------------------------------------- energies
     def shape_energy(self, f: SpatialFactors, bw: Array, pbar: Array) -> float:
@@ -530,32 +681,51 @@ class SpatialSolver:
 
 # ------------------------------------------------------ tangent flipping
 def detect_tangent_flips(
-    tangents: Array, new_tangents: Array, *, threshold: float = np.pi / 2, valid: NDArray[np.bool_] | None = None
+    tangents: Array,
+    new_tangents: Array,
+    *,
+    threshold: float = np.pi / 2,
+    valid: NDArray[np.bool_] | None = None,
+    window: int = 31,
 ) -> NDArray[np.bool_]:
     """Frames whose deformed tangent flipped (section 4.2), shape (F,) bool.
 
     ``phi_i`` is the signed angle from the undeformed tangent ``t_i`` to the
-    deformed one.  A jump ``|phi_{i+1} - phi_i| > threshold`` (between
-    successive valid frames) toggles between "flipped" and "not flipped";
-    the smaller of the two sets of frames is the flipped one.  Deformed
-    tangents of (almost) zero length count as flipped.  ``valid`` marks the
-    frames to examine (default all); others are never flipped.
+    deformed one.  As in the paper, a flip is reported where
+    ``|phi_{i+1} - phi_i| > threshold`` between successive valid frames.  To
+    know which frames around such a jump are the flipped ones (a short
+    reversed stretch, Figure 4), each frame's ``phi`` is compared with the
+    circular mean of ``phi`` over ``window`` frames: the two frames of each
+    jump, and the runs of frames more than ``threshold`` away from a coherent
+    mean (resultant length above 0.5) that touch a jump, are flipped.  Deformed tangents of (almost) zero
+    length count as flipped.  ``valid`` marks the frames to examine (default
+    all); others are never flipped.
     """
     F = len(tangents)
     valid = np.ones(F, bool) if valid is None else np.asarray(valid, bool)
     out = np.zeros(F, bool)
     ln = np.linalg.norm(new_tangents, axis=1)
     tiny = ln < 1e-9 * max(1.0, float(np.max(np.linalg.norm(tangents, axis=1), initial=0.0)))
-    idx = np.flatnonzero(valid & ~tiny)
     out[valid & tiny] = True
-    if len(idx) < 2:
+    idx = np.flatnonzero(valid & ~tiny)
+    if len(idx) < 3:
         return out
     phi = wrap_angle(ground_angle(new_tangents[idx]) - ground_angle(tangents[idx]))
-    jumps = np.abs(wrap_angle(np.diff(phi))) > threshold
-    if not jumps.any():
+    jump = np.abs(wrap_angle(np.diff(phi))) > threshold
+    if not jump.any():
         return out
-    state = np.concatenate([[0], np.cumsum(jumps) % 2]).astype(bool)
-    flipped = state if state.sum() <= (~state).sum() else ~state
+    w = max(3, min(int(window) | 1, len(idx) | 1))
+    c = uniform_filter1d(np.cos(phi), w, mode="nearest")
+    s = uniform_filter1d(np.sin(phi), w, mode="nearest")
+    coherent = np.hypot(c, s) > 0.5
+    far = coherent & (np.abs(wrap_angle(phi - np.arctan2(s, c))) > threshold)
+    near_jump = np.zeros(len(idx), bool)
+    near_jump[:-1] |= jump
+    near_jump[1:] |= jump
+    # keep runs of "far" frames that touch a jump
+    run_id = np.cumsum(np.concatenate([[1], np.diff(far.astype(np.int8)) != 0]))
+    keep = np.unique(run_id[far & near_jump])
+    flipped = (far & np.isin(run_id, keep)) | near_jump
     out[idx[flipped]] = True
     return out
 

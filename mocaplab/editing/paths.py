@@ -344,7 +344,8 @@ def stationary_segments(
 
     A frame is stationary when the root's ground speed, smoothed by a
     Gaussian of ``smoothing`` seconds, is below ``speed`` m/s, or when both
-    feet are planted (``contacts``: a :class:`mocaplab.contacts.Contacts`
+    feet are firmly planted (every contact joint of each foot, ankle and toe,
+    in contact) (``contacts``: a :class:`mocaplab.contacts.Contacts`
     whose joint names contain Left/Right, or ``"auto"`` to detect them with
     :func:`mocaplab.contacts.foot_contacts`).  Runs shorter than
     ``min_duration`` seconds (or 3 frames) are dropped: walking has short
@@ -376,14 +377,19 @@ def stationary_segments(
             else:
                 contacts = foot_contacts(motion)
         if contacts is not None:
-            left = np.zeros(motion.n_frames, bool)
-            right = np.zeros(motion.n_frames, bool)
+            # "firmly planted": every contact joint of the foot (ankle and toe) down
+            left = np.ones(motion.n_frames, bool)
+            right = np.ones(motion.n_frames, bool)
+            n_left = n_right = 0
             for name in contacts.joints:
                 low = name.lower()
                 if "left" in low or name.startswith("L"):
-                    left |= contacts.of(name)
+                    left &= contacts.of(name)
+                    n_left += 1
                 elif "right" in low or name.startswith("R"):
-                    right |= contacts.of(name)
-            still = still | (left & right)
+                    right &= contacts.of(name)
+                    n_right += 1
+            if n_left and n_right:
+                still = still | (left & right)
     min_len = max(3, int(np.ceil(min_duration * motion.fps)))
     return [(a, b) for a, b in _runs(still) if b - a >= min_len]

@@ -36,7 +36,6 @@ flip_threshold : float, default pi / 2
     Tangent-flip detection threshold (radians per frame, section 4.2).
 variational_step : int, default 10
     Sampling step of variational constraints (frames).
-regularization : float, default 1e-8
 start_times : sequence of float, optional
     Reference time of each character's frame 0 before editing (default 0).
 clock_fps : float, optional
@@ -81,7 +80,6 @@ _OPTIONS = {
     "max_step": 4.0,
     "flip_threshold": math.pi / 2,
     "variational_step": 10,
-    "regularization": 1e-8,
     "start_times": None,
     "clock_fps": None,
     "discrete": False,
@@ -231,7 +229,6 @@ class SceneEditor:
         self._space = SpatialSolver(
             self.paths,
             self.segments,
-            regularization=opts["regularization"],
             scale_compensation=opts["scale_compensation"],
         )
         self._time = TimeSolver(
@@ -240,7 +237,6 @@ class SceneEditor:
             starts,
             min_step=opts["min_step"],
             max_step=opts["max_step"],
-            regularization=opts["regularization"],
         )
         layout = self._space.layout
         tangents = self._space.tangent_rows

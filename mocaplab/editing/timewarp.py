@@ -20,8 +20,10 @@ cost one back-substitution per round.  The bounds are reached with equality
 
 Defaults (our choice; the paper gives no numbers): ``h_min = h / 4``,
 ``h_max = 4 h`` (at most four times faster or slower than captured).
-Regularisation ``regularization * |t - t0|^2`` towards the undeformed clock
-(``t0 = start + i h``) keeps characters with no temporal constraint in place.
+A character whose timing no constraint touches would leave the system
+singular (time shifts cost nothing); its shift is fixed by a hard gauge row
+keeping its mean time at the undeformed clock ``t0 = start + i h`` (see
+:func:`mocaplab.editing.laplacian.gauge_rows`), so no constraint is biased.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from .constraints import AbsoluteTime, ConstraintError, Duration, Sync
-from .laplacian import KKT, Layout, Rows, assemble, check_hard_rows
+from .laplacian import KKT, Layout, Rows, _mode_matrix, assemble, check_hard_rows, gauge_rows
 
 __all__ = ["TimeSolver", "TimeFactors", "temporal_rows", "uniformity_matrix"]
 
@@ -89,7 +91,9 @@ class TimeFactors:
     N: sp.csr_matrix
     Bw: sp.csr_matrix
     BwT: sp.csr_matrix
-    Hu: sp.csr_matrix
+    Hu: sp.csr_matrix  # user hard rows
+    Hg: sp.csr_matrix  # user hard rows and gauge rows
+    g: Array  # gauge right-hand side
     groups: list[tuple[Any, NDArray[np.int64]]]
     cache: OrderedDict[tuple[int, ...], KKT]
     base: KKT
@@ -107,7 +111,6 @@ class TimeSolver:
         Reference time of each character's frame 0 before editing.
     min_step, max_step : float
         Bounds on ``t[i+1] - t[i]`` as ratios of ``h``.
-    regularization : float
     cache_size : int
         Factorisations kept per structure for sets of inserted equalities.
     """
@@ -120,7 +123,6 @@ class TimeSolver:
         *,
         min_step: float = 0.25,
         max_step: float = 4.0,
-        regularization: float = 1e-8,
         cache_size: int = 16,
     ) -> None:
         if not 0 < min_step < 1 < max_step:
@@ -137,9 +139,17 @@ class TimeSolver:
         self.Tth = self.T.T @ self.h
         self.hmin = min_step * self.h
         self.hmax = max_step * self.h
-        self.eps = float(regularization)
         self.cache_size = int(cache_size)
-        self._I = sp.identity(self.layout.total, format="csr") * self.eps
+        K = len(self.layout.n_frames)
+        self.Q = _mode_matrix(
+            [
+                (int(self.layout.offsets[k]), np.full((F, 1), 1.0 / np.sqrt(F)))
+                for k, F in enumerate(self.layout.n_frames)
+            ],
+            self.layout.total,
+            1,
+        )
+        self.owner = np.arange(K)
 
     def factorize(
         self, soft: Sequence[Rows], weights: Sequence[float], hard: Sequence[Rows], labels: Sequence[Any]
@@ -154,9 +164,11 @@ class TimeSolver:
             r += block.n
         check_hard_rows(Hu, groups, "temporal")
         BwT = Bw.T.tocsr()
-        N = (self.TtT + BwT @ Bw + self._I).tocsr()
-        base = KKT(N, Hu)
-        return TimeFactors(N, Bw, BwT, Hu, groups, OrderedDict(), base), bw, h
+        N = (self.TtT + BwT @ Bw).tocsr()
+        G = gauge_rows(self.Q, self.owner, sp.vstack([Bw, Hu], format="csr"), len(self.layout.n_frames))
+        Hg = sp.vstack([Hu, G], format="csr")
+        base = KKT(N, Hg)
+        return TimeFactors(N, Bw, BwT, Hu, Hg, G @ self.t0, groups, OrderedDict(), base), bw, h
 
     def _kkt(self, f: TimeFactors, active: tuple[int, ...]) -> KKT:
         if not active:
@@ -179,7 +191,7 @@ class TimeSolver:
                 exc.constraints,
                 exc.indices,
             ) from None
-        kkt = KKT(f.N, H)
+        kkt = KKT(f.N, sp.vstack([f.Hg, E], format="csr"))
         f.cache[active] = kkt
         if len(f.cache) > self.cache_size:
             f.cache.popitem(last=False)
@@ -187,7 +199,8 @@ class TimeSolver:
 
     def solve(self, f: TimeFactors, bw: Array, h: Array) -> tuple[Array, tuple[int, ...]]:
         """Monotone time warp ``t`` (shape (total,)) and the inserted equalities (step rows)."""
-        r = self.Tth + (f.BwT @ bw if len(bw) else 0.0) + self.eps * self.t0
+        r = self.Tth + (f.BwT @ bw if len(bw) else 0.0)
+        h = np.concatenate([h, f.g])
         active: dict[int, float] = {}
         tol = 1e-9 * self.h
         for _ in range(len(self.steps) + 1):

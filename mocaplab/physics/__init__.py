@@ -1,0 +1,81 @@
+"""Physical touch-up of human motions (Shin, Kovar and Gleicher 2003).
+
+=============================  ===============================================
+:class:`Body`                  point masses per link (de Leva 1996 table)
+:func:`center_of_mass`         equation 1
+:func:`angular_momentum`       equation 2 (and :func:`linear_momentum`)
+:func:`balance`                ZMP (equation 4), support polygons, distances
+:func:`fit_masses`             mass estimation from reference clips (s3.2)
+:func:`touch_up`               the touch-up (s3.3, s3.4) -> TouchUpHistory
+:func:`start`, :func:`step`    the same, one adjustment at a time
+:class:`TouchUpSession`        stateful stepper behind the widget
+=============================  ===============================================
+"""
+
+from __future__ import annotations
+
+from .body import (
+    DE_LEVA_MALE,
+    GRAVITY,
+    Body,
+    LinkSpec,
+    angular_momentum,
+    center_of_mass,
+    linear_momentum,
+    link_positions,
+    smoothed_derivatives,
+)
+from .masses import MassFit, fit_masses
+from .touchup import (
+    FLIGHT_SCHEDULE,
+    GROUND_SCHEDULE,
+    Adjustment,
+    LinkSets,
+    TouchUpHistory,
+    TouchUpSession,
+    TouchUpState,
+    default_schedule,
+    flight_stages,
+    link_sets,
+    preset_mask,
+    start,
+    step,
+    touch_up,
+)
+from .zmp import Balance, balance, polygon_distance, signed_distance, support_polygon, zmp, zmp_distance, zmp_from_links
+
+__all__ = [
+    "DE_LEVA_MALE",
+    "GRAVITY",
+    "Body",
+    "LinkSpec",
+    "angular_momentum",
+    "center_of_mass",
+    "link_positions",
+    "linear_momentum",
+    "smoothed_derivatives",
+    "MassFit",
+    "fit_masses",
+    "Adjustment",
+    "FLIGHT_SCHEDULE",
+    "GROUND_SCHEDULE",
+    "LinkSets",
+    "TouchUpHistory",
+    "TouchUpSession",
+    "TouchUpState",
+    "default_schedule",
+    "flight_stages",
+    "link_sets",
+    "preset_mask",
+    "start",
+    "step",
+    "touch_up",
+    "Balance",
+    "balance",
+    "polygon_distance",
+    "signed_distance",
+    "support_polygon",
+    "zmp",
+    "zmp_distance",
+    "zmp_from_links",
+]

@@ -1,0 +1,1007 @@
+"""Physical touch-up of edited motions (Shin, Kovar and Gleicher 2003).
+
+A touch-up is a sequence of **adjustments** (a *schedule*).  Each adjustment
+names three link sets (section 3.1): S1 is left alone, S2 is rotated, S3 is
+carried along by S2 but keeps its global orientation; a time scale
+``sigma`` and a damping factor ``rho``.  One step (Figure 2):
+
+1. on every frame independently, compute the rotation of S2 that best
+   satisfies the physical law of the frame's stage:
+
+   * **ground frames** (section 3.3): the rotation that brings the ZMP onto
+     its projection on the support polygon, about a horizontal axis
+     perpendicular to the correction, by the closed form of equations 6-7
+     (coefficients of the Appendix, computed here as per-link sums);
+   * **flight frames** (section 3.4): first the rotation giving the
+     average angular momentum of the flight (equations 8-9), then the
+     translation or rotation putting the centre of mass on the parabola
+     with ``v0 = d / T - g T / 2``;
+
+2. scale it by ``rho`` and smooth it over time with a Gaussian kernel of
+   width ``sigma`` (the rotation as a world rotation vector, i.e. the
+   logarithm of the displacement relative to the identity, which is how
+   Lee and Shin filter orientation displacements; the root translation
+   linearly);
+3. apply it as a displacement map (S2's top joint rotated, S3's top joint
+   counter-rotated) and re-enforce the footplants.
+
+Choices made where the paper leaves them open
+---------------------------------------------
+* Link sets are given by joint names (each name means the joint and its
+  descendants) or presets ``"lower_body"``, ``"upper_body"``, ``"arms"``,
+  ``"all"``; S3 overrides S2 and S1 is everything else.  One rotation angle
+  is shared by all parts of S2 (e.g. both arms), each turning about its own
+  top joint.
+* Rotation centre: the top joint of the S2 part when it has a parent in S1
+  (the S1/S2 boundary); when S2 holds the root it is the ZMP's projection
+  on the ground (ground frames, S1 holds no planted joint) or, in flight,
+  the S1/S2 boundary joint, or the centre of mass when S1 is empty.  On
+  ground frames, S1 parts hanging below a root-holding S2 are carried like
+  S3.
+* The per-frame ground angle is clamped to +-0.35 rad (20 degrees), a guard
+  against frames with absurd accelerations.
+* Kernel widths and windows are stored in seconds: the paper's 40/20/10 and
+  10/10/5 frames and its 15-frame flight window were at 30 fps.  A kernel of
+  width ``w`` is a Gaussian of standard deviation ``w / 4`` truncated at two
+  standard deviations.
+* Equation 9 relates consecutive frames; the angular-velocity correction
+  ``I^-1 (h* - h)`` is therefore **integrated** over the flight (from the
+  middle of the flight outwards) to give each frame's rotation, so that the
+  corrected motion really has the target angular velocity.  The paper's
+  footnote writes the inertia of point masses as ``sum m r r^T``; the
+  inertia tensor ``sum m (|r|^2 I - r r^T)`` is used here.
+* Ground frames within ``flight_window`` (0.5 s) of a flight keep the
+  flight's boundary adjustment, blended to zero with a raised cosine
+  (Figure 4); the ground adjustments are weighted by the complement.
+* Footplants are re-enforced after every step with
+  :func:`mocaplab.refine.refine` when available, else with an analytic
+  two-bone leg IK that puts each planted ankle back where the input motion
+  had it (blended in and out over 0.2 s); ``footplants=None`` skips it.
+
+Examples
+--------
+>>> from mocaplab.data import cmu                               # doctest: +SKIP
+>>> from mocaplab.physics import touch_up                       # doctest: +SKIP
+>>> history = touch_up(cmu("16_15").resample(30), iterations=2)  # doctest: +SKIP
+>>> history.mean_zmp_distance                                   # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from functools import lru_cache
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.ndimage import distance_transform_edt, gaussian_filter1d
+
+from .. import quat
+from ..motion import Motion, Skeleton
+from .body import GRAVITY, Body, link_positions, paper_width, smoothed_derivatives
+from .zmp import Balance, _check_contacts, balance, default_contacts
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..contacts import Contacts
+
+__all__ = [
+    "Adjustment",
+    "GROUND_SCHEDULE",
+    "FLIGHT_SCHEDULE",
+    "default_schedule",
+    "LinkSets",
+    "link_sets",
+    "preset_mask",
+    "flight_stages",
+    "TouchUpState",
+    "TouchUpHistory",
+    "start",
+    "step",
+    "touch_up",
+    "TouchUpSession",
+]
+
+Array = NDArray[np.float64]
+Stage = Literal["ground", "flight"]
+Footplants = Literal["auto", "refine", "ik"] | Callable[[Motion, "Contacts", Motion], Motion] | None
+
+#: Largest per-frame ground rotation, radians.
+MAX_GROUND_ANGLE = 0.35
+#: Blend length of the IK footplant fallback, seconds.
+FOOT_BLEND = 0.2
+
+
+# ======================================================================
+# schedules
+# ======================================================================
+@dataclasses.dataclass(frozen=True)
+class Adjustment:
+    """One step of a touch-up schedule.
+
+    Parameters
+    ----------
+    s2 : tuple of str
+        Rotated links: joint names (each with its descendants) or presets
+        ``"lower_body"``, ``"upper_body"``, ``"arms"``, ``"all"``.
+    s3 : tuple of str
+        Links carried by S2 that keep their global orientation (empty in
+        flight).  S1 is every joint in neither set.
+    sigma : float
+        Width of the smoothing kernel in seconds (the paper's 40 frames at
+        30 fps is 4/3 s).
+    rho : float
+        Damping factor in (0, 1]: the share of the computed adjustment used.
+    stage : {"ground", "flight"}
+        Which frames this adjustment corrects.
+    label : str
+        A short description for displays.
+    """
+
+    s2: tuple[str, ...]
+    s3: tuple[str, ...] = ()
+    sigma: float = 40.0 / 30.0
+    rho: float = 0.5
+    stage: Stage = "ground"
+    label: str = ""
+
+    def __post_init__(self) -> None:
+        s2 = (self.s2,) if isinstance(self.s2, str) else tuple(str(s) for s in self.s2)
+        s3 = (self.s3,) if isinstance(self.s3, str) else tuple(str(s) for s in self.s3)
+        if not s2:
+            raise ValueError("Expected at least one joint name or preset in `s2`, got none")
+        if not (np.isfinite(self.sigma) and self.sigma >= 0):
+            raise ValueError(f"Expected `sigma` >= 0 seconds, got {self.sigma!r}")
+        if not (np.isfinite(self.rho) and 0 < self.rho <= 1):
+            raise ValueError(f"Expected `rho` in (0, 1], got {self.rho!r}")
+        if self.stage not in ("ground", "flight"):
+            raise ValueError(f"Expected `stage` to be 'ground' or 'flight', got {self.stage!r}")
+        if self.stage == "flight" and s3:
+            raise ValueError(f"Expected an empty `s3` for a flight adjustment (section 3.4), got {s3}")
+        object.__setattr__(self, "s2", s2)
+        object.__setattr__(self, "s3", s3)
+        object.__setattr__(self, "sigma", float(self.sigma))
+        object.__setattr__(self, "rho", float(self.rho))
+        if not self.label:
+            text = f"{self.stage}: S2 {'+'.join(s2)}" + (f", S3 {'+'.join(s3)}" if s3 else "")
+            object.__setattr__(self, "label", text)
+
+    def replace(self, **changes: object) -> Adjustment:
+        """A copy with some fields changed (the label is rebuilt unless given)."""
+        if "label" not in changes and any(k in changes for k in ("s2", "s3", "stage")):
+            changes["label"] = ""
+        return dataclasses.replace(self, **changes)  # type: ignore[arg-type]
+
+    def width(self, fps: float) -> float:
+        """Kernel width in frames at ``fps``."""
+        return self.sigma * float(fps)
+
+
+#: The paper's ground schedule (section 4.1): lean with the lower body
+#: (upper body keeps its orientation), then the upper body, then the arms.
+GROUND_SCHEDULE: tuple[Adjustment, ...] = (
+    Adjustment(("lower_body",), ("upper_body",), 40 / 30, 0.5, "ground", "ground: lower body (S2), upper body (S3)"),
+    Adjustment(("upper_body",), (), 20 / 30, 0.3, "ground", "ground: upper body (S2)"),
+    Adjustment(("arms",), (), 10 / 30, 0.2, "ground", "ground: arms (S2)"),
+)
+
+#: The paper's flight schedule (section 4.1): lower body, upper body, all.
+FLIGHT_SCHEDULE: tuple[Adjustment, ...] = (
+    Adjustment(("lower_body",), (), 10 / 30, 0.3, "flight", "flight: lower body (S2)"),
+    Adjustment(("upper_body",), (), 10 / 30, 0.3, "flight", "flight: upper body (S2)"),
+    Adjustment(("all",), (), 5 / 30, 1.0, "flight", "flight: whole body (S2)"),
+)
+
+
+def default_schedule(
+    stage: Literal["ground", "flight", "both"] = "both", *, contacts: Contacts | None = None
+) -> tuple[Adjustment, ...]:
+    """The paper's default schedules.
+
+    ``stage="both"`` gives the ground schedule followed by the flight one;
+    with ``contacts`` given, the flight part is left out when the clip has
+    no flight frame.
+    """
+    if stage == "ground":
+        return GROUND_SCHEDULE
+    if stage == "flight":
+        return FLIGHT_SCHEDULE
+    if stage != "both":
+        raise ValueError(f"Expected `stage` 'ground', 'flight' or 'both', got {stage!r}")
+    if contacts is not None and not flight_stages(contacts):
+        return GROUND_SCHEDULE
+    return GROUND_SCHEDULE + FLIGHT_SCHEDULE
+
+
+def _as_schedule(schedule: str | Adjustment | Sequence[Adjustment], contacts: Contacts) -> tuple[Adjustment, ...]:
+    if isinstance(schedule, str):
+        if schedule == "default":
+            return default_schedule("both", contacts=contacts)
+        if schedule in ("ground", "flight", "both"):
+            return default_schedule(schedule, contacts=contacts if schedule == "both" else None)  # type: ignore[arg-type]
+        raise ValueError(f"Expected `schedule` 'default', 'ground', 'flight' or a sequence of Adjustment, got {schedule!r}")
+    if isinstance(schedule, Adjustment):
+        return (schedule,)
+    out = tuple(schedule)
+    if not out or not all(isinstance(a, Adjustment) for a in out):
+        raise TypeError(f"Expected `schedule` to be a non-empty sequence of Adjustment, got {schedule!r}")
+    return out
+
+
+# ======================================================================
+# link sets
+# ======================================================================
+_UPPER_ROOTS = ("LowerBack", "abdomen", "lowerback", "Spine", "spine", "Spine0")
+_ARM_ROOTS = (("LeftArm", "RightArm"), ("lShldr", "rShldr"), ("lhumerus", "rhumerus"), ("LeftUpperArm", "RightUpperArm"))
+PRESETS = ("lower_body", "upper_body", "arms", "all")
+
+
+def _subtree(skeleton: Skeleton, j: int) -> NDArray[np.bool_]:
+    mask = np.zeros(skeleton.n_joints, dtype=bool)
+    mask[j] = True
+    for k in range(j + 1, skeleton.n_joints):
+        if mask[skeleton.parents[k]]:
+            mask[k] = True
+    return mask
+
+
+def preset_mask(skeleton: Skeleton, name: str) -> NDArray[np.bool_]:
+    """Joints of a preset (or of a joint's subtree), shape (J,) bool.
+
+    ``"upper_body"`` is the subtree of the first spine joint (``LowerBack``
+    on CMU, ``abdomen`` on Daz), ``"lower_body"`` everything else (root,
+    pelvis, legs), ``"arms"`` the subtrees of both upper arms, ``"all"``
+    every joint.  Any other string must be a joint name: that joint and its
+    descendants.
+    """
+    names = set(skeleton.names)
+    if name == "all":
+        return np.ones(skeleton.n_joints, dtype=bool)
+    if name in ("upper_body", "lower_body"):
+        root = next((r for r in _UPPER_ROOTS if r in names), None)
+        if root is None:
+            raise ValueError(f"Could not find the spine joint for {name!r} (tried {list(_UPPER_ROOTS)}); give joint names")
+        upper = _subtree(skeleton, skeleton.index(root))
+        return upper if name == "upper_body" else ~upper
+    if name == "arms":
+        pair = next((p for p in _ARM_ROOTS if all(a in names for a in p)), None)
+        if pair is None:
+            raise ValueError(f"Could not find the upper-arm joints for 'arms' (tried {list(_ARM_ROOTS)}); give joint names")
+        return _subtree(skeleton, skeleton.index(pair[0])) | _subtree(skeleton, skeleton.index(pair[1]))
+    if name not in names:
+        raise KeyError(f"{name!r} is neither a preset {list(PRESETS)} nor a joint; joints are {list(skeleton.names)}")
+    return _subtree(skeleton, skeleton.index(name))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class LinkSets:
+    """The S1/S2/S3 split of a skeleton for one adjustment.
+
+    Attributes
+    ----------
+    roles : ndarray of int, shape (J,)
+        1, 2 or 3 per joint.
+    s2_tops : tuple of int
+        Top joint of each connected part of S2.
+    carried : tuple of (int, int)
+        ``(joint, part)``: top joints of S3 (or S1) parts hanging below S2
+        part ``part``; they are counter-rotated to keep their orientation.
+    carried_s1 : tuple of bool
+        Whether each carried top is an S1 part (only below a root-holding S2).
+    part : ndarray of int, shape (J,)
+        S2 part moving each joint (-1 for joints that do not move).
+    carried_top : ndarray of int, shape (J,)
+        For joints of a carried part, its top joint; -1 elsewhere.
+    """
+
+    roles: NDArray[np.int64]
+    s2_tops: tuple[int, ...]
+    carried: tuple[tuple[int, int], ...]
+    carried_s1: tuple[bool, ...]
+    part: NDArray[np.int64]
+    carried_top: NDArray[np.int64]
+
+    def names(self, skeleton: Skeleton, role: int) -> list[str]:
+        """Joint names with the given role (1, 2 or 3)."""
+        return [skeleton.names[j] for j in np.flatnonzero(self.roles == role)]
+
+
+def link_sets(skeleton: Skeleton, adjustment: Adjustment) -> LinkSets:
+    """Resolve an adjustment's S1/S2/S3 on a skeleton and check its shape.
+
+    Raises ValueError when S3 does not hang below S2, when S2 hangs below S3,
+    or when an S1 part hangs below an S2 part that does not hold the root.
+    Results are cached per skeleton and link sets.
+    """
+    return _link_sets(skeleton, adjustment.s2, adjustment.s3)
+
+
+@lru_cache(maxsize=128)
+def _link_sets(skeleton: Skeleton, s2: tuple[str, ...], s3: tuple[str, ...]) -> LinkSets:
+    n = skeleton.n_joints
+    roles = np.ones(n, dtype=np.int64)
+    for name in s2:
+        roles[preset_mask(skeleton, name)] = 2
+    for name in s3:
+        roles[preset_mask(skeleton, name)] = 3
+    if not np.any(roles == 2):
+        raise ValueError(f"S2 ({'+'.join(s2)}) is empty on this skeleton (S3 covers it)")
+    parents = skeleton.parents
+    part = np.full(n, -1, dtype=np.int64)
+    tops: list[int] = []
+    carried: list[tuple[int, int]] = []
+    carried_s1: list[bool] = []
+    for j in range(n):
+        p = int(parents[j])
+        if roles[j] == 2:
+            if p < 0 or roles[p] == 1:
+                tops.append(j)
+                part[j] = len(tops) - 1
+            elif roles[p] == 3:
+                raise ValueError(f"S2 joint {skeleton.names[j]!r} hangs below S3 joint {skeleton.names[p]!r}")
+            else:
+                part[j] = part[p]
+        elif roles[j] == 3:
+            if p < 0 or roles[p] == 1:
+                where = "is the root" if p < 0 else f"hangs below S1 joint {skeleton.names[p]!r}"
+                raise ValueError(f"S3 must hang below S2, but S3 joint {skeleton.names[j]!r} {where}")
+            part[j] = part[p]
+            if roles[p] == 2:
+                carried.append((j, int(part[p])))
+                carried_s1.append(False)
+        else:
+            if p >= 0 and part[p] >= 0:
+                if roles[p] == 2 and tops[int(part[p])] == 0:
+                    part[j] = part[p]
+                    carried.append((j, int(part[p])))
+                    carried_s1.append(True)
+                elif roles[p] == 3:
+                    raise ValueError(f"S1 joint {skeleton.names[j]!r} hangs below S3 joint {skeleton.names[p]!r}")
+                else:
+                    part[j] = part[p]
+                    if roles[p] == 2:
+                        raise ValueError(
+                            f"S1 joint {skeleton.names[j]!r} hangs below S2 joint {skeleton.names[p]!r}, "
+                            "which does not hold the root: it would move"
+                        )
+    carried_top = np.full(n, -1, dtype=np.int64)
+    for u, _ in carried:
+        carried_top[_subtree(skeleton, u)] = u
+    for arr in (roles, part, carried_top):
+        arr.flags.writeable = False
+    return LinkSets(roles, tuple(tops), tuple(carried), tuple(carried_s1), part, carried_top)
+
+
+# ======================================================================
+# stages
+# ======================================================================
+def flight_stages(contacts: Contacts, *, min_frames: int = 2) -> list[tuple[int, int]]:
+    """Half-open frame intervals with no joint planted (at least ``min_frames`` long)."""
+    ground = np.asarray(contacts.mask, dtype=bool).any(axis=1)
+    edges = np.diff(np.concatenate(([0], (~ground).astype(np.int8), [0])))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return [(int(a), int(b)) for a, b in zip(starts, stops, strict=True) if b - a >= min_frames]
+
+
+def _flight_weights(n: int, stages: list[tuple[int, int]], window: int) -> Array:
+    """1 on flight frames, a raised cosine down to 0 over ``window`` ground frames around them."""
+    w = np.zeros(n)
+    k = np.arange(1, window + 1)
+    ramp = 0.5 * (1.0 + np.cos(np.pi * k / (window + 1)))
+    for a, b in stages:
+        w[a:b] = 1.0
+        lo = np.arange(a - 1, a - 1 - window, -1)
+        hi = np.arange(b, b + window)
+        for idx in (lo, hi):
+            ok = (idx >= 0) & (idx < n)
+            w[idx[ok]] = np.maximum(w[idx[ok]], ramp[ok])
+    return w
+
+
+# ======================================================================
+# displacement maps
+# ======================================================================
+def _smooth(x: Array, width: float) -> Array:
+    """Gaussian smoothing over frames (std ``width / 4``, two-std truncation)."""
+    std = width / 4.0
+    if std <= 0 or x.shape[0] < 2:
+        return x
+    return gaussian_filter1d(x, std, axis=0, mode="nearest", truncate=2.0)
+
+
+def _rotate_about(omega: Array, centre: Array, point: Array) -> Array:
+    """``point`` rotated by rotation vectors ``omega`` about ``centre`` (all (F, 3))."""
+    return centre + quat.rotate(quat.exp(omega), point - centre)
+
+
+def _apply(motion: Motion, sets: LinkSets, omega: Array, root_delta: Array | None) -> Motion:
+    """Rotate every S2 part by the world rotation vectors ``omega`` (F, 3).
+
+    S2 tops are pre-rotated in world space (expressed locally by conjugating
+    with the parent's global rotation), carried tops are counter-rotated so
+    their global orientation is unchanged, and the root moves by
+    ``root_delta`` when it belongs to S2.
+    """
+    rot = np.array(motion.rotations, copy=True)
+    root = np.array(motion.root_positions, copy=True)
+    grot = motion.global_rotations()
+    parents = motion.skeleton.parents
+    q = quat.exp(omega)
+    for t in sets.s2_tops:
+        if t == 0:
+            rot[:, 0] = quat.mul(q, rot[:, 0])
+            if root_delta is not None:
+                root = root + root_delta
+        else:
+            gp = grot[:, parents[t]]
+            rot[:, t] = quat.mul(quat.inv(gp), quat.mul(q, grot[:, t]))
+    qi = quat.inv(q)
+    for u, _ in sets.carried:
+        gp = grot[:, parents[u]]
+        rot[:, u] = quat.mul(quat.inv(gp), quat.mul(qi, grot[:, u]))
+    return motion.replace(rotations=quat.normalize(rot), root_positions=root)
+
+
+# ======================================================================
+# ground frames (section 3.3)
+# ======================================================================
+def _ground_rotation(motion: Motion, body: Body, sets: LinkSets, bal: Balance, weight: Array) -> tuple[Array, Array]:
+    """Per-frame world rotation vectors (F, 3) and S2 centres of the root part (F, 3).
+
+    Closed form of equations 6 and 7 in the frame whose x axis points from
+    the ZMP to its projection on the support polygon.
+    """
+    n = motion.n_frames
+    gpos = motion.global_positions()
+    z = bal.zmp
+    target = bal.projection
+    todo = np.isfinite(bal.distance) & (bal.distance > 0) & (weight > 0)
+    omega = np.zeros((n, 3))
+    root_centre = np.zeros((n, 3))
+    if not np.any(todo):
+        return omega, root_centre
+    idx = np.flatnonzero(todo)
+    dirv = target[idx] - z[idx]
+    dirv[:, 1] = 0.0
+    xa = dirv / np.linalg.norm(dirv, axis=1, keepdims=True)  # x': towards the polygon
+    up = np.array([0.0, 1.0, 0.0])
+    axis = np.cross(xa, up)  # z' = x' x y: +theta turns x' into y
+
+    r = bal.positions[idx]  # (f, L, 3) smoothed link centres
+    acc = bal.accelerations[idx]
+    m = body.masses
+    alpha = m * (acc[..., 1] - GRAVITY[1])  # (f, L)
+    beta = m * np.einsum("flc,fc->fl", acc, xa)
+
+    # rotation centres of the S2 parts and the boundary joints of carried parts
+    tops = sets.s2_tops
+    centres = np.empty((idx.size, len(tops), 3))
+    for k, t in enumerate(tops):
+        if t == 0:
+            centres[:, k] = target[idx]
+            centres[:, k, 1] = 0.0
+        else:
+            centres[:, k] = gpos[idx, t]
+    root_centre[idx] = centres[:, 0] if tops and tops[0] == 0 else 0.0
+
+    link_role = sets.roles[body.owners]
+    link_part = sets.part[body.owners]
+    # joints carried (S3, or S1 below a root part): their top joint per link
+    link_top = sets.carried_top[body.owners]
+    rotated = (link_role == 2) & (link_top < 0)
+    carried = link_top >= 0
+
+    def coord(v: Array) -> tuple[Array, Array]:  # (f, L, 3) -> x', y
+        return np.einsum("flc,fc->fl", v, xa), v[..., 1]
+
+    x, y = coord(r)
+    numer_c = alpha * x - beta * y  # S1 terms (unchanged links)
+    a_coef = np.zeros_like(alpha)
+    b_coef = np.zeros_like(alpha)
+    c_coef = numer_c.copy()
+    if np.any(rotated):
+        c_l = centres[:, np.where(rotated, link_part, 0)]  # (f, L, 3)
+        dx, dy = coord(r - c_l)
+        cx, cy = coord(c_l)
+        a_coef = np.where(rotated, alpha * dx - beta * dy, a_coef)
+        b_coef = np.where(rotated, -(alpha * dy + beta * dx), b_coef)
+        c_coef = np.where(rotated, alpha * cx - beta * cy, c_coef)
+    if np.any(carried):
+        c_l = centres[:, np.where(carried, link_part, 0)]
+        b_l = gpos[idx][:, np.where(carried, link_top, 0)]
+        dx, dy = coord(b_l - c_l)
+        a_coef = np.where(carried, alpha * dx - beta * dy, a_coef)
+        b_coef = np.where(carried, -(alpha * dy + beta * dx), b_coef)
+        c_coef = np.where(carried, alpha * (x - dx) - beta * (y - dy), c_coef)
+    sig = alpha.sum(axis=1)
+    a1 = a_coef.sum(axis=1)
+    a2 = -b_coef.sum(axis=1)  # Z'_x = (a1 cos - a2 sin + a3), equation 6
+    a3 = c_coef.sum(axis=1)
+    want = np.einsum("fc,fc->f", target[idx], xa) * sig - a3
+    # a1 cos(t) - a2 sin(t) = R cos(t + phi), R = hypot(a1, a2), phi = atan2(a2, a1)
+    radius = np.hypot(a1, a2)
+    phi = np.arctan2(a2, a1)
+    cosv = np.clip(want / np.where(radius > 0, radius, 1.0), -1.0, 1.0)  # no exact solution: clamp
+    acs = np.arccos(cosv)
+    cand = np.stack([acs - phi, -acs - phi], axis=1)
+    cand = (cand + np.pi) % (2.0 * np.pi) - np.pi
+    theta = cand[np.arange(idx.size), np.argmin(np.abs(cand), axis=1)]
+    theta = np.where(radius > 0, np.clip(theta, -MAX_GROUND_ANGLE, MAX_GROUND_ANGLE), 0.0)
+    omega[idx] = axis * (theta * weight[idx])[:, None]
+    return omega, root_centre
+
+
+def _ground_step(
+    motion: Motion, body: Body, contacts: Contacts, adj: Adjustment, flight_w: Array, bal: Balance
+) -> Motion:
+    sets = link_sets(motion.skeleton, adj)
+    omega, centre = _ground_rotation(motion, body, sets, bal, 1.0 - flight_w)
+    omega *= adj.rho
+    root_delta = None
+    if 0 in sets.s2_tops:
+        p = motion.root_positions
+        root_delta = np.where(np.any(omega != 0, axis=1)[:, None], _rotate_about(omega, centre, p) - p, 0.0)
+        root_delta = _smooth(root_delta, adj.width(motion.fps))
+    omega = _smooth(omega, adj.width(motion.fps))
+    return _apply(motion, sets, omega, root_delta)
+
+
+# ======================================================================
+# flight frames (section 3.4)
+# ======================================================================
+def _flight_centre(motion: Motion, body: Body, sets: LinkSets, positions: Array) -> Array:
+    """Rotation centre of the (single) S2 part on every frame, shape (F, 3)."""
+    top = sets.s2_tops[0]
+    gpos = motion.global_positions()
+    if top != 0:
+        return np.array(gpos[:, top])
+    below = [u for (u, _), s1 in zip(sets.carried, sets.carried_s1, strict=True) if s1]
+    if len(below) > 1:
+        names = [motion.skeleton.names[u] for u in below]
+        raise ValueError(f"A flight adjustment needs one S1/S2 boundary joint, got {names}")
+    if below:
+        return np.array(gpos[:, below[0]])
+    return np.einsum("l,flc->fc", body.masses, positions) / body.total_mass
+
+
+def _hold_into_windows(field: Array, stages: list[tuple[int, int]], flight_w: Array, window: int) -> Array:
+    """Carry each flight's boundary values into its ground window, times the window weight."""
+    out = np.array(field, copy=True)
+    n = field.shape[0]
+    for a, b in stages:
+        lo = np.arange(max(0, a - window), a)
+        hi = np.arange(b, min(n, b + window))
+        out[lo] = field[a] * flight_w[lo, None]
+        out[hi] = field[b - 1] * flight_w[hi, None]
+    return out
+
+
+def _flight_step(
+    motion: Motion,
+    body: Body,
+    adj: Adjustment,
+    stages: list[tuple[int, int]],
+    flight_w: Array,
+    window: int,
+) -> Motion:
+    sets = link_sets(motion.skeleton, adj)
+    if len(sets.s2_tops) != 1:
+        names = [motion.skeleton.names[t] for t in sets.s2_tops]
+        raise ValueError(f"A flight adjustment needs S2 to be one connected part, got parts at {names}")
+    n = motion.n_frames
+    dt = motion.dt
+    width = adj.width(motion.fps)
+    # S3 is empty in flight: S2 links rotate, S1 links (above or below) stay
+    in_s2 = sets.roles[body.owners] == 2
+    m = body.masses
+
+    # ---- 3.4.1 angular momentum: average of the flight, by rotating S2
+    width5 = paper_width(5.0, motion.fps)
+    s, v, _ = smoothed_derivatives(link_positions(motion, body), motion.fps, width=width5)
+    com = np.einsum("l,flc->fc", m, s) / m.sum()
+    h = np.einsum("l,flc->fc", m, np.cross(s - com[:, None], v))
+    centre = _flight_centre(motion, body, sets, s)
+    phi = np.zeros((n, 3))
+    for a, b in stages:
+        target = h[a:b].mean(axis=0)
+        q = s[a:b][:, in_s2] - centre[a:b, None]
+        ms = m[in_s2]
+        qq = np.einsum("l,flc,flc->f", ms, q, q)
+        inertia = qq[:, None, None] * np.eye(3) - np.einsum("l,flc,fld->fcd", ms, q, q)
+        inertia += 1e-9 * np.eye(3)
+        domega = np.linalg.solve(inertia, (target - h[a:b])[..., None])[..., 0]  # equation 8, minus current
+        cum = np.cumsum(domega, axis=0) * dt
+        phi[a:b] = cum - cum[(b - a) // 2]
+    phi = _hold_into_windows(phi, stages, flight_w, window) * adj.rho
+    root_delta = None
+    if 0 in sets.s2_tops:
+        p = motion.root_positions
+        root_delta = _smooth(_rotate_about(phi, centre, p) - p, width)
+    out = _apply(motion, sets, _smooth(phi, width), root_delta)
+
+    # ---- 3.4.2 parabolic centre of mass, on the adjusted motion
+    r = link_positions(out, body)
+    com = np.einsum("l,flc->fc", m, r) / m.sum()
+    wanted = com.copy()
+    for a, b in stages:
+        t = (np.arange(a, b) - a) * dt
+        big_t = (b - 1 - a) * dt
+        d = com[b - 1] - com[a]
+        v0 = d / big_t - GRAVITY * big_t / 2.0
+        wanted[a:b] = com[a] + v0 * t[:, None] + 0.5 * GRAVITY * t[:, None] ** 2
+    flight = np.zeros(n, dtype=bool)
+    for a, b in stages:
+        flight[a:b] = True
+    if np.all(sets.roles == 2):
+        # S1 empty: translate the root
+        delta = np.where(flight[:, None], wanted - com, 0.0) * adj.rho
+        return out.replace(root_positions=out.root_positions + _smooth(delta, width))
+    # rotate S2 about the S1/S2 boundary so its centre of mass moves towards c*_M2
+    centre = _flight_centre(out, body, sets, r)
+    m2 = m[in_s2].sum()
+    c2 = np.einsum("l,flc->fc", m[in_s2], r[:, in_s2]) / m2
+    c1m1 = com * m.sum() - c2 * m2
+    c2_star = (wanted * m.sum() - c1m1) / m2
+    rot = quat.log(quat.between(c2 - centre, c2_star - centre))
+    rot = np.where(flight[:, None], rot, 0.0) * adj.rho
+    root_delta = None
+    if 0 in sets.s2_tops:
+        p = out.root_positions
+        root_delta = _smooth(_rotate_about(rot, centre, p) - p, width)
+    return _apply(out, sets, _smooth(rot, width), root_delta)
+
+
+# ======================================================================
+# footplants
+# ======================================================================
+def _feet(skeleton: Skeleton, contacts: Contacts) -> list[tuple[int, list[int]]]:
+    """Ankle joint and the contact columns that plant it (its own and its toes')."""
+    out: dict[int, list[int]] = {}
+    names = skeleton.names
+    for k, name in enumerate(contacts.joints):
+        j = skeleton.index(name)
+        p = int(skeleton.parents[j])
+        ankle = p if p >= 0 and names[p] in contacts.joints else j
+        out.setdefault(ankle, []).append(k)
+    return list(out.items())
+
+
+def _ik_footplants(motion: Motion, contacts: Contacts, reference: Motion) -> Motion:
+    """Put planted ankles back where ``reference`` has them (two-bone leg IK).
+
+    On planted frames the ankle's position and global orientation are those
+    of ``reference``; the correction fades out over :data:`FOOT_BLEND`
+    seconds around each plant.  The legs are independent chains, so one
+    forward-kinematics pass serves every foot.
+    """
+    from ..ik import two_bone_ik
+
+    mask = np.asarray(contacts.mask, dtype=bool)
+    ramp = max(1, int(round(FOOT_BLEND * motion.fps)))
+    sk = motion.skeleton
+    grot, gpos = motion.global_rotations(), motion.global_positions()
+    ref_pos, ref_rot = reference.global_positions(), reference.global_rotations()
+    rot = motion.rotations
+    for ankle, cols in _feet(sk, contacts):
+        planted = mask[:, cols].any(axis=1)
+        if not planted.any():
+            continue
+        dist, (nearest,) = distance_transform_edt(~planted, return_indices=True)
+        w = np.where(dist <= ramp, 0.5 * (1.0 + np.cos(np.pi * dist / (ramp + 1))), 0.0)
+        err = (ref_pos[:, ankle] - gpos[:, ankle])[nearest]
+        target = gpos[:, ankle] + w[:, None] * err
+        want = quat.slerp(grot[:, ankle], ref_rot[nearest, ankle], w)
+        rot = two_bone_ik(rot, motion.root_positions, sk, ankle, target, end_rotation=want, fk=(grot, gpos))
+    return motion.replace(rotations=rot)
+
+
+def _refine_footplants(motion: Motion, contacts: Contacts, reference: Motion) -> Motion:
+    from ..refine import refine
+
+    return refine(motion, contacts=contacts, reference=reference)
+
+
+def _footplant_fn(footplants: Footplants) -> Callable[[Motion, Contacts, Motion], Motion] | None:
+    if footplants is None:
+        return None
+    if callable(footplants):
+        return footplants
+    if footplants == "ik":
+        return _ik_footplants
+    if footplants == "refine":
+        return _refine_footplants
+    if footplants == "auto":
+        try:
+            from .. import refine  # noqa: F401
+        except ImportError:
+            return _ik_footplants
+        return _refine_footplants
+    raise ValueError(f"Expected `footplants` 'auto', 'refine', 'ik', a callable or None, got {footplants!r}")
+
+
+# ======================================================================
+# state, stepping, history
+# ======================================================================
+@dataclasses.dataclass(frozen=True, eq=False)
+class TouchUpState:
+    """Where a touch-up stands: the current motion and what comes next.
+
+    Attributes
+    ----------
+    motion : Motion
+        The motion after ``index`` steps.
+    reference : Motion
+        The input motion (footplant positions are taken from it).
+    body : Body
+    contacts : Contacts
+        Contact labels of the input, fixed for the whole touch-up.
+    schedule : tuple of Adjustment
+        Cycled through: step ``k`` applies ``schedule[k % len(schedule)]``.
+    index : int
+        Number of steps done.
+    balance : Balance
+        ZMP analysis of :attr:`motion`.
+    label : str
+        What produced this state (``"input"`` or the adjustment's label).
+    flight_window : float
+        Seconds of ground frames around a flight adjusted as flight.
+    footplants : str, callable or None
+        How footplants are re-enforced after each step.
+    """
+
+    motion: Motion
+    reference: Motion
+    body: Body
+    contacts: Contacts
+    schedule: tuple[Adjustment, ...]
+    index: int
+    balance: Balance
+    label: str = "input"
+    flight_window: float = 0.5
+    footplants: Footplants = "auto"
+
+    @property
+    def next_adjustment(self) -> Adjustment:
+        """The adjustment the next :func:`step` applies."""
+        return self.schedule[self.index % len(self.schedule)]
+
+    @property
+    def iteration(self) -> int:
+        """Completed passes over the schedule."""
+        return self.index // len(self.schedule)
+
+    @property
+    def zmp_distance(self) -> Array:
+        """Distance of the ZMP outside the support polygon per frame (NaN in flight), shape (F,)."""
+        return self.balance.distance
+
+    @property
+    def mean_zmp_distance(self) -> float:
+        """Mean of :attr:`zmp_distance` over frames with a ZMP, metres."""
+        return self.balance.mean_distance
+
+    def with_schedule(self, schedule: Sequence[Adjustment]) -> TouchUpState:
+        """The same state with another schedule (applied from the next step on)."""
+        return dataclasses.replace(self, schedule=_as_schedule(schedule, self.contacts))
+
+
+def start(
+    motion: Motion,
+    *,
+    body: Body | None = None,
+    schedule: str | Adjustment | Sequence[Adjustment] = "default",
+    contacts: Contacts | None = None,
+    flight_window: float = 0.5,
+    footplants: Footplants = "auto",
+) -> TouchUpState:
+    """The initial state of a touch-up (no step done).  See :func:`touch_up`."""
+    if not isinstance(motion, Motion):
+        raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
+    body = Body.from_skeleton(motion.skeleton) if body is None else body
+    if not isinstance(body, Body):
+        raise TypeError(f"Expected `body` to be a Body, got {type(body).__name__}")
+    body.check(motion)
+    contacts = default_contacts(motion) if contacts is None else contacts
+    _check_contacts(contacts, motion)
+    if not (np.isfinite(flight_window) and flight_window >= 0):
+        raise ValueError(f"Expected `flight_window` >= 0 seconds, got {flight_window!r}")
+    _footplant_fn(footplants)  # validate early
+    sched = _as_schedule(schedule, contacts)
+    for adj in sched:
+        link_sets(motion.skeleton, adj)  # validate the link sets early
+    bal = balance(motion, body, contacts=contacts)
+    return TouchUpState(motion, motion, body, contacts, sched, 0, bal, "input", float(flight_window), footplants)
+
+
+def step(state: TouchUpState) -> TouchUpState:
+    """Apply the next adjustment of the schedule: a new state (the input is untouched)."""
+    if not isinstance(state, TouchUpState):
+        raise TypeError(f"Expected a TouchUpState (see mocaplab.physics.start), got {type(state).__name__}")
+    adj = state.next_adjustment
+    motion, body, contacts = state.motion, state.body, state.contacts
+    stages = flight_stages(contacts)
+    window = int(round(state.flight_window * motion.fps))
+    flight_w = _flight_weights(motion.n_frames, stages, window)
+    if adj.stage == "ground":
+        new = _ground_step(motion, body, contacts, adj, flight_w, state.balance)
+    elif stages:
+        new = _flight_step(motion, body, adj, stages, flight_w, window)
+    else:
+        new = motion
+    fix = _footplant_fn(state.footplants)
+    if fix is not None and new is not motion:
+        new = fix(new, contacts, state.reference)
+    bal = balance(new, body, contacts=contacts)
+    return dataclasses.replace(state, motion=new, index=state.index + 1, balance=bal, label=adj.label)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class TouchUpHistory:
+    """Every state of a touch-up, index 0 the input.
+
+    Attributes
+    ----------
+    states : tuple of TouchUpState
+    """
+
+    states: tuple[TouchUpState, ...]
+
+    @property
+    def motions(self) -> list[Motion]:
+        """The motion after each step; index 0 is the input."""
+        return [s.motion for s in self.states]
+
+    @property
+    def final(self) -> Motion:
+        """The touched-up motion."""
+        return self.states[-1].motion
+
+    @property
+    def labels(self) -> list[str]:
+        """What each step did (index 0: ``"input"``)."""
+        return [s.label for s in self.states]
+
+    @property
+    def zmp_distance(self) -> Array:
+        """ZMP distance outside the support polygon, per step and frame (NaN in flight), shape (S + 1, F)."""
+        return np.stack([s.zmp_distance for s in self.states])
+
+    @property
+    def mean_zmp_distance(self) -> Array:
+        """Mean ZMP distance per step (Figure 9), metres, shape (S + 1,); index 0 the input."""
+        return np.array([s.mean_zmp_distance for s in self.states])
+
+    def __len__(self) -> int:
+        return len(self.states)
+
+
+def touch_up(
+    motion: Motion,
+    *,
+    body: Body | None = None,
+    schedule: str | Adjustment | Sequence[Adjustment] = "default",
+    contacts: Contacts | None = None,
+    iterations: int = 3,
+    flight_window: float = 0.5,
+    footplants: Footplants = "auto",
+) -> TouchUpHistory:
+    """Physically touch up a motion (Shin et al. 2003).
+
+    Parameters
+    ----------
+    motion : Motion
+        The (edited) motion; never modified.
+    body : Body, optional
+        Masses; default :meth:`Body.from_skeleton` (de Leva table).  Fitted
+        masses (:func:`mocaplab.physics.fit_masses`) make a captured clip
+        change less.
+    schedule : "default", "ground", "flight", Adjustment or sequence of Adjustment
+        ``"default"``: the paper's ground schedule, plus its flight schedule
+        when the clip has flight frames.
+    contacts : Contacts, optional
+        Planted joints of the input (default
+        :func:`mocaplab.contacts.foot_contacts`); they decide ground versus
+        flight frames and the support polygons.
+    iterations : int
+        Passes over the schedule; the history has
+        ``iterations * len(schedule) + 1`` states.
+    flight_window : float
+        Seconds of ground frames on each side of a flight adjusted as flight
+        and blended to zero (0.5 s in the paper).
+    footplants : "auto", "refine", "ik", callable or None
+        Re-enforcement of the footplants after each step (see the module
+        notes); a callable gets ``(motion, contacts, reference)``.
+
+    Returns
+    -------
+    TouchUpHistory
+        ``.motions``, ``.zmp_distance``, ``.mean_zmp_distance``, ``.final``.
+    """
+    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
+        raise ValueError(f"Expected `iterations` to be an integer >= 0, got {iterations!r}")
+    state = start(
+        motion, body=body, schedule=schedule, contacts=contacts, flight_window=flight_window, footplants=footplants
+    )
+    states = [state]
+    for _ in range(int(iterations) * len(state.schedule)):
+        state = step(state)
+        states.append(state)
+    return TouchUpHistory(tuple(states))
+
+
+# ======================================================================
+# a stateful stepper for interactive use
+# ======================================================================
+class TouchUpSession:
+    """Step a touch-up forward and back, editing the schedule on the way.
+
+    A thin stateful layer over :func:`start` and :func:`step` (the widget
+    :class:`mocaplab.widgets.TouchUpStepper` forwards its buttons here).
+    States already computed are kept, so stepping back and forward again
+    costs nothing; editing the schedule drops the states after the current
+    one.
+
+    Parameters
+    ----------
+    motion : Motion
+    **options
+        As for :func:`start` (``body``, ``schedule``, ``contacts``,
+        ``flight_window``, ``footplants``).
+    """
+
+    def __init__(self, motion: Motion, **options: object) -> None:
+        self._states: list[TouchUpState] = [start(motion, **options)]  # type: ignore[arg-type]
+        self._index = 0
+
+    @property
+    def index(self) -> int:
+        """Index of the current state (0: the input)."""
+        return self._index
+
+    @property
+    def current(self) -> TouchUpState:
+        return self._states[self._index]
+
+    @property
+    def input(self) -> TouchUpState:
+        return self._states[0]
+
+    @property
+    def schedule(self) -> tuple[Adjustment, ...]:
+        return self.current.schedule
+
+    @property
+    def history(self) -> TouchUpHistory:
+        """States from the input up to the current one."""
+        return TouchUpHistory(tuple(self._states[: self._index + 1]))
+
+    def forward(self) -> TouchUpState:
+        """Go one step forward (computing it if needed)."""
+        if self._index + 1 >= len(self._states):
+            self._states.append(step(self._states[-1]))
+        self._index += 1
+        return self.current
+
+    def back(self) -> TouchUpState:
+        """Go one step back (no-op at the input)."""
+        self._index = max(0, self._index - 1)
+        return self.current
+
+    def run(self, n: int) -> TouchUpState:
+        """Go ``n`` steps forward."""
+        for _ in range(int(n)):
+            self.forward()
+        return self.current
+
+    def set_schedule(self, schedule: Sequence[Adjustment]) -> None:
+        """Replace the schedule from the current state on."""
+        self._states = self._states[: self._index + 1]
+        self._states[-1] = self._states[-1].with_schedule(schedule)
+
+    def set_adjustment(self, k: int, **changes: object) -> None:
+        """Change fields (``s2``, ``s3``, ``sigma``, ``rho``...) of adjustment ``k``."""
+        sched = list(self.schedule)
+        if not 0 <= k < len(sched):
+            raise IndexError(f"Expected an adjustment index in [0, {len(sched)}), got {k}")
+        sched[k] = sched[k].replace(**changes)
+        self.set_schedule(sched)

@@ -48,9 +48,10 @@ is re-rendered when the slider moves (used by the tests and by nbval);
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -71,6 +72,26 @@ OverlayData = ArrayLike | Sequence[ArrayLike] | Callable[[float], ArrayLike]
 def default_backend() -> str:
     """The backend named by ``MOCAPLAB_JUPYTER_BACKEND`` (default ``"trame"``)."""
     return os.environ.get(ENV_VAR, "trame").strip().lower() or "trame"
+
+
+@contextlib.contextmanager
+def _quiet_vtk() -> Iterator[None]:
+    """Hide VTK's warnings while a render window is chosen.
+
+    Without a display, VTK first tries X ("bad X server connection"), then
+    falls back to EGL off-screen rendering, which works; the warning is noise.
+    """
+    try:
+        from vtkmodules.vtkCommonCore import vtkLogger
+    except ImportError:  # pragma: no cover
+        yield
+        return
+    old = vtkLogger.GetCurrentVerbosityCutoff()
+    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)
+    try:
+        yield
+    finally:
+        vtkLogger.SetStderrVerbosity(old)
 
 
 # --------------------------------------------------------------------------
@@ -324,7 +345,8 @@ class MotionViewer:
         import pyvista as pv
 
         interactive = self.backend in ("trame", "server", "client")
-        self.plotter = pv.Plotter(off_screen=True, notebook=interactive, window_size=list(window_size))
+        with _quiet_vtk():
+            self.plotter = pv.Plotter(off_screen=True, notebook=interactive, window_size=list(window_size))
         self.plotter.theme.allow_empty_mesh = True  # overlays may be empty on some frames
         self.plotter.set_background("white")
         all_pts = np.concatenate([c.positions.reshape(-1, 3) for c in self.characters])

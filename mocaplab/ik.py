@@ -1,0 +1,578 @@
+"""Inverse kinematics: analytic two-bone limbs and damped least squares.
+
+Two solvers, both vectorised over frames, both pure (they return new local
+rotation arrays and never touch their inputs):
+
+:func:`two_bone_ik`
+    Closed-form IK for a three-joint limb ``upper -> middle -> end``
+    (hip-knee-ankle, shoulder-elbow-wrist).  In three steps, each a rotation
+    applied in world coordinates:
+
+    1. bend the middle joint about the limb's current bending axis until the
+       distance from the upper joint to the end joint equals the distance to
+       the (reach-clamped) target (law of cosines);
+    2. swing the upper joint by the shortest arc that points the limb at the
+       target;
+    3. twist the whole limb about the upper-joint -> target axis to set its
+       swivel.  By default the limb keeps its swivel plane: the new bending
+       plane (upper, middle, end) is the one containing the new axis whose
+       normal is closest to the old plane's normal, so the knee or elbow
+       stays on its side however close to the axis it is.  With a *pole*
+       point the middle joint goes in the half plane through the axis and
+       the pole instead.  Where that plane is undefined (a straight limb, a
+       pole on the axis) the twist fades out smoothly and the shortest-arc
+       swing alone sets the swivel.
+
+    Unreachable targets are clamped to the limb's reach: the limb straightens
+    and points at the target, with no NaN (angles come from ``arctan2`` and
+    clipped cosines).  Optionally the end joint's *global* orientation is
+    set (for a foot: keep it as it was before the leg moved).
+
+:func:`dls_ik`
+    Damped least squares (Levenberg-Marquardt style) for any set of chain
+    joints (each a free 3-DOF rotation) and one or more end effectors,
+    for example ``LowerBack .. RightForeArm`` to put the right hand on a
+    target.  Each iteration solves, on every frame at once,
+    ``dtheta = W J^T (J W J^T + lambda^2 I)^-1 e`` where ``J`` is the
+    positional Jacobian with respect to world-axis rotations at each chain
+    joint, ``W`` optional per-joint weights and ``e`` the position error.
+
+Both take local rotations ``(F, J, 4)``, the root positions and the
+:class:`~mocaplab.motion.Skeleton`; :func:`reach` is the Motion-level
+convenience.  Conventions are those of :mod:`mocaplab.motion` (metres,
+quaternions ``(x, y, z, w)``).
+
+Examples
+--------
+>>> import mocaplab as ml                                    # doctest: +SKIP
+>>> walk = ml.cmu("16_15")                                   # doctest: +SKIP
+>>> ankle = walk.global_positions()[:, walk.skeleton.index("LeftFoot")]  # doctest: +SKIP
+>>> lifted = reach(walk, "LeftFoot", ankle + [0, 0.1, 0])    # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import kinematics, quat
+from .motion import Motion, Skeleton
+
+__all__ = [
+    "limb_joints",
+    "two_bone_deltas",
+    "two_bone_ik",
+    "aim_deltas",
+    "dls_ik",
+    "reach",
+]
+
+Array = NDArray[np.float64]
+JointRef = str | int
+
+_TINY = 1e-9
+# The swivel twist fades out smoothly where the plane it aligns is undefined:
+# with the default pole, when the sine of the angle between the upper bone and
+# the limb axis is below 0.02 (a limb within about 2 degrees of straight); with
+# an explicit pole point, when the middle joint or the pole is within 0.15
+# upper-bone lengths of the axis (no twist below 0.05).
+_PLANE_FADE = (0.005, 0.02)
+_POLE_FADE = (0.05, 0.15)
+
+
+def _ramp(x: Array, edges: tuple[float, float]) -> Array:
+    """Smoothstep from 0 (x <= edges[0]) to 1 (x >= edges[1])."""
+    u = np.clip((x - edges[0]) / (edges[1] - edges[0]), 0.0, 1.0)
+    return u * u * (3.0 - 2.0 * u)
+
+
+# --------------------------------------------------------------------- helpers
+def _joint(skeleton: Skeleton, j: JointRef, arg: str = "joint") -> int:
+    if isinstance(j, str):
+        return skeleton.index(j)
+    if isinstance(j, (int, np.integer)) and 0 <= int(j) < skeleton.n_joints:
+        return int(j)
+    raise ValueError(f"Expected `{arg}` to be a joint name or an index in [0, {skeleton.n_joints}), got {j!r}")
+
+
+def _unit(v: Array, *, eps: float = _TINY) -> tuple[Array, Array]:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.maximum(n, eps), n[..., 0]
+
+
+def _per_frame(value: ArrayLike, n_frames: int, width: int, name: str) -> Array:
+    """Broadcast ``(width,)`` or ``(F, width)`` to ``(F, width)`` with a clear error."""
+    a = np.asarray(value, dtype=float)
+    if a.shape == (width,):
+        return np.broadcast_to(a, (n_frames, width))
+    if a.shape == (n_frames, width):
+        return a
+    raise ValueError(f"Expected `{name}` of shape ({width},) or ({n_frames}, {width}), got {a.shape}")
+
+
+def _check_rotations(rotations: ArrayLike, root_positions: ArrayLike, skeleton: Skeleton) -> tuple[Array, Array]:
+    if not isinstance(skeleton, Skeleton):
+        raise TypeError(f"Expected `skeleton` to be a Skeleton, got {type(skeleton).__name__}")
+    rot = np.asarray(rotations, dtype=float)
+    if rot.ndim != 3 or rot.shape[1:] != (skeleton.n_joints, 4):
+        raise ValueError(f"Expected `rotations` of shape (F, {skeleton.n_joints}, 4), got {rot.shape}")
+    root = np.asarray(root_positions, dtype=float)
+    if root.shape != (rot.shape[0], 3):
+        raise ValueError(f"Expected `root_positions` of shape ({rot.shape[0]}, 3), got {root.shape}")
+    return rot, root
+
+
+def limb_joints(skeleton: Skeleton, end: JointRef) -> tuple[int, int, int]:
+    """The ``(upper, middle, end)`` joints of the limb ending at ``end``.
+
+    The middle joint is ``end``'s parent and the upper joint its grandparent:
+    ``limb_joints(sk, "LeftFoot")`` gives LeftUpLeg, LeftLeg, LeftFoot on the
+    CMU skeleton, ``"RightHand"`` gives RightArm, RightForeArm, RightHand.
+    """
+    e = _joint(skeleton, end, "end")
+    m = int(skeleton.parents[e])
+    u = int(skeleton.parents[m]) if m >= 0 else -1
+    if m < 0 or u < 0:
+        raise ValueError(f"Joint {skeleton.names[e]!r} needs a parent and a grandparent to be a limb end")
+    return u, m, e
+
+
+# ------------------------------------------------------------ two-bone kernel
+def two_bone_deltas(
+    upper: ArrayLike,
+    middle: ArrayLike,
+    end: ArrayLike,
+    target: ArrayLike,
+    *,
+    pole: ArrayLike | None = None,
+    bend_axis: ArrayLike | None = None,
+) -> tuple[Array, Array]:
+    """World-frame rotations that carry a two-bone limb's end to ``target``.
+
+    Pure geometry on joint positions; every argument broadcasts over leading
+    axes (one pose or all frames).
+
+    Parameters
+    ----------
+    upper, middle, end : array_like, shape (..., 3)
+        World positions of the three joints (hip, knee, ankle).
+    target : array_like, shape (..., 3)
+        Where the end joint should go.  Beyond the limb's reach (or closer
+        than ``|l1 - l2|``) it is clamped: the limb points at it as far as
+        it can.
+    pole : array_like, shape (..., 3), optional
+        A point fixing the swivel plane: the middle joint ends in the half
+        plane through the upper-joint -> target axis and this point.
+        Default: keep the current bending plane (its normal projected
+        perpendicular to the new axis).
+    bend_axis : array_like, shape (..., 3), optional
+        World axis about which to bend the middle joint when the limb is
+        exactly straight (the bending plane is then undefined).  Default: an
+        axis perpendicular to the limb, chosen from the world axes.
+
+    Returns
+    -------
+    upper_delta : ndarray, shape (..., 4)
+        Rotation to pre-multiply onto the upper joint's global rotation.
+    middle_delta : ndarray, shape (..., 4)
+        Rotation about the middle joint to apply *before* ``upper_delta``:
+        the middle joint's new global rotation is
+        ``upper_delta * middle_delta * G_middle``.
+
+    Notes
+    -----
+    Lengths come from the given positions, so the kernel works for any
+    skeleton.  The bend changes the interior angle ``beta`` at the middle
+    joint to ``arccos((l1^2 + l2^2 - d^2) / (2 l1 l2))`` about the axis
+    ``(upper - middle) x (end - middle)``; angles use ``arctan2`` and clipped
+    cosines so full extension is safe.
+    """
+    a = np.asarray(upper, dtype=float)
+    b = np.asarray(middle, dtype=float)
+    c = np.asarray(end, dtype=float)
+    t = np.asarray(target, dtype=float)
+    shape = np.broadcast_shapes(a.shape, b.shape, c.shape, t.shape)
+    a, b, c, t = (np.broadcast_to(x, shape) for x in (a, b, c, t))
+    p = None if pole is None else np.broadcast_to(np.asarray(pole, dtype=float), shape)
+
+    u = a - b
+    v = c - b
+    l1 = np.linalg.norm(u, axis=-1)
+    l2 = np.linalg.norm(v, axis=-1)
+    reach_min = np.abs(l1 - l2)
+    reach_max = l1 + l2
+    d = np.clip(np.linalg.norm(t - a, axis=-1), reach_min, reach_max)
+
+    # step 1: bend the middle joint
+    cross = np.cross(u, v)
+    sin_b = np.linalg.norm(cross, axis=-1)
+    beta = np.arctan2(sin_b, np.sum(u * v, axis=-1))
+    cos_new = (l1**2 + l2**2 - d**2) / np.maximum(2.0 * l1 * l2, _TINY)
+    beta_new = np.arccos(np.clip(cos_new, -1.0, 1.0))
+    axis = cross / np.maximum(sin_b, _TINY)[..., None]
+    straight = sin_b <= 1e-9 * np.maximum(l1 * l2, _TINY)
+    if np.any(straight):
+        if bend_axis is not None:
+            fallback = np.broadcast_to(np.asarray(bend_axis, dtype=float), shape)
+            fallback = fallback - np.sum(fallback * u, axis=-1, keepdims=True) * u / np.maximum(l1**2, _TINY)[..., None]
+        else:
+            # the world axis least aligned with the limb, made perpendicular to it
+            pick = np.argmin(np.abs(u), axis=-1)
+            fallback = np.cross(u, np.eye(3)[pick])
+        fallback, _ = _unit(fallback)
+        axis = np.where(straight[..., None], fallback, axis)
+    middle_delta = quat.from_axis_angle(axis, beta_new - beta)
+    c1 = b + quat.rotate(middle_delta, v)
+
+    # step 2: swing the limb toward the target (shortest arc)
+    from_dir, _ = _unit(c1 - a)
+    to_dir, to_len = _unit(t - a)
+    to_dir = np.where((to_len > _TINY)[..., None], to_dir, from_dir)
+    swing = quat.between(from_dir, to_dir)
+
+    # step 3: twist about the upper -> target axis
+    w = to_dir
+    m2 = quat.rotate(swing, b - a)
+    x = m2 - np.sum(m2 * w, axis=-1, keepdims=True) * w
+    nx = np.linalg.norm(x, axis=-1)
+    if pole is None:
+        # keep the bending plane: make its normal the old normal projected
+        # perpendicular to the new axis (the closest plane containing it);
+        # the knee offset of a plane with unit normal n is w x n
+        normal = np.cross(b - a, c1 - a)
+        n_len = np.linalg.norm(normal, axis=-1)
+        proj = normal - np.sum(normal * w, axis=-1, keepdims=True) * w
+        p_len = np.linalg.norm(proj, axis=-1)
+        y = np.cross(w, proj)
+        # sine of the angle between the upper bone and the limb axis, and how
+        # far the old normal is from the new axis
+        s_bend = n_len / np.maximum(l1 * np.linalg.norm(c1 - a, axis=-1), _TINY)
+        fade = _ramp(s_bend, _PLANE_FADE) * _ramp(p_len / np.maximum(n_len, _TINY), (0.1, 0.3))
+    else:
+        y = (p - a) - np.sum((p - a) * w, axis=-1, keepdims=True) * w
+        ny = np.linalg.norm(y, axis=-1)
+        # the pole's half plane is ill-defined when the middle joint or the
+        # pole is near the axis: fade the twist out there
+        fade = _ramp(np.minimum(nx, ny) / np.maximum(l1, _TINY), _POLE_FADE)
+    gamma = np.arctan2(np.sum(w * np.cross(x, y), axis=-1), np.sum(x * y, axis=-1))
+    gamma = gamma * fade
+    twist = quat.from_axis_angle(w, gamma)
+    return quat.normalize(quat.mul(twist, swing)), quat.normalize(middle_delta)
+
+
+def aim_deltas(pivot: ArrayLike, tip: ArrayLike, target: ArrayLike, *, weight: ArrayLike | None = None) -> Array:
+    """Shortest-arc world rotations about ``pivot`` turning ``tip`` toward ``target``.
+
+    Used to rotate a foot about the ankle so the toe points at its plant.
+    ``weight`` in [0, 1] (broadcast over leading axes) scales the rotation
+    angle (0: identity).  Returns shape (..., 4).
+    """
+    pivot = np.asarray(pivot, dtype=float)
+    f, _ = _unit(np.asarray(tip, dtype=float) - pivot)
+    g, glen = _unit(np.asarray(target, dtype=float) - pivot)
+    g = np.where((glen > _TINY)[..., None], g, f)
+    q = quat.between(f, g)
+    if weight is not None:
+        q = quat.exp(quat.log(q) * np.asarray(weight, dtype=float)[..., None])
+    return q
+
+
+def two_bone_ik(
+    rotations: ArrayLike,
+    root_positions: ArrayLike,
+    skeleton: Skeleton,
+    end: JointRef,
+    target: ArrayLike,
+    *,
+    joints: tuple[JointRef, JointRef, JointRef] | None = None,
+    pole: ArrayLike | None = None,
+    bend_axis: ArrayLike | None = None,
+    end_rotation: ArrayLike | None = None,
+    translations: ArrayLike | None = None,
+    fk: tuple[Array, Array] | None = None,
+) -> Array:
+    """Analytic limb IK on every frame: new local rotations.
+
+    Parameters
+    ----------
+    rotations : array_like, shape (F, J, 4)
+        Local joint rotations.
+    root_positions : array_like, shape (F, 3)
+    skeleton : Skeleton
+    end : str or int
+        The limb's end joint (ankle, wrist); the limb is
+        ``limb_joints(skeleton, end)`` unless ``joints`` is given.
+    target : array_like, shape (3,) or (F, 3)
+        World target of the end joint (clamped to the limb's reach).
+    joints : (upper, middle, end), optional
+        The three joints explicitly; ``middle`` must descend from ``upper``
+        and ``end`` from ``middle`` (intermediate joints are carried
+        rigidly).
+    pole : array_like, shape (3,) or (F, 3), optional
+        Swivel pole point (see :func:`two_bone_deltas`); default: the
+        current bending plane is kept.
+    bend_axis : array_like, shape (3,), optional
+        Bending axis *in the middle joint's local frame*, used only when the
+        limb is exactly straight (for CMU knees ``(1, 0, 0)``).
+    end_rotation : array_like, shape (4,) or (F, 4), optional
+        Global orientation for the end joint (e.g. its orientation before the
+        IK, to keep a foot flat).  Default: the end joint's local rotation is
+        unchanged, so it turns with the limb.
+    translations : array_like, shape (F, J, 3), optional
+        Animated local translations (see :class:`~mocaplab.motion.Motion`).
+    fk : (global_rotations, global_positions), optional
+        Precomputed forward kinematics of ``rotations`` (saves a pass when
+        several independent limbs are solved on the same pose).
+
+    Returns
+    -------
+    ndarray, shape (F, J, 4)
+        A new array of local rotations; only the upper and middle joints
+        (and the end joint when ``end_rotation`` is given) differ from
+        ``rotations``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab.motion import Skeleton
+    >>> sk = Skeleton(["hip", "knee", "ankle"], [-1, 0, 1], [[0, 0, 0], [0, -0.5, 0], [0, -0.5, 0]])
+    >>> rot = np.tile([0.0, 0.0, 0.0, 1.0], (1, 3, 1))
+    >>> new = two_bone_ik(rot, np.zeros((1, 3)), sk, "ankle", [0.3, -0.6, 0.2], bend_axis=[1, 0, 0])
+    >>> from mocaplab.kinematics import fk
+    >>> np.round(fk(new, np.zeros((1, 3)), sk.offsets, sk.parents)[1][0, 2], 6).tolist()
+    [0.3, -0.6, 0.2]
+    """
+    rot, root = _check_rotations(rotations, root_positions, skeleton)
+    n_frames = rot.shape[0]
+    if joints is None:
+        ju, jm, je = limb_joints(skeleton, end)
+    else:
+        if len(joints) != 3:
+            raise ValueError(f"Expected `joints` as (upper, middle, end), got {joints!r}")
+        ju, jm, je = (_joint(skeleton, j, "joints") for j in joints)
+        skeleton.chain(ju, jm)
+        skeleton.chain(jm, je)
+    tgt = _per_frame(target, n_frames, 3, "target")
+    if fk is None:
+        tr = None if translations is None else np.asarray(translations, dtype=float)
+        grot, gpos = kinematics.fk(rot, root, skeleton.offsets, skeleton.parents, translations=tr)
+    else:
+        grot, gpos = fk
+    pole_w = None if pole is None else _per_frame(pole, n_frames, 3, "pole")
+    axis_w = None
+    if bend_axis is not None:
+        axis_w = quat.rotate(grot[:, jm], np.asarray(bend_axis, dtype=float))
+    q_up, q_mid = two_bone_deltas(gpos[:, ju], gpos[:, jm], gpos[:, je], tgt, pole=pole_w, bend_axis=axis_w)
+
+    out = np.array(rot, copy=True)
+    pu = skeleton.parents[ju]
+    pm = skeleton.parents[jm]
+    # a world rotation q on joint j becomes a local one by conjugating with the
+    # parent's global rotation: L' = inv(G_p) q G_p L
+    g_pu = grot[:, pu] if pu >= 0 else quat.identity((n_frames,))
+    out[:, ju] = quat.normalize(quat.mul(quat.mul(quat.mul(quat.inv(g_pu), q_up), g_pu), rot[:, ju]))
+    g_pm = grot[:, pm]
+    out[:, jm] = quat.normalize(quat.mul(quat.mul(quat.mul(quat.inv(g_pm), q_mid), g_pm), rot[:, jm]))
+    if end_rotation is not None:
+        want = _per_frame(end_rotation, n_frames, 4, "end_rotation")
+        pe = skeleton.parents[je]
+        # the end's parent moved rigidly with the limb: new global = q_up q_mid G_pe
+        # (G_pe is below the middle joint)
+        g_pe_new = quat.mul(quat.mul(q_up, q_mid), grot[:, pe])
+        out[:, je] = quat.normalize(quat.mul(quat.inv(g_pe_new), want))
+    return out
+
+
+# ---------------------------------------------------------- damped least squares
+def _skew(v: Array) -> Array:
+    z = np.zeros(v.shape[:-1])
+    return np.stack(
+        [
+            np.stack([z, -v[..., 2], v[..., 1]], axis=-1),
+            np.stack([v[..., 2], z, -v[..., 0]], axis=-1),
+            np.stack([-v[..., 1], v[..., 0], z], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def dls_ik(
+    rotations: ArrayLike,
+    root_positions: ArrayLike,
+    skeleton: Skeleton,
+    chain: Sequence[JointRef],
+    effectors: JointRef | Sequence[JointRef],
+    targets: ArrayLike,
+    *,
+    damping: float = 1e-2,
+    iterations: int = 30,
+    tolerance: float = 1e-6,
+    joint_weights: ArrayLike | None = None,
+    translations: ArrayLike | None = None,
+    max_step: float = 0.5,
+) -> Array:
+    """Damped least-squares IK for general chains, all frames at once.
+
+    Parameters
+    ----------
+    rotations : array_like, shape (F, J, 4)
+        Local joint rotations (the starting pose).
+    root_positions : array_like, shape (F, 3)
+    skeleton : Skeleton
+    chain : sequence of str or int
+        Joints free to rotate (3 DOF each), e.g. ``["LowerBack", "Spine",
+        "Spine1", "RightShoulder", "RightArm", "RightForeArm"]``.  Including
+        joint 0 rotates the root about its position.
+    effectors : str or int, or sequence of them (M joints)
+        Joints to place; each should descend from at least one chain joint.
+    targets : array_like, shape (3,), (F, 3), (M, 3) or (F, M, 3)
+        World targets of the effectors.
+    damping : float
+        ``lambda`` in metres: larger is steadier near singular poses and
+        unreachable targets, smaller converges faster.
+    iterations : int
+        Maximum Gauss-Newton-like steps.
+    tolerance : float
+        Stop when every frame's largest effector error is below this (m).
+    joint_weights : array_like, shape (len(chain),), optional
+        Relative mobility of each chain joint (``W``); 0 freezes a joint.
+    translations : array_like, shape (F, J, 3), optional
+    max_step : float
+        Largest rotation per joint per iteration (radians), for robustness.
+
+    Returns
+    -------
+    ndarray, shape (F, J, 4)
+        New local rotations; only the chain joints differ.
+
+    Notes
+    -----
+    Column ``j`` of the Jacobian for effector ``e`` is ``omega x (p_e - p_j)``
+    for a world-axis rotation ``omega`` at chain joint ``j`` (zero if ``e``
+    does not descend from ``j``).  The step for joint ``j`` is applied as
+    ``L_j <- exp(G_parent^-1 omega_j) L_j``.  Each iteration recomputes
+    forward kinematics for the whole skeleton, vectorised over frames.
+    """
+    rot, root = _check_rotations(rotations, root_positions, skeleton)
+    n_frames = rot.shape[0]
+    chain_idx = [_joint(skeleton, j, "chain") for j in chain]
+    if not chain_idx:
+        raise ValueError("Expected at least one joint in `chain`, got none")
+    if len(set(chain_idx)) != len(chain_idx):
+        raise ValueError(f"Expected distinct joints in `chain`, got {list(chain)}")
+    single = isinstance(effectors, (str, int, np.integer))
+    eff_idx = [_joint(skeleton, effectors, "effectors")] if single else [_joint(skeleton, e, "effectors") for e in effectors]
+    m = len(eff_idx)
+    tg = np.asarray(targets, dtype=float)
+    if tg.shape == (n_frames, m, 3):
+        pass
+    elif m == 1 and tg.shape == (n_frames, 3):
+        tg = tg[:, None, :]
+    elif tg.shape in ((m, 3), (3,) if m == 1 else None):
+        tg = np.broadcast_to(tg.reshape(1, m, 3), (n_frames, m, 3))
+    else:
+        raise ValueError(f"Expected `targets` of shape (3,), ({n_frames}, 3), ({m}, 3) or ({n_frames}, {m}, 3), got {tg.shape}")
+    if joint_weights is None:
+        wj = np.ones(len(chain_idx))
+    else:
+        wj = np.asarray(joint_weights, dtype=float)
+        if wj.shape != (len(chain_idx),) or np.any(wj < 0):
+            raise ValueError(f"Expected `joint_weights` of {len(chain_idx)} non-negative numbers, got {wj.shape}")
+    if damping < 0 or iterations < 0:
+        raise ValueError(f"Expected damping >= 0 and iterations >= 0, got {damping}, {iterations}")
+    # which effectors each chain joint moves
+    depends = np.zeros((m, len(chain_idx)))
+    for a, e in enumerate(eff_idx):
+        for b, j in enumerate(chain_idx):
+            k = e
+            while k >= 0 and k != j:
+                k = int(skeleton.parents[k])
+            depends[a, b] = float(k == j)
+    if not np.all(depends.any(axis=1)):
+        bad = [skeleton.names[e] for a, e in enumerate(eff_idx) if not depends[a].any()]
+        raise ValueError(f"Effectors {bad} do not descend from any joint of `chain`")
+    tr = None if translations is None else np.asarray(translations, dtype=float)
+    out = np.array(rot, copy=True)
+    w_cols = np.repeat(wj, 3)
+    active = np.arange(n_frames)
+    for step in range(iterations + 1):
+        grot, gpos = kinematics.fk(
+            out[active], root[active], skeleton.offsets, skeleton.parents,
+            translations=None if tr is None else tr[active],
+        )
+        pe = gpos[:, eff_idx]  # (A, M, 3)
+        err = tg[active] - pe
+        worst = np.linalg.norm(err, axis=-1).max(axis=1)
+        keep = worst > tolerance
+        if not np.any(keep) or step == iterations:
+            break
+        active, grot, gpos, pe, err = active[keep], grot[keep], gpos[keep], pe[keep], err[keep]
+        pj = gpos[:, chain_idx]  # (A, N, 3)
+        # J[a, e, :, j, :] = skew(p_j - p_e) (maps omega_j to dp_e)
+        lever = pj[:, None, :, :] - pe[:, :, None, :]  # (A, M, N, 3)
+        jac = _skew(lever) * depends[None, :, :, None, None]  # (A, M, N, 3, 3)
+        jac = np.transpose(jac, (0, 1, 3, 2, 4)).reshape(len(active), 3 * m, 3 * len(chain_idx))
+        jw = jac * w_cols
+        jjt = jw @ np.swapaxes(jac, 1, 2) + (damping**2) * np.eye(3 * m)
+        y = np.linalg.solve(jjt, err.reshape(len(active), 3 * m, 1))
+        dtheta = (np.swapaxes(jw, 1, 2) @ y)[..., 0].reshape(len(active), len(chain_idx), 3)
+        ang = np.linalg.norm(dtheta, axis=-1, keepdims=True)
+        dtheta = dtheta * np.minimum(1.0, max_step / np.maximum(ang, _TINY))
+        for b, j in enumerate(chain_idx):
+            p = skeleton.parents[j]
+            local_axis = dtheta[:, b] if p < 0 else quat.rotate(quat.inv(grot[:, p]), dtheta[:, b])
+            out[active, j] = quat.normalize(quat.mul(quat.exp(local_axis), out[active, j]))
+    return out
+
+
+# --------------------------------------------------------------- Motion level
+def reach(
+    motion: Motion,
+    joint: JointRef,
+    target: ArrayLike,
+    *,
+    chain: Sequence[JointRef] | None = None,
+    pole: ArrayLike | None = None,
+    keep_orientation: bool = True,
+    **dls_options: float,
+) -> Motion:
+    """Motion-level IK: a new Motion whose ``joint`` reaches ``target``.
+
+    Parameters
+    ----------
+    motion : Motion
+    joint : str or int
+        The end effector (a foot, a hand).
+    target : array_like, shape (3,) or (F, 3)
+        World target on every frame.
+    chain : sequence of joints, optional
+        Use :func:`dls_ik` on these joints instead of the analytic two-bone
+        limb ``limb_joints(skeleton, joint)``.
+    pole : array_like, optional
+        Swivel pole for the two-bone solver.
+    keep_orientation : bool
+        Two-bone solver only: keep the end joint's global orientation.
+    **dls_options
+        Passed to :func:`dls_ik` (``damping``, ``iterations``, ...).
+    """
+    if not isinstance(motion, Motion):
+        raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
+    sk = motion.skeleton
+    if chain is not None:
+        new = dls_ik(
+            motion.rotations, motion.root_positions, sk, chain, joint, target,
+            translations=motion.translations, **dls_options,
+        )
+    else:
+        if dls_options:
+            raise TypeError(f"Options {sorted(dls_options)} apply only with `chain` (damped least squares)")
+        j = _joint(sk, joint)
+        grot = motion.global_rotations()
+        new = two_bone_ik(
+            motion.rotations, motion.root_positions, sk, j, target, pole=pole,
+            end_rotation=grot[:, j] if keep_orientation else None,
+            fk=(grot, motion.global_positions()),
+        )
+    return motion.replace(rotations=new)

@@ -1,0 +1,1139 @@
+"""Full-body refinement: foot plants and end-effector constraints (Kim et al. 2009 s4.3).
+
+After a motion is edited at the level of its root (a bent path, a physical
+touch-up, a retimed pose) its feet slide and its hands miss what they should
+touch.  This module puts them back, with **one mechanism** shared by every
+caller:
+
+1. **Goals.**  A :class:`Goal` asks a joint to be at ``targets[i]`` on frame
+   ``i`` with weight ``weights[i]`` in [0, 1].  Weights are 1 inside a
+   constraint interval and fall smoothly to 0 over a short window on each
+   side (:func:`blend_weights`), so a constraint is switched on and off
+   without a jump (Coleman et al. 2008: "a smoothly-attenuated constraint
+   solution in a small window adjacent in time").  Foot plants become goals
+   with :func:`foot_goals` (one plant position per contact interval), user
+   constraints with :class:`EndEffector`.
+2. **IK layer.**  :func:`solve_goals` moves each goal joint to
+   ``current + w (target - current)`` on every frame at once: damped least
+   squares for goals with an explicit chain, analytic two-bone IK for limbs
+   (the end joint keeps its global orientation), legs last, then each foot
+   is turned about its ankle so the toe meets its own plant.  When a leg
+   cannot reach, the root is first lowered just enough (Kovar et al. 2002).
+3. **Smoothing.**  :func:`enforce_goals` fits a hierarchical displacement
+   map (:class:`~mocaplab.displacement.DisplacementMap`, Lee and Shin 1999)
+   to the per-frame IK corrections, constrained frames weighted more,
+   applies it, and runs the IK layer once more so constraints hold exactly;
+   that last correction is small and smooth.
+
+:func:`refine` builds the goals from foot contacts (detected on the motion
+before editing when ``reference`` is given) and end effectors, then calls
+:func:`enforce_goals`.  :func:`refine_scene` does the same for several
+characters whose constraints refer to each other (palms meeting).  Physical
+touch-up calls :func:`refine` after each adjustment with the reference's
+contacts; the staggered-pose constraint layer calls :func:`blend_weights`
+and :func:`solve_goals` / :func:`enforce_goals` directly.
+
+Measures: :func:`foot_skate` (mm per frame), :func:`end_effector_residuals`
+(mm) and :func:`max_joint_angle_jump` (degrees).
+
+Examples
+--------
+>>> import mocaplab as ml                                # doctest: +SKIP
+>>> walk = ml.cmu("16_15")                               # doctest: +SKIP
+>>> fixed = ml.refine(edited, reference=walk)            # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.ndimage import minimum_filter1d
+
+from . import kinematics, quat
+from .contacts import Contacts, foot_contacts
+from .displacement import DisplacementMap, displacement_between
+from .ik import _joint, aim_deltas, dls_ik, limb_joints, two_bone_ik
+from .motion import Motion, Skeleton
+
+__all__ = [
+    "Goal",
+    "EndEffector",
+    "RelativeTo",
+    "ObjectFrame",
+    "blend_ramp",
+    "interval_weights",
+    "blend_weights",
+    "plant_positions",
+    "foot_goals",
+    "effector_goals",
+    "solve_goals",
+    "enforce_goals",
+    "refine",
+    "refine_scene",
+    "foot_skate",
+    "end_effector_residuals",
+    "max_joint_angle_jump",
+]
+
+Array = NDArray[np.float64]
+JointRef = str | int
+
+
+# ----------------------------------------------------------------- blending
+def blend_ramp(u: ArrayLike) -> Array:
+    """The C2 ramp ``6u^5 - 15u^4 + 10u^3`` on [0, 1] (clipped outside).
+
+    Its first and second derivatives vanish at both ends, so a constraint
+    blended in with it adds no velocity or acceleration jump (the ZMP of
+    physical touch-up depends on accelerations).
+    """
+    u = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
+    return u * u * u * (u * (6.0 * u - 15.0) + 10.0)
+
+
+def _check_intervals(intervals: Sequence[tuple[int, int]], n_frames: int) -> list[tuple[int, int]]:
+    out = []
+    for iv in intervals:
+        try:
+            a, b = (int(x) for x in iv)
+        except (TypeError, ValueError):
+            raise ValueError(f"Expected intervals as (start, stop) pairs of ints, got {iv!r}") from None
+        if not 0 <= a < b <= n_frames:
+            raise ValueError(f"Expected intervals with 0 <= start < stop <= {n_frames}, got ({a}, {b})")
+        out.append((a, b))
+    return out
+
+
+def interval_weights(n_frames: int, intervals: Sequence[tuple[int, int]], *, window: int) -> Array:
+    """One blending bump per interval, shape (K, F).
+
+    Row ``k`` is 1 on frames ``start_k .. stop_k - 1`` and ramps
+    (:func:`blend_ramp`) to 0 over ``window`` frames on each side: the
+    ``window`` frames before ``start`` and after ``stop - 1`` get weights
+    strictly between 0 and 1, the frames beyond are 0.
+    """
+    if int(window) != window or window < 0:
+        raise ValueError(f"Expected `window` to be an integer >= 0 frames, got {window!r}")
+    ivs = _check_intervals(intervals, n_frames)
+    i = np.arange(n_frames, dtype=float)
+    out = np.zeros((len(ivs), n_frames))
+    w = float(window) + 1.0
+    for k, (a, b) in enumerate(ivs):
+        rise = blend_ramp((i - (a - w)) / w)
+        fall = blend_ramp(((b - 1 + w) - i) / w)
+        out[k] = np.minimum(rise, fall)
+    return out
+
+
+def blend_weights(n_frames: int, intervals: Sequence[tuple[int, int]], *, window: int) -> Array:
+    """Constraint weight per frame in [0, 1], shape (F,).
+
+    1 inside the half-open ``intervals``, ramping smoothly to 0 over
+    ``window`` frames on each side (see :func:`interval_weights`);
+    overlapping ramps add up, clipped at 1.
+
+    Examples
+    --------
+    >>> blend_weights(8, [(3, 5)], window=2).round(3).tolist()
+    [0.0, 0.259, 0.741, 1.0, 1.0, 0.741, 0.259, 0.0]
+    """
+    if n_frames < 1:
+        raise ValueError(f"Expected `n_frames` >= 1, got {n_frames}")
+    return np.clip(interval_weights(n_frames, intervals, window=window).sum(axis=0), 0.0, 1.0)
+
+
+# -------------------------------------------------------------------- goals
+@dataclasses.dataclass(frozen=True, eq=False)
+class Goal:
+    """A per-frame position goal for one joint: the input of the IK layer.
+
+    Parameters
+    ----------
+    joint : str or int
+    targets : array_like, shape (F, 3)
+        World target on every frame (only frames of positive weight matter).
+    weights : array_like, shape (F,)
+        In [0, 1]: the joint goes to ``current + w (target - current)``.
+    kind : {"limb", "foot", "toe"}
+        ``"limb"``: an end effector moved by two-bone IK on
+        ``limb_joints(joint)`` (or by ``chain``); ``"foot"``: an ankle, like a
+        limb but the root may be lowered so the leg reaches; ``"toe"``: a toe,
+        reached by moving its foot (its parent, solved with the leg) and
+        turning the foot about the ankle.
+    chain : sequence of joints, optional
+        Solve with damped least squares over these joints (``"limb"`` only).
+    stiffness : array_like, shape (F,), optional
+        Relative priority of an ankle and its toe where both are planted and
+        cannot both be met exactly (default 1): the foot rolls about the
+        stiffer one.
+    """
+
+    joint: JointRef
+    targets: Array
+    weights: Array
+    kind: Literal["limb", "foot", "toe"] = "limb"
+    chain: tuple[JointRef, ...] | None = None
+    stiffness: Array | None = None
+
+    def __post_init__(self) -> None:
+        t = np.array(self.targets, dtype=float)
+        w = np.array(self.weights, dtype=float)
+        k = np.ones(len(w)) if self.stiffness is None else np.array(self.stiffness, dtype=float)
+        if k.shape != w.shape or np.any(k <= 0) or not np.all(np.isfinite(k)):
+            raise ValueError(f"Expected positive finite Goal `stiffness` of shape {w.shape}, got shape {k.shape}")
+        k.flags.writeable = False
+        object.__setattr__(self, "stiffness", k)
+        if t.ndim != 2 or t.shape[1] != 3:
+            raise ValueError(f"Expected Goal `targets` of shape (F, 3), got {t.shape}")
+        if w.shape != (t.shape[0],):
+            raise ValueError(f"Expected Goal `weights` of shape ({t.shape[0]},), got {w.shape}")
+        if np.any((w < 0) | (w > 1)) or not np.all(np.isfinite(w)):
+            raise ValueError("Expected Goal `weights` in [0, 1]")
+        if not np.all(np.isfinite(t[w > 0])):
+            raise ValueError("Expected finite Goal `targets` on frames of positive weight")
+        if self.kind not in ("limb", "foot", "toe"):
+            raise ValueError(f"Expected Goal `kind` 'limb', 'foot' or 'toe', got {self.kind!r}")
+        if self.chain is not None and self.kind != "limb":
+            raise ValueError("A Goal `chain` is allowed only with kind='limb'")
+        t.flags.writeable = False
+        w.flags.writeable = False
+        object.__setattr__(self, "targets", t)
+        object.__setattr__(self, "weights", w)
+        if self.chain is not None:
+            object.__setattr__(self, "chain", tuple(self.chain))
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.weights.shape[0])
+
+
+def _window_targets(positions: Array, targets: Array, mask: Array, weights: Array) -> Array:
+    """Targets valid on ``mask`` (constrained frames), extended over the blending windows.
+
+    With ``b`` the nearest constrained frame and ``w`` the blending weight,
+    the target on a window frame is
+    ``(1 - w) (p(i) + T(b) - p(b)) + w T(i)``, so the joint goes to
+    ``p(i) + w [(1 - w) (T(b) - p(b)) + w (T(i) - p(i))]``.  Far from the
+    constraint (small ``w``) the joint keeps its own motion plus a fading
+    copy of the correction at ``b`` (it is not dragged toward a point it has
+    not reached yet, like a toe still in the air before it lands); next to
+    the constraint (``w`` near 1) it follows the target ``T(i)`` itself, so
+    its velocity is continuous where the constraint starts or ends.  Where
+    ``T(i)`` is not finite outside ``mask``, ``T(b)`` is used.
+    """
+    idx = np.flatnonzero(mask)
+    if idx.size == 0:
+        raise ValueError("Expected at least one constrained frame")
+    frames = np.arange(len(mask))
+    pos = np.searchsorted(idx, frames)
+    left = idx[np.clip(pos - 1, 0, idx.size - 1)]
+    right = idx[np.clip(pos, 0, idx.size - 1)]
+    nearest = np.where(np.abs(frames - left) <= np.abs(right - frames), left, right)
+    held = targets[nearest]
+    own = np.where(np.isfinite(targets), targets, held)
+    carried = positions + (held - positions[nearest])
+    w = weights[:, None]
+    out = (1.0 - w) * carried + w * own
+    out[mask] = targets[mask]
+    return out
+
+
+def _plant_goal_targets(
+    positions: Array, fields: Sequence[Array], intervals: list[tuple[int, int]], window: int
+) -> tuple[Array, Array]:
+    """Targets and weights of one joint from one plant field (F, 3) per interval.
+
+    Each interval's bump ``b_k`` (:func:`interval_weights`) carries its own
+    target field ``T_k`` (:func:`_window_targets`); the goal is their
+    bump-weighted mean with weight ``min(1, sum_k b_k)``, so the blended goal
+    ``cur + w (T - cur) = cur + sum_k b_k (T_k - cur)`` stays continuous even
+    where the ramps of two intervals overlap.
+    """
+    n = positions.shape[0]
+    bumps = interval_weights(n, intervals, window=window)
+    total = bumps.sum(axis=0)
+    acc = np.zeros((n, 3))
+    for k, (a, b) in enumerate(intervals):
+        live = bumps[k] > 0
+        mask = np.zeros(n, dtype=bool)
+        mask[a:b] = True
+        field = _window_targets(positions, fields[k], mask, bumps[k])
+        acc[live] += bumps[k, live, None] * field[live]
+    targets = np.array(positions, copy=True)
+    pos = total > 0
+    targets[pos] = acc[pos] / total[pos, None]
+    return targets, np.clip(total, 0.0, 1.0)
+
+
+def plant_positions(
+    motion: Motion,
+    contacts: Contacts,
+    joint: str,
+    *,
+    reference: Motion | None = None,
+) -> Array:
+    """One plant position per contact interval of ``joint``, shape (K, 3).
+
+    The ground-plane position ``(x, z)`` is the mean of the joint's position
+    over the interval in ``motion`` (where the edited foot is), the height
+    its mean in ``reference`` when given (the foot's contact height before
+    editing), else in ``motion``.  Both means weight each frame by
+    ``1 / (speed + 0.1 m/s)`` (speed in ``reference``, else ``motion``): the
+    detected intervals include the slow ends of the foot's landing and
+    take-off, and the plant belongs where the foot rests.
+    """
+    j = motion.skeleton.index(joint)
+    ref = reference if reference is not None else motion
+    return _plants(motion.global_positions()[:, j], ref.global_positions()[:, j, 1], _speed(ref, j), contacts.intervals(joint))
+
+
+def _speed(motion: Motion, j: int) -> Array:
+    """World speed of one joint, m/s, shape (F,) (cheaper than all joints)."""
+    return np.linalg.norm(kinematics.velocities(motion.global_positions()[:, j], motion.fps), axis=-1)
+
+
+def _plants(pos: Array, hgt: Array, speed: Array, ivs: list[tuple[int, int]]) -> Array:
+    # where the joint rests counts most: weight frames by slowness
+    slow = 1.0 / (speed + 0.1)
+    out = np.zeros((len(ivs), 3))
+    for k, (a, b) in enumerate(ivs):
+        w = slow[a:b] / slow[a:b].sum()
+        out[k] = w @ pos[a:b]
+        out[k, 1] = w @ hgt[a:b]
+    return out
+
+
+def _frames(seconds: float, fps: float, what: str) -> int:
+    if not (np.isfinite(seconds) and seconds >= 0):
+        raise ValueError(f"Expected `{what}` >= 0 seconds, got {seconds!r}")
+    return int(round(seconds * fps))
+
+
+def _is_toe(skeleton: Skeleton, name: str, names: Sequence[str]) -> bool:
+    j = skeleton.index(name)
+    p = int(skeleton.parents[j])
+    return p >= 0 and (skeleton.names[p] in names or not skeleton.children(j))
+
+
+def foot_goals(
+    motion: Motion,
+    contacts: Contacts,
+    *,
+    reference: Motion | None = None,
+    blend: float = 0.1,
+    follow_height: bool = True,
+) -> list[Goal]:
+    """Goals that keep each planted joint on one spot per contact interval.
+
+    Parameters
+    ----------
+    motion : Motion
+        The edited motion (plants are placed where its feet are).
+    contacts : Contacts
+        Contact intervals, usually detected on the motion before editing.
+    reference : Motion, optional
+        The motion before editing (heights and speeds come from it).
+    blend : float
+        Blending window on each side of an interval, seconds.
+    follow_height : bool
+        ``True`` (default): a planted joint is pinned on the ground plane at
+        its plant ``(x, z)`` (:func:`plant_positions`) while its height
+        follows ``reference`` frame by frame, so the heel still rises and the
+        toe still lands as captured.  ``False``: pinned in 3D at the plant.
+
+    Returns
+    -------
+    list of Goal
+        One per contact joint.  A joint whose parent is also a contact
+        joint, or that has no child joint, is a ``"toe"`` (it follows its
+        foot); the others are ``"foot"`` goals.  Stiffness is
+        ``1 / (speed + 0.05 m/s)`` (speed in ``reference``): where ankle and
+        toe are both planted but the captured heel rises or the toe lands,
+        the foot rolls about whichever joint was stiller.
+
+    Notes
+    -----
+    Where a toe interval overlaps an interval of its ankle (flat foot), the
+    toe plant is moved along the ankle-to-toe direction so that its ground
+    distance from the ankle plant fits the foot's length at the two joints'
+    mean heights, and both can hold at once.
+    """
+    if not isinstance(contacts, Contacts):
+        raise TypeError(f"Expected `contacts` to be a Contacts, got {type(contacts).__name__}")
+    if contacts.n_frames != motion.n_frames:
+        raise ValueError(
+            f"Expected contacts over {motion.n_frames} frames (the motion's), got {contacts.n_frames}; "
+            "contacts must come from a motion with the same frames"
+        )
+    if reference is not None and reference.n_frames != motion.n_frames:
+        raise ValueError(f"Expected `reference` of {motion.n_frames} frames, got {reference.n_frames}")
+    sk = motion.skeleton
+    ref = reference if reference is not None else motion
+    window = _frames(blend, motion.fps, "blend")
+    ref_pos = ref.global_positions()
+    speeds = {name: _speed(ref, sk.index(name)) for name in contacts.joints}
+    plants = {
+        name: _plants(motion.global_positions()[:, sk.index(name)], ref_pos[:, sk.index(name), 1], speeds[name],
+                      contacts.intervals(name))
+        for name in contacts.joints
+    }
+    kinds = {name: ("toe" if _is_toe(sk, name, contacts.joints) else "foot") for name in contacts.joints}
+    goals = []
+    for name in contacts.joints:
+        j = sk.index(name)
+        p = plants[name]
+        ivs = contacts.intervals(name)
+        if kinds[name] == "toe":
+            parent = sk.names[int(sk.parents[j])]
+            if parent in contacts.joints:
+                length = float(np.linalg.norm(_bone(motion, name)))
+                p = _consistent_toe(p, ivs, plants[parent], contacts.intervals(parent), length)
+        fields = []
+        for k in range(len(ivs)):
+            f = np.broadcast_to(p[k], (motion.n_frames, 3)).copy()
+            if follow_height:
+                f[:, 1] = ref_pos[:, j, 1]
+            fields.append(f)
+        targets, weights = _plant_goal_targets(motion.global_positions()[:, j], fields, ivs, window)
+        goals.append(Goal(name, targets, weights, kind=kinds[name], stiffness=1.0 / (speeds[name] + 0.05)))  # type: ignore[arg-type]
+    return goals
+
+
+def _bone(motion: Motion, name: str) -> Array:
+    j = motion.skeleton.index(name)
+    if motion.translations is not None:
+        return np.asarray(motion.translations[:, j].mean(axis=0))
+    return np.asarray(motion.skeleton.offsets[j])
+
+
+def _consistent_toe(
+    toe: Array, toe_ivs: list[tuple[int, int]], ankle: Array, ankle_ivs: list[tuple[int, int]], length: float
+) -> Array:
+    out = np.array(toe, copy=True)
+    for k, (a, b) in enumerate(toe_ivs):
+        overlaps = [max(0, min(b, d) - max(a, c)) for c, d in ankle_ivs]
+        if not overlaps or max(overlaps) == 0:
+            continue
+        m = int(np.argmax(overlaps))
+        d = out[k, [0, 2]] - ankle[m, [0, 2]]
+        n = np.linalg.norm(d)
+        ground = np.sqrt(max(length**2 - (out[k, 1] - ankle[m, 1]) ** 2, 0.0))
+        if n > 1e-9:
+            out[k, [0, 2]] = ankle[m, [0, 2]] + d * (ground / n)
+    return out
+
+
+# ----------------------------------------------------------------- IK layer
+def _resolve_goals(skeleton: Skeleton, goals: Sequence[Goal], n_frames: int) -> tuple[list, list, list, dict]:
+    dls, limbs, feet, toes = [], [], [], {}
+    for g in goals:
+        if not isinstance(g, Goal):
+            raise TypeError(f"Expected Goal objects in `goals`, got {type(g).__name__}")
+        if g.n_frames != n_frames:
+            raise ValueError(f"Expected goals over {n_frames} frames, got one over {g.n_frames}")
+        j = _joint(skeleton, g.joint, "Goal.joint")
+        if g.kind == "toe":
+            p = int(skeleton.parents[j])
+            if p < 0 or p in toes:
+                raise ValueError(f"Toe goal on {skeleton.names[j]!r} needs a parent foot with no other toe goal")
+            toes[p] = (j, g)
+        elif g.chain is not None:
+            dls.append((j, g))
+        elif g.kind == "foot":
+            feet.append((j, g))
+        else:
+            limbs.append((j, g))
+    ends = [j for j, _ in dls + limbs + feet]
+    if len(set(ends)) != len(ends):
+        raise ValueError("Expected at most one goal per joint")
+    return dls, limbs, feet, toes
+
+
+def _fk(rot: Array, root: Array, motion: Motion) -> tuple[Array, Array]:
+    return kinematics.fk(rot, root, motion.skeleton.offsets, motion.skeleton.parents, translations=motion.translations)
+
+
+def _blend(cur: Array, goal: Goal) -> Array:
+    return cur + goal.weights[:, None] * (goal.targets - cur)
+
+
+def _foot_targets(gpos: Array, ankle: int, g_ankle: Goal | None, toe: tuple[int, Goal] | None) -> Array:
+    """Ankle positions that plant the ankle and/or the toe (see solve_goals)."""
+    a_cur = gpos[:, ankle]
+    if g_ankle is None:
+        wa = np.zeros(len(a_cur))
+        target = a_cur
+    else:
+        wa = g_ankle.weights
+        target = _blend(a_cur, g_ankle)
+    if toe is None:
+        return target
+    jt, gt = toe
+    t_cur = gpos[:, jt]
+    wt = gt.weights
+    # where the ankle is free, carry the foot rigidly toward the toe plant
+    target = target + ((1.0 - wa) * wt)[:, None] * (gt.targets - t_cur)
+    # then slide the ankle along the ankle -> toe-goal line so the foot's
+    # length fits, shared by stiffness k w / (1 - w): (nearly) all on the
+    # ankle when only the toe is planted (wt = 1), none when only the ankle
+    # is, by the goals' stiffness (stillness) when both are
+    toe_goal = _blend(t_cur, gt)
+    length = np.linalg.norm(t_cur - a_cur, axis=-1)
+    d = toe_goal - target
+    dist = np.linalg.norm(d, axis=-1)
+    ka = 1.0 if g_ankle is None else g_ankle.stiffness
+    ka = wa * ka / (1.0 - wa + 0.1)
+    kt = wt * gt.stiffness / (1.0 - wt + 0.1)
+    den = ka + kt
+    share = np.where(den > 1e-12, kt / np.maximum(den, 1e-12), 0.5)
+    shift = (dist - length) * share / np.maximum(dist, 1e-12)
+    return target + shift[:, None] * d
+
+
+def _lower_envelope(need: Array, half: int) -> Array:
+    """A smooth curve below ``need`` (F,): erosion then a Hann average.
+
+    Every value of the minimum filter over ``[k - half, k + half]`` is at most
+    ``need(i)`` for ``|k - i| <= half``, so their weighted average over the
+    same radius is too.
+    """
+    if half < 1 or not np.any(need < 0):
+        return need
+    eroded = minimum_filter1d(need, size=2 * half + 1, mode="nearest")
+    kernel = np.hanning(2 * half + 3)[1:-1]
+    kernel /= kernel.sum()
+    padded = np.pad(eroded, half, mode="edge")
+    return np.minimum(np.convolve(padded, kernel, mode="valid"), 0.0)
+
+
+def solve_goals(
+    motion: Motion,
+    goals: Sequence[Goal],
+    *,
+    adjust_root: bool = True,
+    reach: float = 0.99,
+    max_drop: float = 0.15,
+    drop_window: float = 0.15,
+    dls_options: dict[str, float] | None = None,
+) -> Motion:
+    """The IK layer: meet every goal on every frame (no temporal smoothing).
+
+    Parameters
+    ----------
+    motion : Motion
+    goals : sequence of Goal
+    adjust_root : bool
+        Lower the root where a ``"foot"`` goal is beyond ``reach`` times the
+        leg's length (at most ``max_drop`` metres).
+    reach : float
+        Fraction of the leg's full length the root adjustment aims for: a
+        little short of straight, where the knee angle is very sensitive to
+        the ankle's position.
+    max_drop : float
+        Largest root lowering, metres.
+    drop_window : float
+        The lowering is a smooth lower envelope of the per-frame need over
+        this many seconds on each side (never less than the need), because
+        near full extension a small jump of the hip is a large jump of the
+        knee angle.
+    dls_options : dict, optional
+        Passed to :func:`~mocaplab.ik.dls_ik` for goals with a chain.
+
+    Returns
+    -------
+    Motion
+        A new motion.
+
+    Notes
+    -----
+    Order: root lowering; chain goals (damped least squares, each on the
+    frames where its weight is positive); limb goals (two-bone, end joint
+    keeps its global orientation); feet.  A foot's ankle goes to
+    ``A + wa (Pa - A) + (1 - wa) wt (Pt - T)`` (ankle plant ``Pa``, toe plant
+    ``Pt``, current ankle ``A`` and toe ``T``), then slid along the line to
+    the blended toe goal until the foot's length fits, by the share
+    ``kt / (ka + kt)`` with ``k = stiffness * w / (1 - w + 0.001)``; then the
+    foot turns about
+    the ankle by ``wt`` of the shortest arc pointing the toe at ``Pt``.  With
+    both weights 1 the ankle and toe plants hold exactly; with both 0 the
+    pose is unchanged.
+    """
+    if not isinstance(motion, Motion):
+        raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
+    sk = motion.skeleton
+    n = motion.n_frames
+    dls, limbs, feet, toes = _resolve_goals(sk, goals, n)
+    foot_of = {j: g for j, g in feet}
+    foot_joints = sorted(set(foot_of) | set(toes))
+    rot = np.array(motion.rotations, copy=True)
+    root = np.array(motion.root_positions, copy=True)
+    grot, gpos = motion.global_rotations(), motion.global_positions()
+    if adjust_root and foot_joints:
+        drop = np.zeros(n)
+        for ankle in foot_joints:
+            target = _foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle))
+            u, m, e = limb_joints(sk, ankle)
+            full = np.linalg.norm(gpos[:, m] - gpos[:, u], axis=-1) + np.linalg.norm(gpos[:, e] - gpos[:, m], axis=-1)
+            r = target - gpos[:, u]
+            s2 = (reach * full) ** 2 - r[:, 0] ** 2 - r[:, 2] ** 2
+            need = np.where(s2 > 0, r[:, 1] + np.sqrt(np.maximum(s2, 0.0)), r[:, 1])
+            drop = np.minimum(drop, need)
+        drop = _lower_envelope(np.maximum(drop, -max_drop), _frames(drop_window, motion.fps, "drop_window"))
+        if np.any(drop < 0):
+            root[:, 1] += drop
+            gpos = gpos + np.stack([np.zeros(n), drop, np.zeros(n)], axis=-1)[:, None, :]
+    for j, g in dls:
+        active = np.flatnonzero(g.weights > 0)
+        if active.size == 0:
+            continue
+        cur = gpos[active, j]
+        tgt = cur + g.weights[active, None] * (g.targets[active] - cur)
+        rot[active] = dls_ik(
+            rot[active], root[active], sk, g.chain, j, tgt,
+            translations=None if motion.translations is None else motion.translations[active],
+            **(dls_options or {}),
+        )
+        grot, gpos = _fk(rot, root, motion)
+    if limbs:
+        fk = (grot, gpos)
+        for j, g in limbs:
+            rot = two_bone_ik(rot, root, sk, j, _blend(gpos[:, j], g), end_rotation=grot[:, j], fk=fk)
+        grot, gpos = _fk(rot, root, motion)
+    if foot_joints:
+        fk = (grot, gpos)
+        for ankle in foot_joints:
+            target = _foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle))
+            rot = two_bone_ik(rot, root, sk, ankle, target, end_rotation=grot[:, ankle], fk=fk)
+        if toes:
+            grot2, gpos2 = _fk(rot, root, motion)
+            for ankle, (jt, gt) in toes.items():
+                q = aim_deltas(gpos2[:, ankle], gpos2[:, jt], gt.targets, weight=gt.weights)
+                parent = int(sk.parents[ankle])
+                new_global = quat.mul(q, grot2[:, ankle])
+                rot[:, ankle] = quat.normalize(quat.mul(quat.inv(grot2[:, parent]), new_global))
+    return motion.replace(rotations=rot, root_positions=root)
+
+
+def enforce_goals(
+    motion: Motion,
+    goals: Sequence[Goal],
+    *,
+    spacing: float = 0.25,
+    levels: int = 3,
+    exact: bool = True,
+    adjust_root: bool = True,
+    dls_options: dict[str, float] | None = None,
+) -> Motion:
+    """Meet the goals with a smooth correction: IK, displacement map, IK.
+
+    Parameters
+    ----------
+    motion : Motion
+    goals : sequence of Goal
+    spacing : float
+        Knot spacing of the coarsest displacement-map level, seconds.
+    levels : int
+        Number of levels (each halves the spacing).
+    exact : bool
+        Run the IK layer once more on the smoothed motion so the goals hold
+        exactly (the remaining correction is small and smooth).
+    adjust_root, dls_options
+        See :func:`solve_goals`.
+
+    Returns
+    -------
+    Motion
+    """
+    if not goals:
+        return motion
+    solved = solve_goals(motion, goals, adjust_root=adjust_root, dls_options=dls_options)
+    d_root, d_rot = displacement_between(motion, solved)
+    active = np.max([g.weights for g in goals], axis=0)
+    dmap = DisplacementMap.fit(
+        d_root, d_rot, weights=1.0 + 9.0 * active, spacing=max(spacing * motion.fps, 1.0), levels=levels,
+    )
+    smooth = dmap.apply(motion)
+    if not exact:
+        return smooth
+    # the root correction is already in the smooth map: no per-frame lowering now
+    return solve_goals(smooth, goals, adjust_root=False, dls_options=dls_options)
+
+
+# ------------------------------------------------------------ end effectors
+@dataclasses.dataclass(frozen=True)
+class RelativeTo:
+    """A target attached to a joint: of another character, or of the same one.
+
+    Parameters
+    ----------
+    joint : str
+        Joint whose world position (plus ``offset``) is the target.
+    offset : array_like, shape (3,)
+        World-frame offset from that joint, metres.
+    character : int, optional
+        Index of the other character in :func:`refine_scene`; ``None`` means
+        the constrained character itself (resolved on its motion before
+        refinement).
+
+    Two constraints that point at each other (A's hand relative to B's hand
+    and B's hand relative to A's, as in a high five) meet halfway: both
+    targets are the midpoint of the two hands (shifted by half the agreed
+    offset), so each character reaches half the gap.
+    """
+
+    joint: str
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    character: int | None = None
+
+    def __post_init__(self) -> None:
+        off = tuple(float(x) for x in np.asarray(self.offset, dtype=float).reshape(-1))
+        if len(off) != 3:
+            raise ValueError(f"Expected RelativeTo `offset` of 3 numbers, got {self.offset!r}")
+        object.__setattr__(self, "offset", off)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ObjectFrame:
+    """A target fixed in a moving object's frame (hands on a box).
+
+    Parameters
+    ----------
+    positions : array_like, shape (3,) or (F, 3)
+        Object origin in the world, per frame or constant.
+    rotations : array_like, shape (4,) or (F, 4)
+        Object orientation (quaternion), per frame or constant.
+    offset : array_like, shape (3,)
+        Target point in the object's frame.
+    """
+
+    positions: Array
+    rotations: Array = dataclasses.field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))
+    offset: Array = dataclasses.field(default_factory=lambda: np.zeros(3))
+
+    def world(self, n_frames: int) -> Array:
+        """Target positions, shape (F, 3)."""
+        pos = np.asarray(self.positions, dtype=float)
+        rq = np.asarray(self.rotations, dtype=float)
+        off = np.asarray(self.offset, dtype=float)
+        if pos.shape not in ((3,), (n_frames, 3)):
+            raise ValueError(f"Expected ObjectFrame `positions` of shape (3,) or ({n_frames}, 3), got {pos.shape}")
+        if rq.shape not in ((4,), (n_frames, 4)):
+            raise ValueError(f"Expected ObjectFrame `rotations` of shape (4,) or ({n_frames}, 4), got {rq.shape}")
+        if off.shape != (3,):
+            raise ValueError(f"Expected ObjectFrame `offset` of shape (3,), got {off.shape}")
+        return np.broadcast_to(pos + quat.rotate(quat.normalize(rq), off), (n_frames, 3)).copy()
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class EndEffector:
+    """Put a joint on a target at a frame or over frames.
+
+    Parameters
+    ----------
+    joint : str
+        The end effector (e.g. ``"RightHand"``).
+    frames : int, (start, stop) tuple, range, or sequence of ints
+        A single frame, a half-open interval (a *tuple* of two ints), or a
+        list/array of frames.
+    target : array_like (3,) or (F, 3), RelativeTo, or ObjectFrame
+        World position(s), a joint (of this or another character), or a
+        point in an object's frame.
+    character : int
+        Which character in :func:`refine_scene` (0 for :func:`refine`).
+    chain : sequence of str, optional
+        Solve with damped least squares over these joints (e.g. the spine
+        and the arm) instead of the two-bone limb ending at ``joint``.
+    blend : float, optional
+        Blending window in seconds (default: that of the refine call).
+    """
+
+    joint: str
+    frames: int | tuple[int, int] | Sequence[int] | range
+    target: object
+    character: int = 0
+    chain: tuple[str, ...] | None = None
+    blend: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.chain is not None:
+            object.__setattr__(self, "chain", tuple(self.chain))
+        if not isinstance(self.target, (RelativeTo, ObjectFrame)):
+            t = np.array(self.target, dtype=float)
+            if t.ndim not in (1, 2) or t.shape[-1] != 3:
+                raise ValueError(f"Expected EndEffector `target` of shape (3,) or (F, 3), got {t.shape}")
+            t.flags.writeable = False
+            object.__setattr__(self, "target", t)
+
+    def intervals(self, n_frames: int) -> list[tuple[int, int]]:
+        """The constrained frames as half-open intervals."""
+        f = self.frames
+        if isinstance(f, (int, np.integer)):
+            ivs = [(int(f), int(f) + 1)]
+        elif isinstance(f, tuple) and len(f) == 2:
+            ivs = [(int(f[0]), int(f[1]))]
+        else:
+            arr = np.unique(np.asarray(list(f), dtype=np.int64))
+            if arr.size == 0:
+                raise ValueError(f"Expected at least one frame in EndEffector `frames` for {self.joint!r}")
+            if arr[0] < 0 or arr[-1] >= n_frames:
+                raise ValueError(f"Expected EndEffector frames in [0, {n_frames}), got {arr[0]}..{arr[-1]}")
+            mask = np.zeros(n_frames, dtype=bool)
+            mask[arr] = True
+            edges = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
+            ivs = list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True))
+        return _check_intervals(ivs, n_frames)
+
+
+def _world_targets(ee: EndEffector, motions: Sequence[Motion], mutual: dict[int, Array], k: int) -> Array:
+    """Target positions (F, 3) of end effector number ``k`` in the current scene."""
+    me = motions[ee.character]
+    n = me.n_frames
+    if k in mutual:
+        return mutual[k]
+    t = ee.target
+    if isinstance(t, RelativeTo):
+        other = me if t.character is None else motions[t.character]
+        if other.n_frames != n:
+            raise ValueError(f"Expected characters with equal frame counts, got {n} and {other.n_frames}")
+        return other.global_positions()[:, other.skeleton.index(t.joint)] + np.asarray(t.offset)
+    if isinstance(t, ObjectFrame):
+        return t.world(n)
+    arr = np.asarray(t, dtype=float)
+    if arr.shape == (3,):
+        return np.broadcast_to(arr, (n, 3)).copy()
+    if arr.shape != (n, 3):
+        raise ValueError(f"Expected EndEffector target for {ee.joint!r} of shape (3,) or ({n}, 3), got {arr.shape}")
+    return np.array(arr)
+
+
+def effector_goals(
+    motion: Motion,
+    end_effectors: Sequence[EndEffector],
+    targets: Sequence[Array],
+    *,
+    blend: float = 0.1,
+) -> list[Goal]:
+    """Goals from end effectors whose world targets ``(F, 3)`` are resolved.
+
+    In the blending windows the joint follows its own motion plus a fading
+    correction (see ``_window_targets`` in the source for the formula).
+    """
+    out = []
+    n = motion.n_frames
+    for ee, tgt in zip(end_effectors, targets, strict=True):
+        ivs = ee.intervals(n)
+        window = _frames(ee.blend if ee.blend is not None else blend, motion.fps, "blend")
+        mask = np.zeros(n, dtype=bool)
+        for a, b in ivs:
+            mask[a:b] = True
+        weights = blend_weights(n, ivs, window=window)
+        pos = motion.global_positions()[:, motion.skeleton.index(ee.joint)]
+        out.append(Goal(ee.joint, _window_targets(pos, np.asarray(tgt, dtype=float), mask, weights), weights, chain=ee.chain))
+    return out
+
+
+# ------------------------------------------------------------------ refine
+def _contacts_for(motion: Motion, contacts: Contacts | None, reference: Motion | None) -> Contacts:
+    if contacts is not None:
+        return contacts
+    return foot_contacts(reference if reference is not None else motion)
+
+
+def refine(
+    motion: Motion,
+    *,
+    contacts: Contacts | None = None,
+    end_effectors: Sequence[EndEffector] = (),
+    reference: Motion | None = None,
+    feet: bool = True,
+    blend: float = 0.1,
+    spacing: float = 0.25,
+    levels: int = 3,
+    adjust_root: bool = True,
+    dls_options: dict[str, float] | None = None,
+) -> Motion:
+    """Clean foot skate and enforce end-effector constraints (Kim et al. 2009 s4.3).
+
+    Parameters
+    ----------
+    motion : Motion
+        The edited motion.
+    contacts : Contacts, optional
+        Foot contacts to plant.  Default: :func:`~mocaplab.contacts.foot_contacts`
+        of ``reference`` when given (the motion before editing, whose
+        contacts are right), else of ``motion``.
+    end_effectors : sequence of EndEffector
+        Extra constraints (``character`` must be 0 and any
+        :class:`RelativeTo` must refer to this character).
+    reference : Motion, optional
+        The motion before editing, with the same number of frames.
+    feet : bool
+        Plant the feet (``False``: only end effectors).
+    blend : float
+        Blending window on each side of every constraint, seconds.
+    spacing, levels : float, int
+        Coarsest knot spacing (seconds) and number of levels of the
+        displacement map.
+    adjust_root : bool
+        Lower the root where a leg cannot reach its plant.
+    dls_options : dict, optional
+        Options of :func:`~mocaplab.ik.dls_ik` for end effectors with a chain.
+
+    Returns
+    -------
+    Motion
+        A new motion; ``motion`` and ``reference`` are not modified.
+
+    Examples
+    --------
+    >>> import mocaplab as ml                                  # doctest: +SKIP
+    >>> walk = ml.cmu("16_15")                                 # doctest: +SKIP
+    >>> bent = walk.transformed(yaw=0.3)                       # doctest: +SKIP
+    >>> clean = ml.refine(bent, reference=walk)                # doctest: +SKIP
+    """
+    if not isinstance(motion, Motion):
+        raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
+    if reference is not None and not isinstance(reference, Motion):
+        raise TypeError(f"Expected `reference` to be a Motion or None, got {type(reference).__name__}")
+    for ee in end_effectors:
+        if not isinstance(ee, EndEffector):
+            raise TypeError(f"Expected EndEffector objects in `end_effectors`, got {type(ee).__name__}")
+        if ee.character != 0 or (isinstance(ee.target, RelativeTo) and ee.target.character not in (None, 0)):
+            raise ValueError("refine() takes one character; use refine_scene() for constraints between characters")
+    targets = [_world_targets(ee, [motion], {}, k) for k, ee in enumerate(end_effectors)]
+    return _refine_one(
+        motion, end_effectors, targets, contacts=contacts, reference=reference, feet=feet, blend=blend,
+        spacing=spacing, levels=levels, adjust_root=adjust_root, dls_options=dls_options,
+    )
+
+
+def _refine_one(
+    motion: Motion,
+    end_effectors: Sequence[EndEffector],
+    targets: Sequence[Array],
+    *,
+    contacts: Contacts | None,
+    reference: Motion | None,
+    feet: bool,
+    blend: float,
+    spacing: float,
+    levels: int,
+    adjust_root: bool,
+    dls_options: dict[str, float] | None,
+) -> Motion:
+    goals: list[Goal] = []
+    if feet:
+        c = _contacts_for(motion, contacts, reference)
+        goals += foot_goals(motion, c, reference=reference, blend=blend)
+    goals += effector_goals(motion, end_effectors, targets, blend=blend)
+    return enforce_goals(
+        motion, goals, spacing=spacing, levels=levels, adjust_root=adjust_root, dls_options=dls_options
+    )
+
+
+def _mutual_pairs(end_effectors: Sequence[EndEffector]) -> list[tuple[int, int]]:
+    pairs = []
+    for a, ea in enumerate(end_effectors):
+        ta = ea.target
+        if not isinstance(ta, RelativeTo) or ta.character is None or ta.character == ea.character:
+            continue
+        for b in range(a + 1, len(end_effectors)):
+            eb = end_effectors[b]
+            tb = eb.target
+            if (
+                isinstance(tb, RelativeTo)
+                and eb.character == ta.character
+                and tb.character == ea.character
+                and tb.joint == ea.joint
+                and ta.joint == eb.joint
+            ):
+                pairs.append((a, b))
+    return pairs
+
+
+def refine_scene(
+    motions: Sequence[Motion],
+    end_effectors: Sequence[EndEffector] = (),
+    *,
+    contacts: Sequence[Contacts | None] | None = None,
+    references: Sequence[Motion | None] | None = None,
+    **options: object,
+) -> list[Motion]:
+    """Refine several characters whose end effectors may refer to each other.
+
+    Parameters
+    ----------
+    motions : sequence of Motion
+        The characters (equal frame counts where constraints relate them).
+    end_effectors : sequence of EndEffector
+        ``character`` says whose joint is constrained; a :class:`RelativeTo`
+        target with ``character=k`` follows character ``k``'s joint.
+    contacts, references : sequences, optional
+        Per character, as in :func:`refine`.
+    **options
+        Passed to :func:`refine` (``blend``, ``spacing``, ``levels``,
+        ``feet``, ``adjust_root``, ``dls_options``).
+
+    Returns
+    -------
+    list of Motion
+
+    Notes
+    -----
+    Mutual pairs (A's joint relative to B's and B's relative to A's) meet at
+    the midpoint of the two joints before refinement, plus half the agreed
+    offset ``(offset_A - offset_B) / 2`` each way.  Other relative targets
+    are resolved against the *refined* other character, so characters are
+    refined in dependency order; a longer cycle raises ValueError.
+    """
+    motions = list(motions)
+    if not motions or not all(isinstance(m, Motion) for m in motions):
+        raise TypeError("Expected `motions` to be a non-empty sequence of Motion")
+    n_chars = len(motions)
+    for name, seq in (("contacts", contacts), ("references", references)):
+        if seq is not None and len(seq) != n_chars:
+            raise ValueError(f"Expected `{name}` with one entry per character ({n_chars}), got {len(seq)}")
+    ees = list(end_effectors)
+    for ee in ees:
+        if not isinstance(ee, EndEffector):
+            raise TypeError(f"Expected EndEffector objects in `end_effectors`, got {type(ee).__name__}")
+        if not 0 <= ee.character < n_chars:
+            raise ValueError(f"Expected EndEffector character in [0, {n_chars}), got {ee.character}")
+        t = ee.target
+        if isinstance(t, RelativeTo) and t.character is not None and not 0 <= t.character < n_chars:
+            raise ValueError(f"Expected RelativeTo character in [0, {n_chars}), got {t.character}")
+    mutual: dict[int, Array] = {}
+    for a, b in _mutual_pairs(ees):
+        ea, eb = ees[a], ees[b]
+        ma, mb = motions[ea.character], motions[eb.character]
+        if ma.n_frames != mb.n_frames:
+            raise ValueError(f"Expected characters with equal frame counts, got {ma.n_frames} and {mb.n_frames}")
+        pa = ma.global_positions()[:, ma.skeleton.index(ea.joint)]
+        pb = mb.global_positions()[:, mb.skeleton.index(eb.joint)]
+        gap = 0.5 * (np.asarray(ea.target.offset) - np.asarray(eb.target.offset))  # type: ignore[union-attr]
+        mid = 0.5 * (pa + pb)
+        mutual[a] = mid + 0.5 * gap
+        mutual[b] = mid - 0.5 * gap
+    # dependency order for the remaining cross-character targets
+    deps: dict[int, set[int]] = {c: set() for c in range(n_chars)}
+    for k, ee in enumerate(ees):
+        t = ee.target
+        if k not in mutual and isinstance(t, RelativeTo) and t.character not in (None, ee.character):
+            deps[ee.character].add(int(t.character))  # type: ignore[arg-type]
+    order: list[int] = []
+    pending = set(range(n_chars))
+    while pending:
+        ready = sorted(c for c in pending if deps[c] <= set(order))
+        if not ready:
+            raise ValueError(f"End-effector constraints form a cycle between characters {sorted(pending)}")
+        order += ready
+        pending -= set(ready)
+    current = list(motions)
+    for c in order:
+        mine = [k for k, ee in enumerate(ees) if ee.character == c]
+        tg = []
+        for k in mine:
+            # current[c] is still the unrefined motion here
+            tg.append(_world_targets(ees[k], current, mutual, k))
+        current[c] = _refine_one(
+            motions[c], [ees[k] for k in mine], tg,
+            contacts=None if contacts is None else contacts[c],
+            reference=None if references is None else references[c],
+            **_options(options),
+        )
+    return current
+
+
+def _options(options: dict[str, object]) -> dict[str, object]:
+    allowed = {"feet", "blend", "spacing", "levels", "adjust_root", "dls_options"}
+    unknown = set(options) - allowed
+    if unknown:
+        raise TypeError(f"Unknown refine options {sorted(unknown)}; allowed: {sorted(allowed)}")
+    defaults: dict[str, object] = {
+        "feet": True, "blend": 0.1, "spacing": 0.25, "levels": 3, "adjust_root": True, "dls_options": None,
+    }
+    defaults.update(options)
+    return defaults
+
+
+# ----------------------------------------------------------------- measures
+def foot_skate(motion: Motion, contacts: Contacts) -> Array:
+    """Horizontal slide of planted joints, millimetres per frame, shape (F,).
+
+    Entry ``i`` is the largest ground-plane distance ``|p(i+1) - p(i)|``
+    (x and z only) over the contact joints planted on both frames ``i`` and
+    ``i + 1``; NaN where no joint is planted on both (so
+    ``np.nanmean(foot_skate(m, c))`` is the mean skate per planted frame).
+    """
+    if not isinstance(motion, Motion):
+        raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
+    if not isinstance(contacts, Contacts):
+        raise TypeError(f"Expected `contacts` to be a Contacts, got {type(contacts).__name__}")
+    if contacts.n_frames != motion.n_frames:
+        raise ValueError(f"Expected contacts over {motion.n_frames} frames, got {contacts.n_frames}")
+    idx = [motion.skeleton.index(j) for j in contacts.joints]
+    pos = motion.global_positions()[:, idx][:, :, [0, 2]]
+    slide = np.linalg.norm(np.diff(pos, axis=0), axis=-1) * 1000.0  # (F-1, n)
+    both = contacts.mask[1:] & contacts.mask[:-1]
+    out = np.full(motion.n_frames, np.nan)
+    any_ = both.any(axis=1)
+    out[:-1][any_] = np.where(both, slide, -np.inf).max(axis=1)[any_]
+    return out
+
+
+def end_effector_residuals(
+    motions: Motion | Sequence[Motion], end_effectors: Sequence[EndEffector]
+) -> list[Array]:
+    """Distance from each end effector to its target on its constrained frames, mm.
+
+    Parameters
+    ----------
+    motions : Motion or sequence of Motion
+        One motion, or the scene of :func:`refine_scene`.
+    end_effectors : sequence of EndEffector
+
+    Returns
+    -------
+    list of ndarray
+        One array per end effector, shape (n_constrained_frames,).  Relative
+        targets are measured against the given scene (mutual pairs: the
+        distance between ``p_A`` and ``p_B + offset_A``).
+    """
+    scene = [motions] if isinstance(motions, Motion) else list(motions)
+    out = []
+    for k, ee in enumerate(end_effectors):
+        if not isinstance(ee, EndEffector):
+            raise TypeError(f"Expected EndEffector objects in `end_effectors`, got {type(ee).__name__}")
+        if not 0 <= ee.character < len(scene):
+            raise ValueError(f"EndEffector {k} names character {ee.character}, but the scene has {len(scene)}")
+        m = scene[ee.character]
+        tgt = _world_targets(ee, scene, {}, k)
+        pos = m.global_positions()[:, m.skeleton.index(ee.joint)]
+        frames = np.concatenate([np.arange(a, b) for a, b in ee.intervals(m.n_frames)])
+        out.append(np.linalg.norm(pos[frames] - tgt[frames], axis=-1) * 1000.0)
+    return out
+
+
+def max_joint_angle_jump(before: Motion, after: Motion, *, joints: Sequence[JointRef] | None = None) -> float:
+    """Largest per-frame change of the refinement's rotation correction, degrees.
+
+    With the correction ``c_j(i) = q_before_j(i)^-1 q_after_j(i)`` of each
+    joint (root orientation included), this is
+    ``max_{i, j} angle(c_j(i)^-1 c_j(i+1))``: how much the refinement changes
+    a joint angle between consecutive frames beyond what the original motion
+    did.  Zero when ``after`` equals ``before`` or differs by a constant.
+    """
+    if before.rotations.shape != after.rotations.shape:
+        raise ValueError(
+            f"Expected motions of equal shape, got {before.rotations.shape} and {after.rotations.shape}"
+        )
+    if before.n_frames < 2:
+        return 0.0
+    sel = slice(None) if joints is None else [_joint(before.skeleton, j, "joints") for j in joints]
+    c = quat.mul(quat.inv(before.rotations[:, sel]), after.rotations[:, sel])
+    step = quat.mul(quat.inv(c[:-1]), c[1:])
+    return float(np.degrees(quat.angle(step).max()))

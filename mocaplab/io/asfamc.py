@@ -653,9 +653,10 @@ def load_asf_amc(
         for k, d in enumerate(asf.root_order):
             if d[0] == "t":
                 root[:, "xyz".index(d[1])] = values["root"][:, k]
-    root *= unit
-    scaled = offsets * unit
-    end_offsets = ends[leaves] * unit
+    with np.errstate(over="ignore"):  # overflow is reported below
+        root *= unit
+        scaled = offsets * unit
+        end_offsets = ends[leaves] * unit
     if not (np.isfinite(root).all() and np.isfinite(scaled).all() and np.isfinite(end_offsets).all()):
         raise MocapFormatError(asf.path, 0, f"lengths that stay finite in metres (scale {unit:g})", "an overflow")
     skeleton = Skeleton(

@@ -84,13 +84,16 @@ class _Tokens:
                 self.items.append((tok, number))
         self.pos = 0
         self.last_line = max(stop, 1)
+        # what ends the tokens: the MOTION line, or the end of the file
+        self.end = "'MOTION' (is a '}' missing?)" if stop < len(lines) else "end of file (truncated file?)"
 
     def peek(self) -> tuple[str, int] | None:
         return self.items[self.pos] if self.pos < len(self.items) else None
 
     def next(self, expected: str) -> tuple[str, int]:
         if self.pos >= len(self.items):
-            raise MocapFormatError(self.path, self.last_line, expected, "end of the hierarchy (truncated file?)")
+            line = self.last_line + 1 if self.end.startswith("'MOTION'") else self.last_line
+            raise MocapFormatError(self.path, line, expected, self.end)
         item = self.items[self.pos]
         self.pos += 1
         return item
@@ -202,7 +205,7 @@ def _parse_hierarchy(tok: _Tokens) -> list[_Joint]:
 
 def _parse_channels(tok: _Tokens) -> tuple[str, ...]:
     path = tok.path
-    tok.next("CHANNELS")
+    _, channels_line = tok.next("CHANNELS")
     t, line = tok.next("a channel count")
     count = int(t) if t.isascii() and t.isdigit() else None
     if count is None:
@@ -215,7 +218,7 @@ def _parse_channels(tok: _Tokens) -> tuple[str, ...]:
         if c not in VALID_CHANNELS:
             if c in _KEYWORDS or _to_float(c) is not None:
                 raise MocapFormatError(
-                    path, cline, f"{count} channel names after 'CHANNELS {count}'", f"only {len(names)}"
+                    path, channels_line, f"{count} channel names after 'CHANNELS {count}'", f"only {len(names)}"
                 )
             raise MocapFormatError(path, cline, "a channel name (X/Y/Z position or rotation)", repr(c[:40]))
         if c in names:
@@ -223,7 +226,9 @@ def _parse_channels(tok: _Tokens) -> tuple[str, ...]:
         names.append(c)
     nxt = tok.peek()
     if nxt is not None and nxt[0] in VALID_CHANNELS:
-        raise MocapFormatError(path, nxt[1], f"{count} channel names as declared", f"more ({nxt[0]!r})")
+        raise MocapFormatError(
+            path, channels_line, f"{count} channel names after 'CHANNELS {count}'", f"more ({nxt[0]!r})"
+        )
     return tuple(names)
 
 
@@ -240,6 +245,8 @@ def parse_bvh(path: str | PathLike[str]) -> tuple[list[_Joint], float, NDArray[n
     """Parse a BVH file into joints, frame time and the raw channel matrix (F, C)."""
     path = os.fspath(path)
     lines = split_lines(read_text(path, "a BVH file"))
+    while lines and not lines[-1].strip():
+        lines.pop()  # so that "end of file" names the last line with text
     first = next((i for i, s in enumerate(lines) if s.strip()), None)
     if first is None:
         raise MocapFormatError(path, 1, "'HIERARCHY'", "an empty file")
@@ -300,7 +307,7 @@ def _parse_rows(path: str, lines: list[str], start: int, n_frames: int, n_channe
         if not toks:
             continue
         if count >= n_frames:
-            raise MocapFormatError(path, number, f"{n_frames} frame rows as declared by 'Frames:'", "more rows")
+            raise MocapFormatError(path, number, f"{n_frames} frame row(s) as declared by 'Frames:'", "more rows")
         if len(toks) != n_channels:
             raise MocapFormatError(path, number, f"{n_channels} numbers in frame row {count + 1}", f"{len(toks)}")
         vals = [_to_float(x) for x in toks]
@@ -313,7 +320,7 @@ def _parse_rows(path: str, lines: list[str], start: int, n_frames: int, n_channe
         count += 1
     if count < n_frames:
         raise MocapFormatError(
-            path, start + len(rows), f"{n_frames} frame rows as declared by 'Frames:'", f"{count} (truncated file?)"
+            path, start + len(rows), f"{n_frames} frame row(s) as declared by 'Frames:'", f"{count} (truncated file?)"
         )
     return out
 
@@ -460,11 +467,12 @@ def load_bvh(path: str | PathLike[str], *, scale: float | None = None, name: str
     if rotations is None:
         rotations = np.zeros((n_frames, n, 4))
         rotations[..., 3] = 1.0
-    root *= scale
-    if translations is not None:
-        translations *= scale
-    scaled_offsets = offsets * scale
-    scaled_ends = raw_skeleton.end_site_offsets * scale
+    with np.errstate(over="ignore"):  # overflow is reported below
+        root *= scale
+        if translations is not None:
+            translations *= scale
+        scaled_offsets = offsets * scale
+        scaled_ends = raw_skeleton.end_site_offsets * scale
     big = [
         what
         for what, arr in (

@@ -355,7 +355,37 @@ def affine_modes(layout: Layout) -> tuple[sp.csc_matrix, NDArray[np.int64]]:
     return _mode_matrix(blocks, 2 * layout.total, 4), np.repeat(np.arange(len(layout.n_frames)), 4)
 
 
-def gauge_rows(Q: sp.csc_matrix, owner: NDArray[np.int64], C: sp.spmatrix, n_chars: int) -> sp.csr_matrix:
+def _gauge_coordinates(V: Array, primary: NDArray[np.bool_] | None) -> Array:
+    """Rows ``M`` (d, q) with ``M V`` invertible, using primary coordinates first."""
+    if primary is None or not primary.any():
+        return V.T
+    d = V.shape[1]
+    VP = V[primary]
+    u, sv, vt = np.linalg.svd(VP, full_matrices=True)
+    tol = 1e-10 * max(float(np.abs(V).max(initial=0.0)), 1e-300)
+    r = int(np.sum(sv > tol))
+    rows = []
+    if r:
+        m1 = np.zeros((r, V.shape[0]))
+        m1[:, primary] = u[:, :r].T
+        rows.append(m1)
+    if r < d:
+        VT = (V @ vt[r:].T)[~primary]
+        u2, s2, _ = np.linalg.svd(VT, full_matrices=False)
+        r2 = int(np.sum(s2 > tol))
+        m2 = np.zeros((r2, V.shape[0]))
+        m2[:, ~primary] = u2[:, :r2].T
+        rows.append(m2)
+    return np.vstack(rows)
+
+
+def gauge_rows(
+    Q: sp.csc_matrix,
+    owner: NDArray[np.int64],
+    C: sp.spmatrix,
+    n_chars: int,
+    primary: NDArray[np.bool_] | None = None,
+) -> sp.csr_matrix:
     """Rows fixing the modes in ``Q``'s span that no row of ``C`` touches.
 
     ``Q`` (n, q) has orthonormal columns spanning the null space of the
@@ -363,6 +393,13 @@ def gauge_rows(Q: sp.csc_matrix, owner: NDArray[np.int64], C: sp.spmatrix, n_cha
     ``C`` are ``Q V`` with ``V`` an orthonormal basis of the null space of
     ``C Q``, computed separately for each group of characters linked by rows
     of ``C`` (so gauge rows never couple unrelated characters).
+
+    The gauge rows fix mode *coordinates* ``Q^T x``, preferring the
+    ``primary`` columns (rotation and scale, or the index-linear modes): free
+    directions are first held by their primary coordinates, and only what is
+    left (pure translations) by the others.  So pinning one frame of a path
+    translates it rigidly instead of also turning it to reduce the overall
+    displacement (which the minimum-norm choice would do).
     """
     CQ = (sp.csr_matrix(C) @ Q).toarray() if C.shape[0] else np.zeros((0, Q.shape[1]))
     scale = max(1.0, float(np.abs(CQ).max(initial=0.0)))
@@ -389,7 +426,8 @@ def gauge_rows(Q: sp.csc_matrix, owner: NDArray[np.int64], C: sp.spmatrix, n_cha
             V = vt[rank:].T
         if V.shape[1] == 0:
             continue
-        out.append(sp.csr_matrix((Q[:, cols] @ V).T))
+        M = _gauge_coordinates(V, None if primary is None else primary[cols])
+        out.append(sp.csr_matrix((Q[:, cols] @ M.T).T))
     if not out:
         return sp.csr_matrix((0, Q.shape[0]))
     return sp.vstack(out, format="csr")
@@ -590,6 +628,8 @@ class SpatialSolver:
         self.tangent_rows = _TangentRows(self.paths)
         self.Q1, self.owner1 = similarity_modes(self.paths, self.layout)
         self.Q2, self.owner2 = affine_modes(self.layout)
+        self._primary = np.tile([False, False, True, True], K0 := len(self.paths))
+        self._primary2 = np.tile([False, True, False, True], K0)
         # phase-2 helpers: undeformed segment lengths of within-character steps
         steps = self.layout.steps()
         P0 = self.p0.reshape(-1, 2)
@@ -624,7 +664,7 @@ class SpatialSolver:
         BwT = Bw.T.tocsr()
         BtB = (BwT @ Bw).tocsr()
         C = sp.vstack([Bw, H], format="csr")
-        G1 = gauge_rows(self.Q1, self.owner1, C, K)
+        G1 = gauge_rows(self.Q1, self.owner1, C, K, self._primary)
         shape = KKT(self.AtA + BtB, sp.vstack([H, G1], format="csr"))
         G2 = sp.csr_matrix((0, n))
         scale = None
@@ -636,7 +676,7 @@ class SpatialSolver:
                     groups[: len(hard)] + [("rigid stationary segments", np.arange(Hu.shape[0], H2.shape[0]))],
                     "spatial",
                 )
-            G2 = gauge_rows(self.Q2, self.owner2, sp.vstack([Bw, H2], format="csr"), K)
+            G2 = gauge_rows(self.Q2, self.owner2, sp.vstack([Bw, H2], format="csr"), K, self._primary2)
             scale = KKT(self.AhtAh + BtB, sp.vstack([H2, G2], format="csr"))
         return SpatialFactors(shape, scale, Bw, BwT, H, G1, G1 @ self.p0, G2), bw, h
 

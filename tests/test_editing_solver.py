@@ -1,0 +1,266 @@
+"""The Laplacian space solver (eqs. 3-7, s4.2) and the time warp (eqs. 8-9, s4.4) on real CMU walks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocaplab.editing import (
+    AbsoluteTime,
+    Duration,
+    PinDirection,
+    PinPosition,
+    Relative,
+    SceneEditor,
+    Sync,
+    deformation_energy,
+    edit,
+)
+from mocaplab.editing.laplacian import detect_tangent_flips
+from mocaplab.editing.paths import central_tangents, ground_angle, laplacian_coordinates, wrap_angle
+
+
+@pytest.fixture(scope="module")
+def walk(mocap_dir):
+    from mocaplab import data
+
+    return data.cmu("16_15").resample(30)
+
+
+@pytest.fixture(scope="module")
+def pair(mocap_dir):
+    from mocaplab import data
+
+    return [data.cmu("16_15").resample(30), data.cmu("16_11").resample(30).transformed(translation=[2.0, 0, 0])]
+
+
+def ground(m):
+    return m.root_positions[:, [0, 2]]
+
+
+def test_pins_at_original_positions_are_the_identity(pair):
+    a, b = pair
+    cons = [
+        PinPosition(0, 0, ground(a)[0], hard=True),
+        PinPosition(0, 80, ground(a)[80]),
+        PinPosition(1, 30, ground(b)[30]),
+        AbsoluteTime(1, None, b.times[40], frames=(40, 75)),
+        PinDirection(1, 50, central_tangents(ground(b))[50]),
+        AbsoluteTime(0, 10, a.times[10], hard=True),
+        Duration(1, 5, 60, b.times[60] - b.times[5]),
+    ]
+    res = edit(pair, cons)
+    for k, m in enumerate(pair):
+        np.testing.assert_allclose(res.paths[k], ground(m), atol=1e-6)
+        np.testing.assert_allclose(res.times[k], m.times, atol=1e-6)
+    assert res.shape_distortion < 1e-6
+    assert res.energies.total < 1e-12
+
+
+def test_no_constraint_is_the_identity(pair):
+    res = edit(pair, [])
+    for k, m in enumerate(pair):
+        np.testing.assert_allclose(res.paths[k], ground(m), atol=1e-6)
+        np.testing.assert_allclose(res.times[k], m.times, atol=1e-9)
+
+
+def test_hard_constraints_hold_exactly_after_large_edits(pair):
+    a, b = pair
+    pa = ground(a)
+    cons = [
+        PinPosition(0, 0, pa[0] + [0.5, -0.2], hard=True),
+        PinPosition(0, 100, pa[100] + [1.5, -1.0], hard=True),
+        PinDirection(0, 60, 1.2, hard=True),
+        Relative(1, 40, 0, 60, (0.3, 1.0), direction=(0.0, -1.0), hard=True),
+        AbsoluteTime(0, 0, 0.5, hard=True),
+        Duration(0, 10, 90, 4.0, hard=True),
+        Sync(1, 40, 0, 60, offset=0.2, hard=True),
+    ]
+    res = edit(pair, cons)
+    assert res.hard_residual_space < 1e-6
+    assert res.hard_residual_time < 1e-6
+    p0, p1 = res.paths
+    np.testing.assert_allclose(p0[0], pa[0] + [0.5, -0.2], atol=1e-6)
+    np.testing.assert_allclose(p0[100], pa[100] + [1.5, -1.0], atol=1e-6)
+    t = central_tangents(p0)[60]
+    assert ground_angle(t) == pytest.approx(1.2, abs=1e-6)
+    assert res.times[0][0] == pytest.approx(0.5, abs=1e-6)
+    assert res.times[0][90] - res.times[0][10] == pytest.approx(4.0, abs=1e-6)
+    assert res.times[1][40] - res.times[0][60] == pytest.approx(0.2, abs=1e-6)
+    assert max(res.residuals()[i] for i in range(len(cons))) < 1e-6
+
+
+def test_soft_pin_translation_keeps_shape_exactly(walk):
+    # one soft pin: a pure translation costs no Laplacian energy, so it is met exactly
+    p = ground(walk)
+    res = edit([walk], [PinPosition(0, 50, p[50] + [2.0, 1.0])])
+    np.testing.assert_allclose(res.paths[0], p + [2.0, 1.0], atol=1e-6)
+
+
+def test_shape_phase_scales_and_rotates_as_a_similarity(walk):
+    # two pins: phase 1 alone moves the path by a similarity (eq. 3 is similarity invariant)
+    p = ground(walk)
+    F = len(p)
+    target = p[0] + 0.6 * (p[-1] - p[0]) @ np.array([[0.0, 1.0], [-1.0, 0.0]])
+    res = edit(
+        [walk], [PinPosition(0, 0, p[0], hard=True), PinPosition(0, F - 1, target, hard=True)], scale_compensation=False
+    )
+    np.testing.assert_allclose(laplacian_coordinates(res.paths[0])[1:-1], laplacian_coordinates(p)[1:-1], atol=1e-6)
+    assert res.length_change[0] == pytest.approx(-0.4, abs=1e-6)
+
+
+def test_scale_compensation_evens_out_scaling(walk):
+    # bend the path: keep its start and start direction, swing its end by 90 degrees.
+    # Phase 1 alone stretches some segments and squeezes others; phase 2 (eq. 7)
+    # brings every segment back towards its own length.
+    p = ground(walk)
+    F = len(p)
+    d = p[-1] - p[0]
+    rot = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    cons = [
+        PinPosition(0, 0, p[0], hard=True),
+        PinDirection(0, 0, d, hard=True),
+        PinPosition(0, F - 1, p[0] + rot @ d, hard=True),
+    ]
+    shape_only = edit([walk], cons, scale_compensation=False)
+    both = edit([walk], cons)
+    assert both.hard_residual_space < 1e-9
+    seg0 = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    ratio_shape = np.linalg.norm(np.diff(shape_only.paths[0], axis=0), axis=1) / seg0
+    ratio_both = np.linalg.norm(np.diff(both.paths[0], axis=0), axis=1) / seg0
+    assert np.abs(ratio_both - 1).mean() < 0.7 * np.abs(ratio_shape - 1).mean()
+    assert np.ptp(ratio_both) < 0.5 * np.ptp(ratio_shape)
+    np.testing.assert_allclose(both.shape_paths[0], shape_only.paths[0], atol=1e-9)
+
+
+def test_unconstrained_character_keeps_its_path(pair):
+    a, b = pair
+    res = edit(pair, [PinPosition(0, 0, ground(a)[0] + [3.0, 1.0], hard=True), PinPosition(0, 90, ground(a)[90])])
+    np.testing.assert_allclose(res.paths[1], ground(b), atol=1e-6)
+    np.testing.assert_allclose(res.times[1], b.times, atol=1e-9)
+
+
+def test_time_warp_follows_constraints_and_stays_uniform(walk):
+    h = walk.dt
+    res = edit([walk], [AbsoluteTime(0, 0, 1.0, hard=True), Duration(0, 0, 60, 3.0, hard=True)])
+    t = res.times[0]
+    assert t[0] == pytest.approx(1.0, abs=1e-9) and t[60] - t[0] == pytest.approx(3.0, abs=1e-9)
+    dt = np.diff(t)
+    np.testing.assert_allclose(dt[:60], 3.0 / 60, atol=1e-9)  # stretched uniformly
+    np.testing.assert_allclose(dt[60:], h, atol=1e-9)  # the rest keeps its pace
+
+
+@pytest.mark.parametrize("squeeze", [0.2, 0.05, 0.01])
+def test_time_warp_is_strictly_increasing_and_bounded(walk, squeeze):
+    # soft constraints asking for steps below h_min (and time flowing backwards)
+    h = walk.dt
+    cons = [AbsoluteTime(0, 20, 2.0), AbsoluteTime(0, 80, 2.0 + squeeze * 60 * h - 0.5)]
+    ed = SceneEditor([walk], cons, min_step=0.25, max_step=4.0)
+    res = ed.result
+    dt = np.diff(res.times[0])
+    assert np.all(dt > 0)
+    assert dt.min() >= 0.25 * h * (1 - 1e-9)
+    assert dt.max() <= 4.0 * h * (1 + 1e-9)
+    assert res.min_time_step_ratio >= 0.25 - 1e-9
+    assert res.active_steps  # the inserted equalities of section 4.4
+
+
+def test_time_warp_slowdown_bounded(walk):
+    h = walk.dt
+    res = edit([walk], [AbsoluteTime(0, 0, 0.0, hard=True), AbsoluteTime(0, 10, 100.0)])
+    dt = np.diff(res.times[0])
+    assert dt.max() <= 4.0 * h * (1 + 1e-9) and np.all(dt > 0)
+
+
+def test_relative_and_sync_between_two_walks(pair):
+    a, b = pair
+    cons = [
+        PinPosition(0, 0, ground(a)[0], hard=True),
+        PinPosition(0, 100, ground(a)[100] + [0.8, 0.4]),
+        Relative(1, 60, 0, 80, (0.0, 1.0), direction=(-1.0, 0.0)),
+        Sync(1, 60, 0, 80, weight=10.0),
+        AbsoluteTime(0, 0, 0.0, hard=True),
+    ]
+    res = edit(pair, cons)
+    p0, p1 = res.paths
+    t0 = central_tangents(p0)[80]
+    # equation 1: offsets measured in units of the undeformed tangent length
+    L = np.linalg.norm(res.original_paths[0].tangents[80])
+    from mocaplab.editing.paths import rot90
+
+    expected = p0[80] + (1.0 / L) * rot90(t0)
+    np.testing.assert_allclose(p1[60], expected, atol=2e-3)
+    # so the metric offset is ~1 m to the left, facing the other way
+    d = p1[60] - p0[80]
+    u = t0 / np.linalg.norm(t0)
+    assert d @ rot90(u) == pytest.approx(1.0, rel=0.15)
+    assert abs(d @ u) < 0.05
+    t1 = central_tangents(p1)[60]
+    assert t1 @ t0 / (np.linalg.norm(t1) * np.linalg.norm(t0)) < -0.99
+    assert abs(res.times[1][60] - res.times[0][80]) < 1e-3
+
+
+def test_stationary_segment_stays_rigid(mocap_dir):
+    from mocaplab import data
+
+    stop = data.cmu("16_34").resample(30)
+    p = ground(stop)
+    ed = SceneEditor([stop], [PinPosition(0, 0, p[0], hard=True), PinPosition(0, 40, p[40])])
+    (seg,) = ed.segments[0]
+    assert seg[1] == stop.n_frames
+    res = ed.drag(1, p[40] + [1.0, 0.5])
+    a, b = seg
+    X, Y = p[a:b], res.paths[0][a:b]
+    assert np.abs(Y - X).max() > 0.5  # it moved ...
+    dx = np.linalg.norm(X[:, None] - X[None], axis=-1)
+    dy = np.linalg.norm(Y[:, None] - Y[None], axis=-1)
+    np.testing.assert_allclose(dy, dx, atol=1e-6)  # ... as a rigid body
+    turn = res.heading_change[0][a:b]
+    np.testing.assert_allclose(turn, turn[0], atol=1e-9)  # the standing character turns as one
+    # without rigid segments the same drag deforms it
+    free = edit([stop], ed.constraints, stationary=None)
+    Z = free.paths[0][a:b]
+    assert np.abs(np.linalg.norm(Z[:, None] - Z[None], axis=-1) - dx).max() > 1e-4
+
+
+def test_detect_tangent_flips_synthetic():
+    t0 = np.tile([0.0, 1.0], (40, 1))
+    t1 = t0.copy()
+    t1[18:22] *= -1  # a short reversed stretch
+    flips = detect_tangent_flips(t0, t1)
+    assert flips[18:22].all() and flips.sum() <= 6
+    assert not detect_tangent_flips(t0, t0).any()
+    # a smooth U-turn (legitimate) is not a flip
+    ang = np.linspace(0, np.pi, 40)
+    turn = np.c_[np.sin(ang), np.cos(ang)]
+    assert not detect_tangent_flips(t0, turn).any()
+
+
+def test_tangent_flip_repaired_when_squeezing(walk):
+    # Figure 4: squeezing a path makes its tangent flip; the heading must not spin round
+    p = ground(walk)
+    F = len(p)
+    cons = [PinPosition(0, 0, p[0], hard=True), PinPosition(0, F - 1, p[-1] - 0.9 * (p[-1] - p[0]), hard=True)]
+    res = edit([walk], cons)
+    t_new = central_tangents(res.paths[0])
+    phi = wrap_angle(ground_angle(t_new) - ground_angle(res.original_paths[0].tangents))
+    assert np.abs(wrap_angle(np.diff(phi))).max() > np.pi / 2  # raw tangents flip
+    assert res.flips[0].any()
+    psi = np.diff(res.heading_change[0])
+    assert np.abs(psi).max() < np.pi / 2  # repaired heading turns less than the threshold per frame
+    # repaired tangents agree with the raw ones away from flips
+    good = ~res.flips[0] & ~res.original_paths[0].degenerate
+    cosang = np.einsum("ij,ij->i", res.tangents[0][good], t_new[good]) / np.linalg.norm(t_new[good], axis=1)
+    np.testing.assert_allclose(cosang, 1.0, atol=1e-9)
+
+
+def test_energy_terms(pair):
+    a, _ = pair
+    res0 = edit(pair, [PinPosition(0, 0, ground(a)[0])])
+    assert deformation_energy(res0) == pytest.approx(0.0, abs=1e-9)
+    res = edit(pair, [PinPosition(0, 0, ground(a)[0], hard=True), PinPosition(0, 100, ground(a)[100] + [1.0, 0.0])])
+    e = res.energies
+    assert e.shape > 0 and e.scale > 0 and e.time == pytest.approx(0.0, abs=1e-12)
+    E = deformation_energy(res, cs=2.0, ct=1.0)
+    length = res.original_paths[0].length
+    assert E == pytest.approx(e.total + 2.0 * abs(res.length_change[0]) * length, rel=1e-9)

@@ -130,7 +130,7 @@ class Contacts:
 
     def planted_any(self) -> NDArray[np.bool_]:
         """True on frames where at least one joint is in contact, shape (F,)."""
-        return self.mask.any(axis=1)
+        return np.asarray(self.mask.any(axis=1), dtype=bool)
 
     def fraction(self, joint: str) -> float:
         """Share of the frames on which ``joint`` is in contact, in [0, 1]."""

@@ -156,28 +156,31 @@ def skeleton(
     label = motion.name if label is None else label
     marked = np.array([motion.skeleton.index(n) for n in highlight], dtype=np.int64)
     if projection == "3d":
-        ax = _new_axes(ax, three_d=True)
+        ax3: Any = _new_axes(ax, three_d=True)  # mpl_toolkits.mplot3d.Axes3D
         from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
-        ax.add_collection3d(Line3DCollection(_to_mpl3d(segs), colors=color, linewidths=linewidth, label=label or None))
+        ax3.add_collection3d(Line3DCollection(_to_mpl3d(segs), colors=color, linewidths=linewidth, label=label or None))
         p = _to_mpl3d(pos)
-        ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=10, color=color, depthshade=False)
+        ax3.scatter(p[:, 0], p[:, 1], p[:, 2], s=10, color=color, depthshade=False)
         if marked.size:
-            ax.scatter(*_to_mpl3d(pos[marked]).T, s=50, color=highlight_color, depthshade=False)
+            ax3.scatter(*_to_mpl3d(pos[marked]).T, s=50, color=highlight_color, depthshade=False)
         if ground:
             lo, hi = p.min(axis=0) - 0.3, p.max(axis=0) + 0.3
             gx, gy = np.meshgrid([lo[0], hi[0]], [lo[1], hi[1]])
-            ax.plot_surface(gx, gy, np.zeros_like(gx), color="0.85", alpha=0.35, zorder=-1)
-        _set_equal_3d(ax, np.concatenate([_to_mpl3d(segs).reshape(-1, 3), [[p[0, 0], p[0, 1], 0.0]]]))
-        ax.set_xlabel("z (m)")
-        ax.set_ylabel("x (m)")
-        ax.set_zlabel("y (m, up)")
+            ax3.plot_surface(gx, gy, np.zeros_like(gx), color="0.85", alpha=0.35, zorder=-1)
+        _set_equal_3d(ax3, np.concatenate([_to_mpl3d(segs).reshape(-1, 3), [[p[0, 0], p[0, 1], 0.0]]]))
+        ax3.set_xlabel("z (m)")
+        ax3.set_ylabel("x (m)")
+        ax3.set_zlabel("y (m, up)")
+        ax = ax3
     else:
         ax = _new_axes(ax)
         from matplotlib.collections import LineCollection
 
         h, v = _PLANES[projection]
-        ax.add_collection(LineCollection(segs[:, :, [h, v]], colors=color, linewidths=linewidth, label=label or None))
+        ax.add_collection(
+            LineCollection(list(segs[:, :, [h, v]]), colors=color, linewidths=linewidth, label=label or None)
+        )
         ax.scatter(pos[:, h], pos[:, v], s=10, color=color, zorder=3)
         if marked.size:
             ax.scatter(pos[marked, h], pos[marked, v], s=50, color=highlight_color, zorder=4)

@@ -178,3 +178,11 @@ def test_trame_backend_builds_an_updatable_view(walk):
     v.slider.value = 30
     assert np.allclose(_sphere_centres(v)[: walk.n_joints], walk.global_positions()[30], atol=1e-9)
     v.close()
+
+
+def test_display_hooks(walk, capsys):
+    v = MotionViewer(walk[:10], backend="none")
+    v._ipython_display_()  # outside a kernel IPython prints the widget's text form
+    assert v.show() is v.widget
+    assert "VBox" in capsys.readouterr().out
+    v.close()

@@ -49,6 +49,7 @@ refine : bool, default False
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import OrderedDict
 from collections.abc import Iterator, Sequence
@@ -85,6 +86,17 @@ _OPTIONS = {
     "discrete": False,
     "refine": False,
 }
+
+
+def _is_effector(c: Any) -> bool:
+    """True for a :class:`mocaplab.refine.EndEffector` (imported lazily)."""
+    if type(c).__name__ != "EndEffector":
+        return False
+    try:
+        from ..refine import EndEffector
+    except ImportError:  # pragma: no cover - refine not available
+        return False
+    return isinstance(c, EndEffector)
 
 
 def _characters(characters: Any) -> tuple[Motion, ...]:
@@ -282,8 +294,14 @@ class SceneEditor:
     def _validate(self, constraints: Sequence[Any], offset: int = 0) -> None:
         K = len(self.characters)
         for i, c in enumerate(constraints, start=offset):
-            if not isinstance(c, SPATIAL + TEMPORAL + (EndEffectorConstraint,)):
+            if not isinstance(c, SPATIAL + TEMPORAL + (EndEffectorConstraint,)) and not _is_effector(c):
                 raise TypeError(f"constraint #{i}: expected a mocaplab.editing constraint, got {type(c).__name__}")
+            if _is_effector(c):
+                if not 0 <= c.character < K:
+                    raise ValueError(
+                        f"constraint #{i} {c!r}: unknown character {c.character} (the scene has {K} characters)"
+                    )
+                continue
             for k in c.characters:
                 if not 0 <= k < K:
                     raise ValueError(
@@ -552,12 +570,18 @@ class EditResult:
         ee: list[list[Any]] = [[] for _ in range(K)]
         for c in constraints:
             if isinstance(c, EndEffectorConstraint):
-                ee[c.character].append(c.constraint)
+                inner = c.constraint
+                if _is_effector(inner) and inner.character != c.character:
+                    inner = dataclasses.replace(inner, character=c.character)
+                ee[c.character].append(inner)
+            elif _is_effector(c):
+                ee[c.character].append(c)
         self.end_effectors = tuple(tuple(x) for x in ee)
         self._headings = _Lazy(K, self._heading)
         self.edited_motions = _Lazy(K, self._edited_motion)
-        self.motions = _Lazy(K, self._refined_motion if editor.options["refine"] else self._motion)
-        self._refined = _Lazy(K, self._refined_motion)
+        self._plain = _Lazy(K, self._motion)
+        self._refined = _Lazy(K, lambda k: self._refine_all()[k])
+        self.motions = self._refined if editor.options["refine"] else self._plain
 
     def __repr__(self) -> str:
         return (
@@ -628,29 +652,47 @@ class EditResult:
     def _motion(self, k: int) -> Motion:
         return self._warp(k, self.edited_motions[k])
 
-    def _refined_motion(self, k: int) -> Motion:
+    def _tick(self, k: int, frame: int) -> int:
+        """Clock tick nearest to character ``k``'s frame ``frame``."""
+        return int(round((float(self.times[k][frame]) - float(self.clock[0])) * self.clock_fps))
+
+    def _effector_on_clock(self, ee: Any) -> Any:
+        k = ee.character
+        f = ee.frames
+        n = len(self.clock)
+        if isinstance(f, (int, np.integer)):
+            frames: Any = min(self._tick(k, int(f)), n - 1)
+        elif isinstance(f, tuple) and len(f) == 2:
+            a, b = self._tick(k, int(f[0])), self._tick(k, int(f[1]) - 1) + 1
+            frames = (a, min(max(b, a + 1), n))
+        else:
+            frames = sorted({min(self._tick(k, int(i)), n - 1) for i in f})
+        return dataclasses.replace(ee, frames=frames)
+
+    @cached_property
+    def _refined_list(self) -> list[Motion]:
         try:
-            from ..refine import refine
+            from ..refine import refine_scene
         except ImportError:
             raise NotImplementedError("full-body refinement needs mocaplab.refine, which is not available") from None
-        contacts = None
-        try:
-            from ..contacts import foot_contacts
-        except ImportError:  # pragma: no cover
-            pass
-        else:
-            contacts = foot_contacts(self.characters[k])
-        m = refine(
-            self.edited_motions[k], contacts=contacts, end_effectors=self.end_effectors[k], reference=self.characters[k]
-        )
-        return self._warp(k, m)
+        K = len(self.characters)
+        warped = [self._plain[k] for k in range(K)]
+        refs = [self._warp(k, self.characters[k]) for k in range(K)]
+        ees = [self._effector_on_clock(ee) for per in self.end_effectors for ee in per]
+        return refine_scene(warped, ees, references=refs)
+
+    def _refine_all(self) -> list[Motion]:
+        return self._refined_list
 
     def refined(self) -> Sequence[Motion]:
-        """Full-body refined motions on the shared clock (section 4.3, via :func:`mocaplab.refine.refine`).
+        """Full-body refined motions on the shared clock (section 4.3).
 
-        Each edited motion (original timing) is refined with the foot contacts
-        of its input clip, its end-effector constraints and the input clip as
-        reference, then time-warped like :attr:`motions`.
+        The time-warped motions (:attr:`motions` without refinement) go through
+        :func:`mocaplab.refine.refine_scene` with the input clips warped the
+        same way as references (their foot contacts are planted) and the
+        scene's end-effector constraints, whose frames (each character's own
+        frames) are mapped to the nearest clock ticks, so interactions between
+        characters happen at the synchronised instant.
         """
         return self._refined
 

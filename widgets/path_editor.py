@@ -160,6 +160,7 @@ class _Drag:
     created: bool  # the press added the constraint
     moved: bool = False
     anchor: Any = None  # kind-specific data fixed at press time
+    last_px: tuple[float, float] | None = None  # where the last update put the handle
 
 
 def _guarded(method: Callable[..., Any]) -> Callable[..., Any]:
@@ -335,6 +336,22 @@ def _tangent(path: NDArray[np.float64], i: int) -> NDArray[np.float64]:
     return np.asarray(path[b] - path[a], dtype=float)
 
 
+def _event_data(ax: Any, event: Any) -> NDArray[np.float64]:
+    """Data coordinates of a mouse event, also outside the axes (where ``xdata`` is None)."""
+    if event.inaxes is ax and event.xdata is not None and event.ydata is not None:
+        return np.array([event.xdata, event.ydata], dtype=float)
+    return np.asarray(ax.transData.inverted().transform((float(event.x), float(event.y))), dtype=float)
+
+
+def _plain_ticks(ax: Any) -> None:
+    """Tick labels with an ASCII minus sign (some browser fonts drop the Unicode one)."""
+    from matplotlib.ticker import FuncFormatter
+
+    plain = FuncFormatter(lambda value, _pos: f"{value:g}")
+    ax.xaxis.set_major_formatter(plain)
+    ax.yaxis.set_major_formatter(plain)
+
+
 def _fmt_vec(v: Any) -> str:
     v = np.asarray(v, dtype=float)
     return "(" + ", ".join(f"{x:.3f}" for x in v) + ")"
@@ -426,6 +443,7 @@ class PathEditor(_DragView):
         self.ax.set_xlabel("x (m)")
         self.ax.set_ylabel("z (m)")
         self.ax.set_aspect("equal", adjustable="datalim")
+        _plain_ticks(self.ax)
         self.ax.grid(True, alpha=0.3)
 
         self._ghosts = [
@@ -634,7 +652,7 @@ class PathEditor(_DragView):
         for _, _, xy in self._handles:
             pts = np.vstack([pts, xy])
         lo, hi = pts.min(axis=0), pts.max(axis=0)
-        pad = 0.1 * max(float(np.max(hi - lo)), 1.0)
+        pad = 0.15 * max(float(np.max(hi - lo)), 1.0) + 0.25  # room to drag handles near the edges
         lo, hi = lo - pad, hi + pad
         if grow_only:
             (x0, x1), (y0, y1) = sorted(self.ax.get_xlim()), sorted(self.ax.get_ylim())
@@ -646,7 +664,9 @@ class PathEditor(_DragView):
         # set_*lim cancels any pending autoscale, and set_data never requests one
         self.ax.set_xlim(lo[0], hi[0], auto=True)
         self.ax.set_ylim(hi[1], lo[1], auto=True)  # z grows down the page: the scene seen from above
-        self.ax.apply_aspect()
+        # settle the layout and the equal aspect now, so that published handle
+        # pixels match what the front end will draw
+        self.figure.draw_without_rendering()
 
     # ------------------------------------------------------------------ picking
     def _pick_handle(self, event: Any) -> tuple[int, str, NDArray[np.float64]] | None:
@@ -710,12 +730,19 @@ class PathEditor(_DragView):
     @_guarded
     def _on_motion(self, event: Any) -> None:
         drag = self._drag
-        if drag is None or event.xdata is None or event.ydata is None:
+        if drag is None or event.x is None or event.y is None:
             return
         if not drag.moved and not self._moved(event):
             return
         drag.moved = True
-        mouse = np.array([event.xdata, event.ydata], dtype=float)
+        self._move_to(event)
+
+    def _move_to(self, event: Any) -> None:
+        """Solve with the dragged handle under the mouse position of ``event``."""
+        drag = self._drag
+        assert drag is not None  # internal invariant
+        drag.last_px = (float(event.x), float(event.y))
+        mouse = _event_data(self.ax, event)
         if drag.kind == "pin":
             target = mouse
         else:
@@ -732,9 +759,16 @@ class PathEditor(_DragView):
 
     @_guarded
     def _on_release(self, event: Any) -> None:
-        drag, self._drag = self._drag, None
+        drag = self._drag
         if drag is None:
             return
+        try:
+            if self.last_error is None and event.x is not None and (drag.moved or self._moved(event)):
+                if drag.last_px != (float(event.x), float(event.y)):
+                    drag.moved = True
+                    self._move_to(event)  # the front end may drop motion events: end under the mouse
+        finally:
+            self._drag = None
         if self.last_error is not None:
             pass  # keep the error of the failed update on show
         elif not drag.moved and not drag.created:

@@ -47,11 +47,13 @@ from .path_editor import (
     _current_result,
     _Drag,
     _DragView,
+    _event_data,
     _frame_of,
     _guarded,
     _is,
     _kind_of,
     _other_frame_of,
+    _plain_ticks,
     character_colors,
 )
 
@@ -130,6 +132,7 @@ class TimeTrackEditor(_DragView):
         self.ax = self.figure.add_subplot()
         self.ax.set_title(title)
         self.ax.set_xlabel("reference time (s)")
+        _plain_ticks(self.ax)
         self.ax.set_yticks(range(n), self.labels)
         self.ax.set_ylim(n - 0.4, -0.7)  # track 0 on top
         self.ax.grid(True, axis="x", alpha=0.3)
@@ -197,6 +200,7 @@ class TimeTrackEditor(_DragView):
                 return
             lo, hi = min(lo, x0), max(hi, x1)
         self.ax.set_xlim(lo, hi)
+        self.figure.draw_without_rendering()  # settle the layout: handle pixels as drawn
 
     def _redraw(self, *, final: bool = False) -> None:
         for k, (coll, times) in enumerate(zip(self._tracks, self.result.times, strict=True)):
@@ -287,12 +291,19 @@ class TimeTrackEditor(_DragView):
     @_guarded
     def _on_motion(self, event: Any) -> None:
         drag = self._drag
-        if drag is None or event.xdata is None:
+        if drag is None or event.x is None or event.y is None:
             return
         if not drag.moved and not self._moved(event):
             return
         drag.moved = True
-        x = float(event.xdata)
+        self._move_to(event)
+
+    def _move_to(self, event: Any) -> None:
+        """Solve with the dragged handle at the time under the mouse (also outside the axes)."""
+        drag = self._drag
+        assert drag is not None  # internal invariant
+        drag.last_px = (float(event.x), float(event.y))
+        x = float(_event_data(self.ax, event)[0])
         target = x if drag.kind == "time" else x - drag.anchor
         self._apply(_current_result(self.editor, self.editor.drag(drag.index, target)))
         self._redraw()
@@ -300,9 +311,16 @@ class TimeTrackEditor(_DragView):
 
     @_guarded
     def _on_release(self, event: Any) -> None:
-        drag, self._drag = self._drag, None
+        drag = self._drag
         if drag is None:
             return
+        try:
+            if self.last_error is None and event.x is not None and (drag.moved or self._moved(event)):
+                if drag.last_px != (float(event.x), float(event.y)):
+                    drag.moved = True
+                    self._move_to(event)  # the front end may drop motion events: end under the mouse
+        finally:
+            self._drag = None
         if self.last_error is not None:
             pass  # keep the error of the failed update on show
         elif not drag.moved and not drag.created:

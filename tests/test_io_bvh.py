@@ -262,9 +262,9 @@ def test_non_finite_number(tmp_path, token):
 
 
 def test_non_numeric_offset(tmp_path):
-    assert_format_error(write(tmp_path, edit(CHAIN, 8, "    OFFSET 0 ten 0")), 8, "expected an OFFSET number, got 'ten'")
+    assert_format_error(write(tmp_path, edit(CHAIN, 8, "    OFFSET 0 ten 0")), 8, "expected a number in OFFSET, got 'ten'")
     assert_format_error(
-        write(tmp_path, edit(CHAIN, 8, "    OFFSET 0 nan 0")), 8, "expected a finite an OFFSET number, got 'nan'"
+        write(tmp_path, edit(CHAIN, 8, "    OFFSET 0 nan 0")), 8, "expected a finite number in OFFSET, got 'nan'"
     )
 
 

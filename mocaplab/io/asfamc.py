@@ -169,7 +169,9 @@ def parse_asf(path: str | PathLike[str]) -> Asf:
     """Parse an ASF file (no unit conversion); see :func:`load_asf_amc`."""
     path = os.fspath(path)
     lines = split_lines(read_text(path, "an ASF file"))
-    if not any(s.strip() for s in lines):
+    while lines and not lines[-1].strip():
+        lines.pop()  # so that "end of file" names the last line with text
+    if not lines:
         raise MocapFormatError(path, 1, "an ASF skeleton (':root', ':bonedata', ':hierarchy')", "an empty file")
     section = ""
     seen: dict[str, int] = {}
@@ -388,6 +390,8 @@ def parse_amc(path: str | PathLike[str], asf: Asf) -> tuple[dict[str, NDArray[np
     """
     path = os.fspath(path)
     lines = split_lines(read_text(path, "an AMC file"))
+    while lines and not lines[-1].strip():
+        lines.pop()
     counts = _dof_count(asf)
     degrees: bool | None = None
     fully = False
@@ -408,7 +412,7 @@ def parse_amc(path: str | PathLike[str], asf: Asf) -> tuple[dict[str, NDArray[np
         start = i
         break
     if start is None:
-        what = "an empty file" if not any(s.strip() for s in lines) else "end of file"
+        what = "an empty file" if not lines else "end of file"
         raise MocapFormatError(path, max(len(lines), 1), "AMC frames (a frame number, then one line per bone)", what)
     body = lines[start:]
     while body and not body[-1].strip():
@@ -524,7 +528,7 @@ def _slow_amc(
             raise MocapFormatError(path, number, "a bone of the ASF skeleton", repr(name[:40]))
         n = counts[name]
         if len(toks) - 1 != n:
-            raise MocapFormatError(path, number, f"{n} values for bone {name!r}", str(len(toks) - 1))
+            raise MocapFormatError(path, number, f"{n} value(s) for bone {name!r}", str(len(toks) - 1))
         if n == 0:
             continue
         if name in present:

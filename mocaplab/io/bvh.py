@@ -104,13 +104,13 @@ class _Tokens:
             raise MocapFormatError(self.path, line, repr(word), repr(tok[:40]))
         return line
 
-    def number(self, what: str) -> float:
-        tok, line = self.next(what)
+    def number(self, where: str) -> float:
+        tok, line = self.next(f"a number in {where}")
         value = _to_float(tok)
         if value is None:
-            raise MocapFormatError(self.path, line, what, repr(tok[:40]))
+            raise MocapFormatError(self.path, line, f"a number in {where}", repr(tok[:40]))
         if not math.isfinite(value):
-            raise MocapFormatError(self.path, line, f"a finite {what}", repr(tok[:40]))
+            raise MocapFormatError(self.path, line, f"a finite number in {where}", repr(tok[:40]))
         return value
 
 
@@ -175,7 +175,7 @@ def _parse_hierarchy(tok: _Tokens) -> list[_Joint]:
             raise MocapFormatError(path, keyword_line, "unique joint names", f"a second joint named {name!r}")
         names.add(name)
         tok.expect("OFFSET")
-        offset = [tok.number("an OFFSET number") for _ in range(3)]
+        offset = [tok.number("OFFSET") for _ in range(3)]
         joint = _Joint(name, parent, offset, line=keyword_line)
         joints.append(joint)
         stack.append(len(joints) - 1)
@@ -197,7 +197,7 @@ def _parse_hierarchy(tok: _Tokens) -> list[_Joint]:
                 tok.expect("Site")
                 tok.expect("{")
                 tok.expect("OFFSET")
-                joints[stack[-1]].end_sites.append([tok.number("an OFFSET number") for _ in range(3)])
+                joints[stack[-1]].end_sites.append([tok.number("OFFSET") for _ in range(3)])
                 tok.expect("}")
             else:
                 raise MocapFormatError(path, line, "'JOINT', 'End Site' or '}'", repr(t[:40]))

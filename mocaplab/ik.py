@@ -521,6 +521,8 @@ def dls_ik(
         ang = np.linalg.norm(dtheta, axis=-1, keepdims=True)
         dtheta = dtheta * np.minimum(1.0, max_step / np.maximum(ang, _TINY))
         for b, j in enumerate(chain_idx):
+            if wj[b] == 0.0:
+                continue
             p = skeleton.parents[j]
             local_axis = dtheta[:, b] if p < 0 else quat.rotate(quat.inv(grot[:, p]), dtheta[:, b])
             out[active, j] = quat.normalize(quat.mul(quat.exp(local_axis), out[active, j]))

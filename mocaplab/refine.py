@@ -46,6 +46,8 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+import sys
+import types
 from collections.abc import Sequence
 from typing import Literal
 
@@ -578,11 +580,14 @@ def solve_goals(
             target = _foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle))
             u, m, e = limb_joints(sk, ankle)
             full = np.linalg.norm(gpos[:, m] - gpos[:, u], axis=-1) + np.linalg.norm(gpos[:, e] - gpos[:, m], axis=-1)
+            # a leg may stay as straight as it already is, else up to `reach`
+            allowed = np.maximum(reach * full, np.linalg.norm(gpos[:, e] - gpos[:, u], axis=-1))
             r = target - gpos[:, u]
-            s2 = (reach * full) ** 2 - r[:, 0] ** 2 - r[:, 2] ** 2
+            s2 = allowed**2 - r[:, 0] ** 2 - r[:, 2] ** 2
             need = np.where(s2 > 0, r[:, 1] + np.sqrt(np.maximum(s2, 0.0)), r[:, 1])
             drop = np.minimum(drop, need)
-        drop = _lower_envelope(np.maximum(drop, -max_drop), _frames(drop_window, motion.fps, "drop_window"))
+        drop = np.where(drop < -1e-9, np.maximum(drop, -max_drop), 0.0)
+        drop = _lower_envelope(drop, _frames(drop_window, motion.fps, "drop_window"))
         if np.any(drop < 0):
             root[:, 1] += drop
             gpos = gpos + np.stack([np.zeros(n), drop, np.zeros(n)], axis=-1)[:, None, :]
@@ -639,8 +644,10 @@ def enforce_goals(
     levels : int
         Number of levels (each halves the spacing).
     exact : bool
-        Run the IK layer once more on the smoothed motion so the goals hold
-        exactly (the remaining correction is small and smooth).
+        Run the IK layer once more on the smoothed motion, aiming each goal
+        joint at its position in the per-frame solution with the same
+        weights: constraints hold exactly and the remaining correction is
+        small and smooth.
     adjust_root, dls_options
         See :func:`solve_goals`.
 
@@ -659,8 +666,14 @@ def enforce_goals(
     smooth = dmap.apply(motion)
     if not exact:
         return smooth
-    # the root correction is already in the smooth map: no per-frame lowering now
-    return solve_goals(smooth, goals, adjust_root=False, dls_options=dls_options)
+    # Last pass: aim each goal joint at where the per-frame solution put it
+    # (that is the constraint itself where w = 1), with the same weights, so
+    # only the small smoothing residual is corrected and it fades out with
+    # the blending windows.  The root correction is already in the map.
+    reached = solved.global_positions()
+    sk = motion.skeleton
+    final = [dataclasses.replace(g, targets=reached[:, _joint(sk, g.joint, "Goal.joint")]) for g in goals]
+    return solve_goals(smooth, final, adjust_root=False, dls_options=dls_options)
 
 
 # ------------------------------------------------------------ end effectors
@@ -1137,3 +1150,15 @@ def max_joint_angle_jump(before: Motion, after: Motion, *, joints: Sequence[Join
     c = quat.mul(quat.inv(before.rotations[:, sel]), after.rotations[:, sel])
     step = quat.mul(quat.inv(c[:-1]), c[1:])
     return float(np.degrees(quat.angle(step).max()))
+
+
+# ``mocaplab.refine`` names both this module and the entry point
+# ``mocaplab.refine(motion, ...)``: once the module is imported, Python binds
+# the attribute ``mocaplab.refine`` to the module, so the module itself must
+# be callable for the entry point to keep working.
+class _CallableModule(types.ModuleType):
+    def __call__(self, motion: Motion, **options: object) -> Motion:
+        return refine(motion, **options)  # type: ignore[arg-type]
+
+
+sys.modules[__name__].__class__ = _CallableModule

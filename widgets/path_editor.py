@@ -143,6 +143,7 @@ def make_canvas(figure: Figure, *, backend: Backend = "auto") -> Any:
             canvas.footer_visible = False
             canvas.resizable = False
             canvas.toolbar_position = "left"
+            canvas.toolbar_visible = "fade-in-fade-out"  # do not hide the tick labels
             return canvas
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 

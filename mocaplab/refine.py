@@ -459,6 +459,27 @@ def _fk(rot: Array, root: Array, motion: Motion) -> tuple[Array, Array]:
     return kinematics.fk(rot, root, motion.skeleton.offsets, motion.skeleton.parents, translations=motion.translations)
 
 
+def _refresh(rot: Array, fk: tuple[Array, Array], motion: Motion, changed: Sequence[int]) -> tuple[Array, Array]:
+    """Forward kinematics again only below the ``changed`` joints (root excluded).
+
+    Global rotations and positions of joints outside the subtrees of
+    ``changed`` are taken from ``fk``; the subtrees (a few leg joints) are
+    recomputed in index order, vectorised over frames.
+    """
+    sk = motion.skeleton
+    grot, gpos = (np.array(a, copy=True) for a in fk)
+    below = np.zeros(sk.n_joints, dtype=bool)
+    below[list(changed)] = True
+    for j in range(1, sk.n_joints):
+        below[j] |= below[sk.parents[j]]
+        if below[j]:
+            p = sk.parents[j]
+            local = sk.offsets[j] if motion.translations is None else motion.translations[:, j]
+            grot[:, j] = quat.mul(grot[:, p], rot[:, j])
+            gpos[:, j] = gpos[:, p] + quat.rotate(grot[:, p], local)
+    return grot, gpos
+
+
 def _blend(cur: Array, goal: Goal) -> Array:
     return cur + goal.weights[:, None] * (goal.targets - cur)
 
@@ -614,7 +635,7 @@ def solve_goals(
             target = _foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle))
             rot = two_bone_ik(rot, root, sk, ankle, target, end_rotation=grot[:, ankle], fk=fk)
         if toes:
-            grot2, gpos2 = _fk(rot, root, motion)
+            grot2, gpos2 = _refresh(rot, fk, motion, [limb_joints(sk, a)[0] for a in foot_joints])
             for ankle, (jt, gt) in toes.items():
                 q = aim_deltas(gpos2[:, ankle], gpos2[:, jt], gt.targets, weight=gt.weights)
                 parent = int(sk.parents[ankle])

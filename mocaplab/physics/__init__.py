@@ -42,7 +42,7 @@ from .touchup import (
     step,
     touch_up,
 )
-from .zmp import Balance, balance, polygon_distance, signed_distance, support_polygon, zmp, zmp_distance, zmp_from_links
+from .zmp import Balance, balance, polygon_distance, signed_distance, support_polygon, zmp_distance, zmp_from_links
 
 __all__ = [
     "DE_LEVA_MALE",
@@ -75,7 +75,6 @@ __all__ = [
     "polygon_distance",
     "signed_distance",
     "support_polygon",
-    "zmp",
     "zmp_distance",
     "zmp_from_links",
 ]

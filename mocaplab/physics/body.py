@@ -539,9 +539,11 @@ def smoothed_derivatives(
     The paper applies "a gaussian filter of width 5" (frames at 30 fps) and
     then finite differences.  A kernel of width ``w`` frames here is a
     Gaussian of standard deviation ``w / 4`` truncated at two standard
-    deviations, so it spans ``w`` frames.  The ends are padded by point
-    reflection (``x[-k] = 2 x[0] - x[k]``), which continues the velocity
-    instead of inventing a stop, before filtering; then central differences.
+    deviations, so it spans ``w`` frames.  Before filtering, each end is
+    padded with the least-squares parabola through its first (last) frames,
+    so that the filter neither invents a stop at the ends nor bends a
+    ballistic path (quadratic signals come out exact); then central
+    differences.
 
     Parameters
     ----------
@@ -561,19 +563,28 @@ def smoothed_derivatives(
         z = np.zeros_like(x)
         return x.copy(), z, z.copy()
     std = max(float(width), 0.0) / 4.0
-    pad = min(n - 1, int(2.0 * std + 0.5) + 2)
-    head = 2.0 * x[:1] - x[1 : pad + 1][::-1]
-    tail = 2.0 * x[-1:] - x[-pad - 1 : -1][::-1]
-    xp = np.concatenate([head, x, tail], axis=0)
+    pad = int(2.0 * std + 0.5) + 1
+    fit = min(n, max(3, 2 * pad))
+    flat = x.reshape(n, -1)
+    head = _extrapolate(flat[:fit], np.arange(-pad, 0))
+    tail = _extrapolate(flat[n - fit :][::-1], np.arange(-pad, 0))[::-1]
+    xp = np.concatenate([head, flat, tail], axis=0)
     if std > 0:
         xp = gaussian_filter1d(xp, std, axis=0, mode="nearest", truncate=2.0)
     s = xp[pad : pad + n]
     v = (xp[pad + 1 : pad + n + 1] - xp[pad - 1 : pad + n - 1]) * (0.5 * fps)
     a = (xp[pad + 1 : pad + n + 1] - 2.0 * s + xp[pad - 1 : pad + n - 1]) * (fps * fps)
-    if pad == 0:  # two-frame clip: no neighbours beyond the ends
-        v = np.gradient(x, 1.0 / fps, axis=0)
-        a = np.zeros_like(x)
-    return s, v, a
+    return s.reshape(x.shape), v.reshape(x.shape), a.reshape(x.shape)
+
+
+def _extrapolate(samples: Array, at: NDArray[np.int64]) -> Array:
+    """Least-squares parabola (line for two samples) through ``samples`` (q, K) at indices ``at``."""
+    q = samples.shape[0]
+    deg = min(2, q - 1)
+    t = np.arange(q, dtype=float)
+    basis = np.vander(t, deg + 1)
+    coef, *_ = np.linalg.lstsq(basis, samples, rcond=None)
+    return np.vander(at.astype(float), deg + 1) @ coef
 
 
 def center_of_mass(motion: Motion, body: Body) -> Array:

@@ -55,7 +55,6 @@ __all__ = [
     "signed_distance",
     "Balance",
     "balance",
-    "zmp",
     "zmp_distance",
     "default_contacts",
 ]
@@ -211,7 +210,7 @@ def polygon_distance(
     widest = np.max(np.where(valid_gap, gaps, 0.0), axis=1, initial=0.0)
     last = srt[rows, np.maximum(n_act - 1, 0)]
     widest = np.maximum(widest, srt[:, 0] + 2.0 * np.pi - last)
-    inside = (n_act >= 3) & (widest < np.pi - 1e-12) & (best_d > 0.0)
+    inside = (n_act >= 3) & (widest < np.pi - 1e-12)
     dist = np.sqrt(best_d)
     signed = np.where(inside, 0.0, dist)
     if depth and np.any(inside) and pairs.size:
@@ -380,11 +379,6 @@ def balance(
     proj = np.column_stack([proj2[:, 0], np.zeros(len(proj2)), proj2[:, 1]])
     com = np.einsum("l,flc->fc", body.masses, raw) / body.total_mass
     return Balance(z, proj, dist, com, ground, support, active, r, acc)
-
-
-def zmp(motion: Motion, body: Body | None = None, *, contacts: Contacts | None = None) -> Array:
-    """ZMP of every frame (equation 4), shape (F, 3); NaN on flight frames."""
-    return balance(motion, body, contacts=contacts).zmp
 
 
 def zmp_distance(motion: Motion, body: Body | None = None, *, contacts: Contacts | None = None) -> Array:

@@ -1,0 +1,347 @@
+"""Step through a physical touch-up (Shin et al. 2003) and watch the ZMP settle.
+
+>>> from mocaplab.widgets import TouchUpStepper          # doctest: +SKIP
+>>> TouchUpStepper(bent_walk, body=fit.body)             # doctest: +SKIP
+
+The widget is a thin view over :class:`mocaplab.physics.TouchUpSession`:
+
+* **step** / **back** buttons move through the adjustments (a step already
+  computed is reused); the forward button carries the CSS class
+  ``mocaplab-touchup-step`` and the label with the mean ZMP distance the
+  class ``mocaplab-touchup-mean``;
+* a **schedule table** edits each adjustment's link sets (joint names or
+  presets, comma separated), ``sigma`` (seconds), ``rho`` and stage; an
+  edit applies from the current step on;
+* **Figure 8**: the ZMP's distance outside the support polygon on every
+  frame, for the input and for the current step;
+* **Figure 9**: the mean distance after each step so far;
+* a **3D view** (:class:`~mocaplab.widgets.MotionViewer`) of the input (grey)
+  and the current motion with its centre of mass, its ZMP and its support
+  polygon drawn under it.
+
+Callbacks show their exceptions in the widget's status line.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from typing import Any
+
+import ipywidgets as W
+import numpy as np
+from matplotlib.figure import Figure
+
+from mocaplab.motion import Motion
+from mocaplab.physics import Adjustment, TouchUpSession
+
+__all__ = ["TouchUpStepper"]
+
+STEP_CLASS = "mocaplab-touchup-step"
+BACK_CLASS = "mocaplab-touchup-back"
+MEAN_CLASS = "mocaplab-touchup-mean"
+INPUT_COLOR = "#9a9a9a"
+CURRENT_COLOR = "#1f77b4"
+
+
+def _canvas(figure: Figure) -> tuple[Any, Any]:
+    """(canvas, widget): an ipympl canvas widget, or Agg drawn into an Image."""
+    try:
+        from .path_editor import make_canvas
+    except ImportError:  # pragma: no cover - the path editor ships with the package
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        canvas: Any = FigureCanvasAgg(figure)
+    else:
+        canvas = make_canvas(figure)
+    if isinstance(canvas, W.DOMWidget):
+        return canvas, canvas
+    return canvas, W.Image(format="png")
+
+
+class _Plot:
+    def __init__(self, figure: Figure) -> None:
+        self.figure = figure
+        self.canvas, self.widget = _canvas(figure)
+
+    def draw(self) -> None:
+        if self.widget is self.canvas:
+            self.canvas.draw_idle()
+        else:
+            buf = io.BytesIO()
+            self.figure.savefig(buf, format="png")
+            self.widget.value = buf.getvalue()
+
+
+def _names(text: str) -> tuple[str, ...]:
+    return tuple(t.strip() for t in text.replace(";", ",").split(",") if t.strip())
+
+
+class _Row:
+    """Controls of one adjustment of the schedule."""
+
+    def __init__(self, k: int, adj: Adjustment) -> None:
+        self.k = k
+        self.s2 = W.Text(value=", ".join(adj.s2), description="S2", layout=W.Layout(width="230px"))
+        self.s3 = W.Text(value=", ".join(adj.s3), description="S3", layout=W.Layout(width="200px"))
+        self.sigma = W.BoundedFloatText(
+            value=round(adj.sigma, 4), min=0.0, max=10.0, step=1 / 30, description="sigma (s)", layout=W.Layout(width="170px")
+        )
+        self.rho = W.FloatSlider(
+            value=adj.rho, min=0.05, max=1.0, step=0.05, description="rho", continuous_update=False, layout=W.Layout(width="250px")
+        )
+        self.stage = W.Dropdown(options=["ground", "flight"], value=adj.stage, layout=W.Layout(width="90px"))
+        self.box = W.HBox([W.Label(f"{k + 1}."), self.s2, self.s3, self.sigma, self.rho, self.stage])
+
+    def set(self, adj: Adjustment) -> None:
+        self.s2.value = ", ".join(adj.s2)
+        self.s3.value = ", ".join(adj.s3)
+        self.sigma.value = round(adj.sigma, 4)
+        self.rho.value = adj.rho
+        self.stage.value = adj.stage
+
+    def changes(self, adj: Adjustment) -> dict[str, Any]:
+        """Fields whose control differs from ``adj``."""
+        out: dict[str, Any] = {}
+        if _names(self.s2.value) != adj.s2:
+            out["s2"] = _names(self.s2.value)
+        if _names(self.s3.value) != adj.s3:
+            out["s3"] = _names(self.s3.value)
+        if abs(float(self.sigma.value) - round(adj.sigma, 4)) > 1e-9:
+            out["sigma"] = float(self.sigma.value)
+        if abs(float(self.rho.value) - adj.rho) > 1e-9:
+            out["rho"] = float(self.rho.value)
+        if self.stage.value != adj.stage:
+            out["stage"] = self.stage.value
+        return out
+
+
+class TouchUpStepper:
+    """Step a physical touch-up forward and back and edit its schedule.
+
+    Parameters
+    ----------
+    motion : Motion or TouchUpSession
+        The motion to touch up (a new session is started with ``options``),
+        or an existing session.
+    viewer : bool
+        Show the 3D view (a :class:`~mocaplab.widgets.MotionViewer`).
+    viewer_options : dict, optional
+        Keyword options of the viewer (``window_size``, ``backend`` ...).
+    **options
+        Options of :class:`mocaplab.physics.TouchUpSession` (``body``,
+        ``schedule``, ``contacts``, ``flight_window``, ``footplants``).
+
+    Attributes
+    ----------
+    session : TouchUpSession
+        The core stepper every control forwards to.
+    step_button, back_button : ipywidgets.Button
+    mean_label : ipywidgets.HTML
+        "mean ZMP distance ... mm" of the current step.
+    rows : list
+        One set of schedule controls per adjustment (``.s2``, ``.s3``,
+        ``.sigma``, ``.rho``, ``.stage`` widgets).
+    figure8, figure9 : matplotlib.figure.Figure
+    viewer : MotionViewer or None
+    widget : ipywidgets.VBox
+    """
+
+    def __init__(
+        self,
+        motion: Motion | TouchUpSession,
+        *,
+        viewer: bool = True,
+        viewer_options: dict[str, Any] | None = None,
+        **options: Any,
+    ) -> None:
+        if isinstance(motion, TouchUpSession):
+            if options:
+                raise ValueError(f"Expected no session options with an existing TouchUpSession, got {sorted(options)}")
+            self.session = motion
+        elif isinstance(motion, Motion):
+            self.session = TouchUpSession(motion, **options)
+        else:
+            raise TypeError(f"Expected `motion` to be a Motion or a TouchUpSession, got {type(motion).__name__}")
+        self.viewer_options = dict(viewer_options or {})
+        self.viewer_updates = 0
+
+        self.back_button = W.Button(description="back", icon="step-backward", layout=W.Layout(width="90px"))
+        self.back_button.add_class(BACK_CLASS)
+        self.step_button = W.Button(description="step", icon="step-forward", button_style="primary", layout=W.Layout(width="90px"))
+        self.step_button.add_class(STEP_CLASS)
+        self.iteration_button = W.Button(description="+1 iteration", layout=W.Layout(width="110px"))
+        self.mean_label = W.HTML()
+        self.mean_label.add_class(MEAN_CLASS)
+        self.step_label = W.HTML()
+        self.status = W.HTML()
+        self.back_button.on_click(lambda _: self._guard(self.back))
+        self.step_button.on_click(lambda _: self._guard(self.forward))
+        self.iteration_button.on_click(lambda _: self._guard(self.forward_iteration))
+
+        self.rows = [_Row(k, adj) for k, adj in enumerate(self.session.schedule)]
+        for row in self.rows:
+            for ctl in (row.s2, row.s3, row.sigma, row.rho, row.stage):
+                ctl.observe(lambda change, r=row: self._guard(lambda: self._edit(r)), names="value")
+        self._syncing = False
+
+        self.figure8, self._ax8 = self._figure(4.6, 2.6)
+        self.figure9, self._ax9 = self._figure(3.2, 2.6)
+        self._plot8 = _Plot(self.figure8)
+        self._plot9 = _Plot(self.figure9)
+        self._init_plots()
+
+        self.viewer: Any = self._make_viewer() if viewer else None
+        self._viewer_box = W.Box([self.viewer.widget] if self.viewer is not None else [])
+        controls = W.HBox([self.back_button, self.step_button, self.iteration_button, self.mean_label])
+        schedule = W.VBox([W.HTML("<b>schedule</b> (S1 = the other joints; an edit applies from the current step on)")] + [r.box for r in self.rows])
+        plots = W.HBox([self._plot8.widget, self._plot9.widget])
+        self.widget = W.VBox([controls, self.step_label, schedule, plots, self._viewer_box, self.status])
+        self.widget.add_class("mocaplab-touchup")
+        self._refresh(viewer=False)
+
+    # ------------------------------------------------------------ actions
+    def forward(self) -> None:
+        """Apply the next adjustment (what the step button does)."""
+        self.session.forward()
+        self._refresh()
+
+    def back(self) -> None:
+        """Go back one step (what the back button does)."""
+        self.session.back()
+        self._refresh()
+
+    def forward_iteration(self) -> None:
+        """Run the rest of the schedule's current pass, or a whole pass."""
+        n = len(self.session.schedule)
+        k = self.session.current.index % n
+        self.session.run(n - k if k else n)
+        self._refresh()
+
+    def _edit(self, row: _Row) -> None:
+        if self._syncing:
+            return
+        changes = row.changes(self.session.schedule[row.k])
+        if changes:
+            self.session.set_adjustment(row.k, **changes)
+            self._refresh(viewer=False)
+
+    def _guard(self, action: Any) -> None:
+        try:
+            action()
+            self.status.value = ""
+        except Exception as err:  # shown in the widget, not lost in the log
+            self.status.value = f"<pre style='color:#b00'>{type(err).__name__}: {err}</pre>"
+
+    # ------------------------------------------------------------ drawing
+    @staticmethod
+    def _figure(w: float, h: float) -> tuple[Figure, Any]:
+        fig = Figure(figsize=(w, h), dpi=90, layout="constrained")
+        return fig, fig.add_subplot(1, 1, 1)
+
+    def _init_plots(self) -> None:
+        first = self.session.input
+        t = first.motion.times
+        ax = self._ax8
+        ax.set_title("ZMP distance per frame (Fig. 8)", fontsize=9)
+        ax.set_xlabel("time (s)", fontsize=8)
+        ax.set_ylabel("distance (mm)", fontsize=8)
+        (self._line_in,) = ax.plot(t, 1000 * first.zmp_distance, color=INPUT_COLOR, lw=1.2, label="input")
+        (self._line_now,) = ax.plot(t, 1000 * first.zmp_distance, color=CURRENT_COLOR, lw=1.2, label="current")
+        ax.legend(fontsize=7, loc="upper right")
+        ax.tick_params(labelsize=7)
+        ax9 = self._ax9
+        ax9.set_title("mean distance per step (Fig. 9)", fontsize=9)
+        ax9.set_xlabel("step", fontsize=8)
+        ax9.set_ylabel("mean (mm)", fontsize=8)
+        ax9.tick_params(labelsize=7)
+        (self._line_mean,) = ax9.plot([0], [1000 * first.mean_zmp_distance], "o-", color=CURRENT_COLOR, ms=3)
+        (self._dot_mean,) = ax9.plot([0], [1000 * first.mean_zmp_distance], "o", color="#d62728", ms=6)
+
+    def _refresh(self, *, viewer: bool = True) -> None:
+        s = self.session
+        cur = s.current
+        mm = 1000.0 * cur.mean_zmp_distance
+        mm0 = 1000.0 * s.input.mean_zmp_distance
+        self.mean_label.value = (
+            f"mean ZMP distance <b>{mm:.2f}</b> mm (input {mm0:.2f} mm)"
+        )
+        nxt = cur.next_adjustment
+        self.step_label.value = (
+            f"step {cur.index} (pass {cur.iteration + 1}): <i>{cur.label}</i> &nbsp;|&nbsp; next: {nxt.label}, "
+            f"sigma {nxt.sigma:.3g} s, rho {nxt.rho:.2g}"
+        )
+        self.back_button.disabled = s.index == 0
+        self._syncing = True
+        try:
+            for row, adj in zip(self.rows, cur.schedule, strict=False):
+                row.set(adj)
+        finally:
+            self._syncing = False
+        self._line_now.set_ydata(1000 * cur.zmp_distance)
+        top = np.nanmax(np.concatenate([1000 * s.input.zmp_distance, 1000 * cur.zmp_distance, [1.0]]))
+        self._ax8.set_ylim(0, 1.08 * top)
+        hist = s.history.mean_zmp_distance * 1000
+        steps = np.arange(len(hist))
+        self._line_mean.set_data(steps, hist)
+        self._dot_mean.set_data([steps[-1]], [hist[-1]])
+        self._ax9.set_xlim(-0.5, max(3, len(hist)) - 0.5)
+        self._ax9.set_ylim(0, 1.1 * max(np.nanmax(hist), 1e-3))
+        self._plot8.draw()
+        self._plot9.draw()
+        if viewer:
+            self._update_viewer()
+
+    # ------------------------------------------------------------ 3D view
+    def _make_viewer(self) -> Any:
+        from .viewer import MotionViewer
+
+        s = self.session
+        options = {"window_size": (640, 360)} | self.viewer_options
+        viewer = MotionViewer(
+            [s.input.motion, s.current.motion], colors=[INPUT_COLOR, CURRENT_COLOR], labels=["input", "touched up"], **options
+        )
+        self._add_overlays(viewer)
+        return viewer
+
+    def _add_overlays(self, viewer: Any) -> None:
+        bal = self.session.current.balance
+        n = len(bal.com)
+        lift = np.array([0.0, 0.003, 0.0])
+        viewer.add_points("com", bal.com[:, None, :], color="#ff7f0e", radius=0.04)
+        ground_com = bal.com * np.array([1.0, 0.0, 1.0]) + lift
+        viewer.add_points("com_ground", ground_com[:, None, :], color="#ff7f0e", radius=0.02)
+        viewer.add_points("zmp", (bal.zmp + lift)[:, None, :], color="#d62728", radius=0.03)
+        polygons: Sequence[np.ndarray] = [bal.polygon(f) + lift for f in range(n)]
+        viewer.add_polygon("support", list(polygons), color="#2ca02c", opacity=0.35)
+
+    def _update_viewer(self) -> None:
+        if self.viewer is None:
+            return
+        s = self.session
+        setter = getattr(self.viewer, "set_motions", None)
+        if callable(setter):
+            setter([s.input.motion, s.current.motion])
+            self._add_overlays(self.viewer)
+        else:
+            frame = getattr(self.viewer, "frame", 0)
+            old = self.viewer
+            self.viewer = self._make_viewer()
+            if frame:
+                self.viewer.set_frame(frame)
+            self._viewer_box.children = [self.viewer.widget]
+            old.close()
+        self.viewer_updates += 1
+
+    # ------------------------------------------------------------ display
+    def _ipython_display_(self) -> None:
+        from IPython.display import display
+
+        display(self.widget)
+
+    def show(self) -> Any:
+        """Display the widget (and return it)."""
+        from IPython.display import display
+
+        display(self.widget)
+        return self.widget

@@ -133,7 +133,8 @@ def cmu(trial: str, *, source: Literal["auto", "bvh", "asfamc"] = "auto") -> Mot
 
     Notes
     -----
-    The salsa pair (``"60_10"``, ``"61_10"``) exists only as BVH in the mirror
+    Frame rate and units come from the registry (metres; 120 fps for the
+    CMU clips).  The salsa pair (``"60_10"``, ``"61_10"``) exists only as BVH in the mirror
     (a third-party conversion with another skeleton, in centimetres); its
     header says 120 fps but the clips are 60 fps, which is what is used, and
     its artificial T-pose frame 0 is dropped.
@@ -158,8 +159,9 @@ def cmu(trial: str, *, source: Literal["auto", "bvh", "asfamc"] = "auto") -> Mot
         _check(path, str(entry["bvh_sha256"]), normalise_newlines=False)
         motion = io.load_bvh(path, scale=float(entry["scale"]), name=trial)  # type: ignore[arg-type]
         if is_pair:
-            motion = motion[1:].replace(fps=float(entry["fps"]))  # type: ignore[arg-type]
-        return motion
+            motion = motion[1:]
+        # the registry's rate: BVH headers round it (0.008333333 s) or get it wrong (salsa)
+        return motion.replace(fps=float(entry["fps"]))  # type: ignore[arg-type]
     if is_pair:
         raise DataError(f"Clip {trial} has no ASF/AMC files in the registry; use source='bvh' with a mirror")
     if root is not None:
@@ -170,4 +172,4 @@ def cmu(trial: str, *, source: Literal["auto", "bvh", "asfamc"] = "auto") -> Mot
     else:
         asf = _download(str(entry["asf_url"]), str(entry["asf_sha256_lf"]))
         amc = _download(str(entry["amc_url"]), str(entry["amc_sha256_lf"]))
-    return io.load_asf_amc(asf, amc, name=trial)
+    return io.load_asf_amc(asf, amc, name=trial, fps=float(entry["fps"]))  # type: ignore[arg-type]

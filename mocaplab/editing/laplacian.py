@@ -420,10 +420,10 @@ def gauge_rows(
             V = np.eye(len(cols))
         else:
             sub = CQ[np.ix_(rows, cols)]
-            _, sv, vt = np.linalg.svd(sub, full_matrices=True)
-            tol = 1e-10 * max(float(sv.max(initial=0.0)), 1e-300)
-            rank = int(np.sum(sv > tol))
-            V = vt[rank:].T
+            # null space from the (small, q x q) Gram matrix: eigenvalues are squared singular values
+            w, vecs = np.linalg.eigh(sub.T @ sub)
+            tol = 1e-12 * max(float(w.max(initial=0.0)), 1e-300)
+            V = vecs[:, w <= tol]
         if V.shape[1] == 0:
             continue
         M = _gauge_coordinates(V, None if primary is None else primary[cols])
@@ -620,9 +620,7 @@ class SpatialSolver:
             ),
             shape=(2 * n2, 2 * self.layout.total),
         )
-        steps_index = np.full(self.layout.total, -1, dtype=np.int64)
-        steps_index[self.layout.steps()] = np.arange(len(self.layout.steps()))
-        self._rigid_step_rows = steps_index[rs]
+        self._rigid_step_rows = rs  # global step g: segment p[g] -> p[g + 1]
         self.segments = [list(s) for s in segments]
         self.scale_compensation = bool(scale_compensation)
         self.tangent_rows = _TangentRows(self.paths)
@@ -635,11 +633,10 @@ class SpatialSolver:
         P0 = self.p0.reshape(-1, 2)
         self._steps = steps
         self._L0 = np.linalg.norm(P0[steps + 1] - P0[steps], axis=1)
+        # lengths of all n - 1 consecutive segments, 0 across characters
+        self._L0full = np.zeros(max(self.layout.total - 1, 0))
+        self._L0full[steps] = self._L0
         self._interior = self.layout.interior()
-        seg_of = np.full(self.layout.total, -1, dtype=np.int64)
-        seg_of[steps] = np.arange(len(steps))
-        self._seg_after = seg_of[self._interior]  # segment interior -> interior+1
-        self._seg_before = seg_of[self._interior - 1]
 
     def factorize(
         self, soft: Sequence[Rows], weights: Sequence[float], hard: Sequence[Rows], labels: Sequence[Any]
@@ -699,11 +696,12 @@ class SpatialSolver:
 
     def _scale_terms(self, pbar: Array) -> tuple[Array, Array]:
         P = pbar.reshape(-1, 2)
-        seg = P[self._steps + 1] - P[self._steps]
-        ln = np.linalg.norm(seg, axis=1)
-        scale = np.divide(self._L0, ln, out=np.ones_like(ln), where=ln > 1e-15)
+        seg = P[1:] - P[:-1]
+        ln = np.sqrt(np.einsum("ij,ij->i", seg, seg))
+        scale = np.divide(self._L0full, ln, out=np.ones_like(ln), where=ln > 1e-15)
         v = seg * scale[:, None]
-        return (v[self._seg_after] - v[self._seg_before]).reshape(-1), v
+        dv = v[1:] - v[:-1]  # row g - 1 belongs to frame g
+        return dv[self._interior - 1].reshape(-1), v
 
     # ---------------------------------------------------------- energies
     def shape_energy(self, f: SpatialFactors, bw: Array, pbar: Array) -> float:

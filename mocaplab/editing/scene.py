@@ -99,6 +99,20 @@ def _is_effector(c: Any) -> bool:
     return isinstance(c, EndEffector)
 
 
+def _effectors(constraints: Sequence[Any], K: int) -> tuple[tuple[Any, ...], ...]:
+    """End-effector constraints per character."""
+    ee: list[list[Any]] = [[] for _ in range(K)]
+    for c in constraints:
+        if isinstance(c, EndEffectorConstraint):
+            inner = c.constraint
+            if _is_effector(inner) and inner.character != c.character:
+                inner = dataclasses.replace(inner, character=c.character)
+            ee[c.character].append(inner)
+        elif _is_effector(c):
+            ee[c.character].append(c)
+    return tuple(tuple(x) for x in ee)
+
+
 def _characters(characters: Any) -> tuple[Motion, ...]:
     if isinstance(characters, Motion):
         characters = (characters,)
@@ -255,6 +269,7 @@ class SceneEditor:
         self._sd = _Domain(self._space, "space", lambda c: spatial_rows(c, self.paths, layout, tangents, step))
         self._td = _Domain(self._time, "time", lambda c: temporal_rows(c, layout, self._time.dts, step))
         self._constraints: tuple[Any, ...] = ()
+        self._effectors: tuple[tuple[Any, ...], ...] = ()
         self._space_sol: tuple[Array, Array] | None = None
         self._time_sol: tuple[Array, tuple[int, ...]] | None = None
         self._result: EditResult | None = None
@@ -333,13 +348,13 @@ class SceneEditor:
 
         On any error the editor keeps its previous state.
         """
-        saved = (self._sd.snapshot(), self._td.snapshot(), self._space_sol, self._time_sol)
+        saved = (self._sd.snapshot(), self._td.snapshot(), self._space_sol, self._time_sol, self._effectors)
         try:
             return self._install(constraints, changed)
         except Exception:
             self._sd.restore(saved[0])
             self._td.restore(saved[1])
-            self._space_sol, self._time_sol = saved[2], saved[3]
+            self._space_sol, self._time_sol, self._effectors = saved[2], saved[3], saved[4]
             raise
 
     def _install(self, constraints: tuple[Any, ...], changed: int | None) -> EditResult:
@@ -355,6 +370,8 @@ class SceneEditor:
             c = constraints[changed]
             self._validate([c], offset=changed)
             dom = self._sd if isinstance(c, SPATIAL) else self._td if isinstance(c, TEMPORAL) else None
+            if dom is None:
+                self._effectors = _effectors(constraints, len(self.characters))
             if dom is not None:
                 if old[changed].structure() == c.structure():
                     dom.move(changed, c)
@@ -372,6 +389,7 @@ class SceneEditor:
                     self._time_sol = self._time.solve(self._td.factors, self._td.bw, self._td.h)
         else:
             self._validate(constraints)
+            self._effectors = _effectors(constraints, len(self.characters))
             self._sd.set([(i, c) for i, c in enumerate(constraints) if isinstance(c, SPATIAL)])
             self._td.set([(i, c) for i, c in enumerate(constraints) if isinstance(c, TEMPORAL)])
             self._space_sol = self._space.solve(self._sd.factors, self._sd.bw, self._sd.h)
@@ -567,16 +585,7 @@ class EditResult:
         self.paths = tuple(P[off[k] : off[k + 1]] for k in range(K))
         self.shape_paths = tuple(Pb[off[k] : off[k + 1]] for k in range(K))
         self.times = tuple(T[off[k] : off[k + 1]] for k in range(K))
-        ee: list[list[Any]] = [[] for _ in range(K)]
-        for c in constraints:
-            if isinstance(c, EndEffectorConstraint):
-                inner = c.constraint
-                if _is_effector(inner) and inner.character != c.character:
-                    inner = dataclasses.replace(inner, character=c.character)
-                ee[c.character].append(inner)
-            elif _is_effector(c):
-                ee[c.character].append(c)
-        self.end_effectors = tuple(tuple(x) for x in ee)
+        self.end_effectors = editor._effectors
         self._headings = _Lazy(K, self._heading)
         self.edited_motions = _Lazy(K, self._edited_motion)
         self._plain = _Lazy(K, self._motion)

@@ -1,0 +1,190 @@
+"""Interactive speed of Laplacian path editing and time warping (Kim et al. 2009, Table 1).
+
+Scenes sized like Table 1 (30 fps, total frames over all characters):
+
+* high five: 4 characters, ~600 frames  (paper: 58.9 ms per Laplacian update)
+* adventure: 8 characters, ~2000 frames (paper: 332.4 ms)
+* stacking: 10 characters, ~2400 frames (paper: 282.5 ms)
+* a crowd of 100 characters x 300 frames (30 000 frames)
+
+Characters are real CMU walks resampled to 30 fps and chained end to end
+(each clip turned and moved to continue the previous one) to reach the frame
+counts; each has soft pins at its ends and middle plus one hard pin, and
+neighbours are tied by soft relative and sync constraints.
+
+For each scene we time, through :class:`mocaplab.editing.SceneEditor`:
+
+* a *space drag*: a soft position pin moves (both spatial phases, 2 back-substitutions);
+* a *time drag*: a sync offset moves (the time warp with its monotonicity rounds);
+* the *naive baseline* in the same run: ``edit(characters, constraints)`` from
+  scratch (assemble, factorise, solve both systems).
+
+Medians over repeats.  The paper's times also include end-effector IK on a
+2009 PC, so the ratio to the paper says "interactive", not "same work".
+Targets: < 5 ms per update (space + time) for every Table 1 size, < 50 ms for
+the crowd.  The last table shows the update time against the number of
+frames: it grows linearly (constant ms per 1000 frames).
+
+Run: ``python benchmarks/bench_laplacian.py`` (needs the CMU mirror:
+``MOCAPLAB_DATA_DIR``).  Takes about a minute on 2 cores.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import time
+
+import numpy as np
+
+from mocaplab import data, quat
+from mocaplab.editing import AbsoluteTime, PinPosition, Relative, SceneEditor, Sync, edit
+from mocaplab.motion import Motion, concatenate
+
+FPS = 30.0
+CLIPS = ("16_15", "16_11", "16_17")  # one subject: one skeleton
+PAPER_MS = {"high five (4)": 58.9, "adventure (8)": 332.4, "stacking (10)": 282.5}
+
+
+def _clips() -> list[Motion]:
+    return [data.cmu(c).resample(FPS) for c in CLIPS]
+
+
+def _chain(clips: list[Motion], n_frames: int, seed: int) -> Motion:
+    """A walk of ``n_frames`` frames: clips chained, each continuing the previous one's position and heading."""
+    rng = np.random.default_rng(seed)
+    parts: list[Motion] = []
+    total = 0
+    prev: Motion | None = None
+    while total < n_frames:
+        m = clips[int(rng.integers(len(clips)))]
+        if prev is not None:
+            h_prev = quat.yaw(prev.rotations[-1, 0])
+            h_new = quat.yaw(m.rotations[0, 0])
+            m = m.transformed(yaw=float(h_prev - h_new))
+            step = prev.root_positions[-1] - prev.root_positions[-2]
+            shift = prev.root_positions[-1] + step - m.root_positions[0]
+            shift[1] = 0.0
+            m = m.transformed(translation=shift)
+        parts.append(m)
+        prev = m
+        total += m.n_frames
+    return concatenate(parts)[:n_frames]
+
+
+def build_scene(frames: list[int], seed: int = 0) -> tuple[list[Motion], list, int, int]:
+    """Characters with the given frame counts, their constraints, and the indices to drag."""
+    clips = _clips()
+    chars = []
+    for k, n in enumerate(frames):
+        m = _chain(clips, n, seed + k)
+        chars.append(m.transformed(yaw=0.3 * k, translation=[2.0 * (k % 10), 0.0, 3.0 * (k // 10)]))
+    cons: list = []
+    drag_space = drag_time = -1
+    for k, m in enumerate(chars):
+        p = m.root_positions[:, [0, 2]]
+        F = m.n_frames
+        cons.append(PinPosition(k, 0, p[0], hard=True))
+        cons.append(PinPosition(k, F - 1, p[-1]))
+        if k == 0:
+            drag_space = len(cons)
+        cons.append(PinPosition(k, F // 2, p[F // 2]))
+        cons.append(AbsoluteTime(k, 0, 0.0))
+        if k:
+            cons.append(Relative(k, 10, k - 1, 10, (0.0, 2.0), weight=0.1))
+            if k == 1:
+                drag_time = len(cons)
+            cons.append(Sync(k, F // 3, k - 1, chars[k - 1].n_frames // 3, weight=0.1))
+    return chars, cons, drag_space, drag_time
+
+
+def _median_ms(fn, repeats: int) -> float:
+    times = []
+    for r in range(repeats):
+        t0 = time.perf_counter()
+        fn(r)
+        times.append(time.perf_counter() - t0)
+    return 1e3 * statistics.median(times)
+
+
+def time_scene(frames: list[int], repeats: int, naive_repeats: int) -> dict[str, float]:
+    chars, cons, i_space, i_time = build_scene(frames)
+    ed = SceneEditor(chars, cons)
+    base = np.asarray(cons[i_space].position)
+
+    def space(r: int) -> None:
+        a = 0.05 * r
+        ed.drag(i_space, base + [0.8 * np.cos(a), 0.8 * np.sin(a)])
+
+    def time_(r: int) -> None:
+        ed.drag(i_time, 0.3 * np.sin(0.1 * r))
+
+    space(0)
+    time_(0)
+    n0 = ed.factorizations
+    ms_space = _median_ms(space, repeats)
+    ms_time = _median_ms(time_, repeats)
+    assert ed.factorizations == n0, "a drag refactorised"
+    res = ed.result
+    assert res.hard_residual_space < 1e-6 and res.hard_residual_time < 1e-6
+    assert np.all(np.diff(res.times[0]) > 0)
+    moved = list(ed.constraints)
+    ms_naive = _median_ms(lambda r: edit(chars, moved), naive_repeats)
+    check = edit(chars, moved)
+    agree = max(float(np.abs(a - b).max()) for a, b in zip(check.paths, res.paths, strict=True))
+    return {
+        "frames": float(sum(frames)),
+        "characters": float(len(frames)),
+        "space": ms_space,
+        "time": ms_time,
+        "update": ms_space + ms_time,
+        "naive": ms_naive,
+        "agree": agree,
+    }
+
+
+def main() -> int:
+    if not os.environ.get("MOCAPLAB_DATA_DIR"):
+        print("set MOCAPLAB_DATA_DIR to the CMU mirror", file=sys.stderr)
+        return 2
+    scenes = {
+        "high five (4)": [142, 105, 253, 105],
+        "adventure (8)": [356, 140, 370, 251, 140, 140, 370, 251],
+        "stacking (10)": [368, 220, 250, 210, 298, 262, 216, 168, 307, 211],
+        "crowd (100x300)": [300] * 100,
+    }
+    print("Laplacian path editing + time warping: one drag update through SceneEditor.drag (median ms)")
+    print(
+        f"{'scene':18s} {'frames':>7s} {'space':>8s} {'time':>8s} {'update':>8s} {'naive':>9s} {'x faster':>9s} "
+        f"{'paper':>7s} {'vs paper':>9s} {'target':>7s}"
+    )
+    worst_ratio = []
+    ok = True
+    for name, frames in scenes.items():
+        crowd = name.startswith("crowd")
+        r = time_scene(frames, repeats=15 if crowd else 40, naive_repeats=3 if crowd else 8)
+        target = 50.0 if crowd else 5.0
+        ok &= r["update"] < target
+        paper = PAPER_MS.get(name)
+        vs = f"{paper / r['update']:8.0f}x" if paper else f"{'-':>9s}"
+        print(
+            f"{name:18s} {int(r['frames']):7d} {r['space']:8.2f} {r['time']:8.2f} {r['update']:8.2f} "
+            f"{r['naive']:9.1f} {r['naive'] / r['update']:8.0f}x {paper or float('nan'):7.1f} {vs} "
+            f"{'<' if r['update'] < target else '>='}{target:4.0f} ms"
+        )
+        worst_ratio.append(r["agree"])
+    print(f"editor vs edit(): max path difference {max(worst_ratio):.1e} m")
+    print()
+    print("Frames versus update time (crowds of 300-frame characters):")
+    print(f"{'characters':>10s} {'frames':>7s} {'update ms':>10s} {'ms / 1000 frames':>17s}")
+    for n_chars in (5, 10, 25, 50, 100):
+        r = time_scene([300] * n_chars, repeats=15, naive_repeats=1)
+        print(f"{n_chars:10d} {int(r['frames']):7d} {r['update']:10.2f} {1000 * r['update'] / r['frames']:17.3f}")
+    print()
+    print("all targets met" if ok else "SOME TARGETS MISSED")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

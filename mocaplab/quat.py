@@ -158,19 +158,19 @@ def between(u: ArrayLike, v: ArrayLike) -> Array:
 
     For opposite vectors an arbitrary perpendicular axis is used.
     """
-    u = np.asarray(u, dtype=float)
-    v = np.asarray(v, dtype=float)
-    u = u / np.linalg.norm(u, axis=-1, keepdims=True)
-    v = v / np.linalg.norm(v, axis=-1, keepdims=True)
-    c = np.cross(u, v)
-    d = np.sum(u * v, axis=-1, keepdims=True)
+    ua = np.asarray(u, dtype=float)
+    va = np.asarray(v, dtype=float)
+    ua = ua / np.linalg.norm(ua, axis=-1, keepdims=True)
+    va = va / np.linalg.norm(va, axis=-1, keepdims=True)
+    c = np.cross(ua, va)
+    d = np.sum(ua * va, axis=-1, keepdims=True)
     q = np.concatenate([c, 1.0 + d], axis=-1)
     opposite = (1.0 + d[..., 0]) < 1e-9
     if np.any(opposite):
         # any axis perpendicular to u
-        alt = np.cross(u, np.array([1.0, 0.0, 0.0]))
+        alt = np.cross(ua, np.array([1.0, 0.0, 0.0]))
         weak = np.linalg.norm(alt, axis=-1) < 1e-6
-        alt = np.where(weak[..., None], np.cross(u, np.array([0.0, 0.0, 1.0])), alt)
+        alt = np.where(weak[..., None], np.cross(ua, np.array([0.0, 0.0, 1.0])), alt)
         q = np.where(opposite[..., None], np.concatenate([alt, np.zeros_like(d)], axis=-1), q)
     return normalize(q)
 

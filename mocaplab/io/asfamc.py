@@ -664,7 +664,7 @@ def load_asf_amc(
     if not (np.isfinite(root).all() and np.isfinite(scaled).all() and np.isfinite(end_offsets).all()):
         raise MocapFormatError(asf.path, 0, f"lengths that stay finite in metres (scale {unit:g})", "an overflow")
     skeleton = Skeleton(
-        names=names,
+        names=tuple(names),
         parents=parents,
         offsets=scaled,
         end_site_parents=np.array(leaves, dtype=np.int64),

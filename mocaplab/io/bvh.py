@@ -406,10 +406,10 @@ def load_bvh(path: str | PathLike[str], *, scale: float | None = None, name: str
     esp = [i for i, j in enumerate(joints) for _ in j.end_sites]
     eso = [e for j in joints for e in j.end_sites]
     raw_skeleton = Skeleton(
-        names=[j.name for j in joints],
+        names=tuple(j.name for j in joints),
         parents=np.array([j.parent for j in joints], dtype=np.int64),
         offsets=offsets,
-        channels=[j.channels for j in joints],
+        channels=tuple(j.channels for j in joints),
         end_site_parents=np.array(esp, dtype=np.int64),
         end_site_offsets=np.array(eso, dtype=float).reshape(-1, 3),
     )

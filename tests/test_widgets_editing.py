@@ -380,3 +380,55 @@ def test_time_track_dom_classes(walks):
     assert "mocaplab-time-handles" in tt.handles_info._dom_classes
     assert tt.ax.get_title() == "mocaplab time tracks"
     assert [t.get_text() for t in tt.ax.get_yticklabels()] == ["0: 16_15", "1: 02_01"]
+
+
+def test_release_lands_the_handle_under_the_mouse_when_motion_events_were_dropped(walks):
+    """Browsers may drop motion events: the release position is applied too."""
+    end = walks[0].n_frames - 1
+    target = walks[0].root_positions[end, [0, 2]]
+    pe = PathEditor([walks[0]], [PinPosition(0, end, target, hard=True)], viewer=False)
+    pe.figure.canvas.draw()
+    goal = target + np.array([0.7, -0.4])
+    _event(pe, "button_press_event", target)
+    _event(pe, "motion_notify_event", target + np.array([0.2, -0.1]))  # only one motion event arrives
+    _event(pe, "button_release_event", goal)
+    assert np.allclose(pe.editor.constraints[0].position, goal, atol=1e-9)
+    assert np.allclose(pe.result.paths[0][end], goal, atol=1e-6)
+    (h,) = pe.handle_positions()
+    x, y = pe.ax.transData.transform(goal)
+    assert np.allclose(h["pixel"], [x, y], atol=1e-6)
+
+
+def test_dragging_beyond_the_axes_keeps_following_the_mouse(walks):
+    pe = PathEditor([walks[0]], [PinPosition(0, 0, walks[0].root_positions[0, [0, 2]], hard=True)], viewer=False)
+    pe.figure.canvas.draw()
+    start = np.asarray(pe.editor.constraints[0].position)
+    bbox = pe.ax.get_window_extent()
+    x0, y0 = pe.ax.transData.transform(start)
+    _event(pe, "button_press_event", (x0, y0), data=False)
+    outside = (x0, bbox.y1 + 15.0)  # above the axes, on the title
+    event = _event(pe, "motion_notify_event", outside, data=False)
+    assert event.inaxes is None
+    want = pe.ax.transData.inverted().transform((event.x, event.y))  # matplotlib rounds pixels
+    assert np.allclose(pe.editor.constraints[0].position, want, atol=1e-9)
+    _event(pe, "button_release_event", outside, data=False)
+    assert np.allclose(pe.editor.constraints[0].position, want, atol=1e-9)
+    assert pe.ax.get_window_extent().contains(*pe.ax.transData.transform(want)), "the view grew to show the handle"
+    assert pe.last_error is None
+
+
+def test_handle_pixels_match_the_drawn_figure(walks):
+    """Published handle pixels are those of the laid-out figure (what the browser shows)."""
+    pe = PathEditor([walks[0]], [PinPosition(0, 30, walks[0].root_positions[30, [0, 2]])], viewer=False)
+    published = json.loads(pe.handles_info.value.replace("&quot;", '"'))
+    pe.figure.canvas.draw()
+    assert np.allclose(published[0]["pixel"], pe.handle_positions()[0]["pixel"], atol=0.5)
+    css = published[0]["css"]
+    assert css[1] == pytest.approx(pe.figure.bbox.height - published[0]["pixel"][1])
+
+
+def test_press_away_from_the_tracks_does_nothing(walks):
+    tt = TimeTrackEditor(walks)
+    tt.figure.canvas.draw()
+    _drag(tt, (1.0, 0.5), (1.5, 0.5))  # between the two tracks
+    assert len(tt.editor.constraints) == 0

@@ -105,7 +105,7 @@ _ROT_DOFS = ("rx", "ry", "rz")
 _ROOT_DOFS = ("tx", "ty", "tz", "rx", "ry", "rz")
 
 
-@dataclass
+@dataclass(frozen=True)
 class AsfBone:
     """One ``begin ... end`` block of an ASF ``:bonedata`` section (file units)."""
 
@@ -118,7 +118,7 @@ class AsfBone:
     line: int = 0
 
 
-@dataclass
+@dataclass(frozen=True)
 class Asf:
     """A parsed ASF skeleton (file units and angle unit as written)."""
 

@@ -262,6 +262,13 @@ def test_shares_a_scene_editor_with_the_time_track(walks):
     p = np.array(pe.result.paths[1][20])
     _drag(pe, p, p + 0.4)
     assert tt.result is editor.result and pe.result is editor.result
+    # re-time character 1 in the time track: the path editor's slider follows the new clock
+    tt.on_edit(lambda result: pe.refresh())
+    tt.figure.canvas.draw()
+    last = float(tt.result.times[1][-1])
+    _drag(tt, (last, 1.0), (last + 1.5, 1.0))
+    assert pe.time.max == pytest.approx(max(float(t[-1]) for t in editor.result.times))
+    assert pe.time.max > last + 1.0
 
 
 def test_inputs_are_not_mutated(walks):

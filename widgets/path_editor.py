@@ -533,6 +533,19 @@ class PathEditor(_DragView):
         times = [np.asarray(t, dtype=float) for t in self.result.times]
         return float(min(t[0] for t in times)), float(max(t[-1] for t in times))
 
+    def _update_time_range(self) -> None:
+        """Fit the time slider to the (possibly re-timed) reference clock."""
+        t0, t1 = self._time_range()
+        t1 = max(t1, t0 + 1e-6)
+        if (self.time.min, self.time.max) != (t0, t1):
+            with self.time.hold_trait_notifications():
+                if t0 > self.time.max:
+                    self.time.max = t1
+                    self.time.min = t0
+                else:
+                    self.time.min = t0
+                    self.time.max = t1
+
     def _time_step(self) -> float:
         steps = [np.median(np.diff(t)) for t in self.result.times if len(t) > 1]
         return float(min(steps)) if steps else 0.01
@@ -630,6 +643,8 @@ class PathEditor(_DragView):
         return 0.08 * float(np.hypot(x1 - x0, y1 - y0))
 
     def _redraw(self, *, final: bool = False) -> None:
+        if final:
+            self._update_time_range()
         for line, path in zip(self._lines, self.result.paths, strict=True):
             p = np.asarray(path, dtype=float)
             line.set_data(p[:, 0], p[:, 1])

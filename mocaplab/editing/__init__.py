@@ -23,8 +23,11 @@ Paths (:mod:`mocaplab.editing.paths`)
     ``.directions (F,)`` root heading relative to the tangent (radians),
     ``.headings (F,)``, ``.degenerate (F,) bool``, ``.fps``, ``.length``,
     ``.laplacian_coordinates() -> (F, 2)`` (eq. 3; NaN at the two ends),
-    ``.local_offset(frame, point) -> (forward, left)``.
-    ``stationary_segments(motion, *, speed=0.15, min_duration=0.3) -> list[(start, stop)]``.
+    ``.local_offset(frame, point) -> (forward, left)``, ``.local_direction(frame,
+    vector)``, ``.from_local(frame, offset) -> (2,)``, ``.with_positions(p)``,
+    ``.tangent_operator() -> sparse (F, F)``.
+    ``stationary_segments(motion, *, speed=0.15, min_duration=0.3, contacts=None)
+    -> list[(start, stop)]`` (half-open; ``contacts="auto"`` adds both-feet-planted).
 
 Constraints (:mod:`mocaplab.editing.constraints`), frozen dataclasses
     ``PinPosition(character, frame, position, *, hard=False, weight=1.0, frames=None)``
@@ -36,8 +39,11 @@ Constraints (:mod:`mocaplab.editing.constraints`), frozen dataclasses
     ``Duration(character, frame, end_frame, duration, *, hard=False, weight=1.0)``
     ``Sync(character, frame, other, other_frame, *, offset=0.0, hard=False,
     weight=1.0, frames=None, other_frames=None)`` (``t[frame] = t_other[other_frame] + offset``)
-    ``EndEffectorConstraint(character, constraint)``: wraps a
-    :mod:`mocaplab.refine` end-effector for full-body refinement.
+    End effectors: a :class:`mocaplab.refine.EndEffector` (its ``character``
+    is the scene index) goes straight into the constraint list, or wrapped as
+    ``EndEffectorConstraint(character, end_effector)``; path editing ignores
+    them, ``EditResult.end_effectors[k]`` records them and
+    ``EditResult.refined()`` hands them to :func:`mocaplab.refine.refine_scene`.
     Variational form: pass ``frame=None, frames=(start, end)`` (inclusive);
     sampled every 10th frame.  Every constraint has ``.target``,
     ``.with_target(new_target)``, ``.hard``, ``.weight``, ``.characters``.
@@ -48,8 +54,13 @@ Editing (:mod:`mocaplab.editing.scene`)
     ``edit(characters, constraints, **options) -> EditResult``
     ``SceneEditor(characters, constraints=(), **options)`` with
     ``.drag(constraint_index, new_target) -> EditResult``, ``.add(constraint) -> int``,
-    ``.remove(index)``, ``.replace(index, constraint)``, ``.result``, ``.constraints``,
-    ``.factorizations`` (counter: how many KKT factorizations so far).
+    ``.remove(index) -> EditResult``, ``.replace(index, constraint) -> EditResult``,
+    ``.set_constraints(constraints) -> EditResult``, ``.evaluate(characters,
+    constraints) -> EditResult`` (fresh, state untouched), ``.result``,
+    ``.constraints``, ``.characters``, ``.paths`` (input MotionPaths),
+    ``.segments`` (rigid stationary segments), ``.options``,
+    ``.factorizations`` (how many factorisations so far; a target drag adds
+    none).  A failed update (ConstraintError) leaves the editor unchanged.
     ``EditResult``: ``.paths[k] (F_k, 2)``, ``.times[k] (F_k,)``, ``.motions[k]``
     (lazy; all on one shared clock ``.clock (N,)``, pose held outside each
     character's own span, ``.active[k] (N,) bool``), ``.shape_paths[k]``
@@ -57,10 +68,11 @@ Editing (:mod:`mocaplab.editing.scene`)
     ``.flips[k] (F_k,) bool`` (repaired tangent flips), ``.stationary[k]``,
     ``.edited_motions[k]`` (edited, not time-warped), ``.residuals() -> {index: max |r|}``,
     ``.constraints``, ``.transformations`` (section 5 discrete edits; empty),
-    ``.end_effectors[k]``, ``.report() -> dict`` and attributes
+    ``.end_effectors[k]``, ``.refined()`` (full-body refined motions on the
+    clock), ``.original_paths``, ``.report() -> dict`` and attributes
     ``hard_residual_space, hard_residual_time, soft_residual_space,
     soft_residual_time, shape_distortion, length_change (K,), min_time_step``,
-    ``.energies -> Energies(shape, scale, time)``, ``.refined()``.
+    ``min_time_step_ratio``, ``.energies -> Energies(shape, scale, time)``.
     Options: ``scale_compensation=True, stationary="auto", min_step=0.25,
     max_step=4.0`` (ratios of the frame time), ``flip_threshold=pi/2,
     variational_step=10, clock_fps=None, start_times=None, discrete=False,
@@ -69,6 +81,11 @@ Editing (:mod:`mocaplab.editing.scene`)
 
 Energy (:mod:`mocaplab.editing.energy`)
     ``deformation_energy(result, *, cs=1.0, ct=1.0, reference=None) -> float`` (eq. 10).
+
+Section 5 plugs in through ``discrete=True``: after each continuous solve the
+editor calls ``mocaplab.editing.graph.discrete_update(editor, result) ->
+EditResult`` (which may score candidates with ``editor.evaluate`` and fill
+``result.transformations``).
 """
 
 from __future__ import annotations

@@ -42,7 +42,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -148,6 +148,12 @@ class Constraint:
     target_name: ClassVar[str] = ""
     target_in_matrix: ClassVar[bool] = False
 
+    if TYPE_CHECKING:  # fields declared by the subclasses
+        character: int
+        frame: int | None
+        hard: bool
+        weight: float
+
     def _check_common(self, *, allow_variational: bool = True) -> None:
         object.__setattr__(self, "character", _index(self.character, "character"))
         frame = self.frame
@@ -238,7 +244,7 @@ class PinPosition(Constraint):
 
     def samples(self, step: int = 10) -> list[tuple[int, ...]]:
         if self.frames is None:
-            return [(self.frame,)]
+            return [(int(self.frame),)]  # type: ignore[arg-type]
         return [(f,) for f in _sample(*self.frames, step)]
 
 
@@ -270,7 +276,7 @@ class PinDirection(Constraint):
 
     def samples(self, step: int = 10) -> list[tuple[int, ...]]:
         if self.frames is None:
-            return [(self.frame,)]
+            return [(int(self.frame),)]  # type: ignore[arg-type]
         return [(f,) for f in _sample(*self.frames, step)]
 
 
@@ -383,7 +389,7 @@ class AbsoluteTime(Constraint):
 
     def samples(self, step: int = 10) -> list[tuple[int, ...]]:
         if self.frames is None:
-            return [(self.frame,)]
+            return [(int(self.frame),)]  # type: ignore[arg-type]
         return [(f,) for f in _sample(*self.frames, step)]
 
 

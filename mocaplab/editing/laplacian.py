@@ -350,7 +350,7 @@ def affine_modes(layout: Layout) -> tuple[sp.csc_matrix, NDArray[np.int64]]:
             lin = np.zeros((F, 2))
             lin[:, c] = s
             cols += [one, lin]
-        cols = [c.reshape(-1) / max(np.linalg.norm(c), 1e-300) for c in cols]
+        cols = [c.reshape(-1) / max(float(np.linalg.norm(c)), 1e-300) for c in cols]
         blocks.append((2 * int(layout.offsets[k]), np.stack(cols, axis=1)))
     return _mode_matrix(blocks, 2 * layout.total, 4), np.repeat(np.arange(len(layout.n_frames)), 4)
 

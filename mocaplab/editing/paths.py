@@ -134,9 +134,9 @@ def _difference_operator(n: int) -> sp.csr_matrix:
     """(n, n) matrix of :func:`central_tangents` (per coordinate)."""
     if n < 2:
         return sp.csr_matrix((n, n))
-    rows = [np.arange(1, n - 1), np.arange(1, n - 1), [0, 0, n - 1, n - 1]]
-    cols = [np.arange(2, n), np.arange(0, n - 2), [1, 0, n - 1, n - 2]]
-    vals = [np.ones(n - 2), -np.ones(n - 2), [2.0, -2.0, 2.0, -2.0]]
+    rows = [np.arange(1, n - 1), np.arange(1, n - 1), np.array([0, 0, n - 1, n - 1])]
+    cols = [np.arange(2, n), np.arange(0, n - 2), np.array([1, 0, n - 1, n - 2])]
+    vals = [np.ones(n - 2), -np.ones(n - 2), np.array([2.0, -2.0, 2.0, -2.0])]
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
 
 

@@ -71,7 +71,7 @@ __all__ = ["edit", "SceneEditor", "EditResult"]
 
 Array = NDArray[np.float64]
 
-_OPTIONS = {
+_OPTIONS: dict[str, Any] = {
     "scale_compensation": True,
     "stationary": "auto",
     "stationary_speed": 0.15,
@@ -525,7 +525,7 @@ class _Lazy(Sequence):
         return f"<{self._n} lazily computed items>"
 
 
-def _ro(a: Array) -> Array:
+def _ro(a: NDArray[Any]) -> NDArray[Any]:
     a.flags.writeable = False
     return a
 

@@ -55,7 +55,7 @@ def uniformity_matrix(layout: Layout) -> sp.csr_matrix:
     )
 
 
-def temporal_rows(c: Any, layout: Layout, dts: Sequence[float], step: int) -> Rows:
+def temporal_rows(c: Any, layout: Layout, dts: Sequence[float] | Array, step: int) -> Rows:
     """The linear rows (unweighted) of one temporal constraint."""
     off = layout.offsets
     cols: list[NDArray[np.int64]] = []

@@ -53,6 +53,7 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -462,8 +463,10 @@ def dls_ik(
         raise ValueError("Expected at least one joint in `chain`, got none")
     if len(set(chain_idx)) != len(chain_idx):
         raise ValueError(f"Expected distinct joints in `chain`, got {list(chain)}")
-    single = isinstance(effectors, (str, int, np.integer))
-    eff_idx = [_joint(skeleton, effectors, "effectors")] if single else [_joint(skeleton, e, "effectors") for e in effectors]
+    if isinstance(effectors, (str, int, np.integer)):
+        eff_idx = [_joint(skeleton, effectors, "effectors")]
+    else:
+        eff_idx = [_joint(skeleton, e, "effectors") for e in effectors]
     m = len(eff_idx)
     tg = np.asarray(targets, dtype=float)
     if tg.shape == (n_frames, m, 3):
@@ -538,7 +541,7 @@ def reach(
     chain: Sequence[JointRef] | None = None,
     pole: ArrayLike | None = None,
     keep_orientation: bool = True,
-    **dls_options: float,
+    **dls_options: Any,
 ) -> Motion:
     """Motion-level IK: a new Motion whose ``joint`` reaches ``target``.
 

@@ -17,13 +17,16 @@ caller:
    ``current + w (target - current)`` on every frame at once: damped least
    squares for goals with an explicit chain, analytic two-bone IK for limbs
    (the end joint keeps its global orientation), legs last, then each foot
-   is turned about its ankle so the toe meets its own plant.  When a leg
-   cannot reach, the root is first lowered just enough (Kovar et al. 2002).
+   is turned about its ankle so the toe meets its own plant (where ankle
+   and toe cannot both hold, the foot rolls about the stiller one).  When a
+   leg cannot reach, the root is first lowered just enough, smoothly (as in
+   Kovar et al. 2002's footskate cleanup).
 3. **Smoothing.**  :func:`enforce_goals` fits a hierarchical displacement
    map (:class:`~mocaplab.displacement.DisplacementMap`, Lee and Shin 1999)
    to the per-frame IK corrections, constrained frames weighted more,
-   applies it, and runs the IK layer once more so constraints hold exactly;
-   that last correction is small and smooth.
+   applies it, and runs the IK layer once more toward the per-frame
+   solution so constraints hold exactly; that last correction is small and
+   smooth.
 
 :func:`refine` builds the goals from foot contacts (detected on the motion
 before editing when ``reference`` is given) and end effectors, then calls
@@ -49,7 +52,7 @@ import dataclasses
 import sys
 import types
 from collections.abc import Sequence
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -93,8 +96,8 @@ def blend_ramp(u: ArrayLike) -> Array:
     blended in with it adds no velocity or acceleration jump (the ZMP of
     physical touch-up depends on accelerations).
     """
-    u = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
-    return u * u * u * (u * (6.0 * u - 15.0) + 10.0)
+    x: Array = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
+    return x * x * x * (x * (6.0 * x - 15.0) + 10.0)
 
 
 def _check_intervals(intervals: Sequence[tuple[int, int]], n_frames: int) -> list[tuple[int, int]]:
@@ -141,7 +144,7 @@ def blend_weights(n_frames: int, intervals: Sequence[tuple[int, int]], *, window
     Examples
     --------
     >>> blend_weights(8, [(3, 5)], window=2).round(3).tolist()
-    [0.0, 0.259, 0.741, 1.0, 1.0, 0.741, 0.259, 0.0]
+    [0.0, 0.21, 0.79, 1.0, 1.0, 0.79, 0.21, 0.0]
     """
     if n_frames < 1:
         raise ValueError(f"Expected `n_frames` >= 1, got {n_frames}")
@@ -484,6 +487,15 @@ def _blend(cur: Array, goal: Goal) -> Array:
     return cur + goal.weights[:, None] * (goal.targets - cur)
 
 
+# Stiffness of a planted joint as its weight goes to 1 is capped at 1 / _SOFT,
+# so the ankle/toe share changes smoothly when one of them is released.
+_SOFT = 0.02
+
+
+def _stiffness(goal: Goal) -> Array:
+    return np.ones(goal.n_frames) if goal.stiffness is None else goal.stiffness
+
+
 def _foot_targets(gpos: Array, ankle: int, g_ankle: Goal | None, toe: tuple[int, Goal] | None) -> Array:
     """Ankle positions that plant the ankle and/or the toe (see solve_goals)."""
     a_cur = gpos[:, ankle]
@@ -508,9 +520,8 @@ def _foot_targets(gpos: Array, ankle: int, g_ankle: Goal | None, toe: tuple[int,
     length = np.linalg.norm(t_cur - a_cur, axis=-1)
     d = toe_goal - target
     dist = np.linalg.norm(d, axis=-1)
-    ka = 1.0 if g_ankle is None else g_ankle.stiffness
-    ka = wa * ka / (1.0 - wa + 0.1)
-    kt = wt * gt.stiffness / (1.0 - wt + 0.1)
+    ka = wa * (1.0 if g_ankle is None else _stiffness(g_ankle)) / (1.0 - wa + _SOFT)
+    kt = wt * _stiffness(gt) / (1.0 - wt + _SOFT)
     den = ka + kt
     share = np.where(den > 1e-12, kt / np.maximum(den, 1e-12), 0.5)
     shift = (dist - length) * share / np.maximum(dist, 1e-12)
@@ -541,7 +552,7 @@ def solve_goals(
     reach: float = 0.99,
     max_drop: float = 0.15,
     drop_window: float = 0.15,
-    dls_options: dict[str, float] | None = None,
+    dls_options: dict[str, Any] | None = None,
 ) -> Motion:
     """The IK layer: meet every goal on every frame (no temporal smoothing).
 
@@ -579,7 +590,7 @@ def solve_goals(
     ``A + wa (Pa - A) + (1 - wa) wt (Pt - T)`` (ankle plant ``Pa``, toe plant
     ``Pt``, current ankle ``A`` and toe ``T``), then slid along the line to
     the blended toe goal until the foot's length fits, by the share
-    ``kt / (ka + kt)`` with ``k = stiffness * w / (1 - w + 0.001)``; then the
+    ``kt / (ka + kt)`` with ``k = stiffness * w / (1 - w + 0.02)``; then the
     foot turns about
     the ankle by ``wt`` of the shortest arc pointing the toe at ``Pt``.  With
     both weights 1 the ankle and toe plants hold exactly; with both 0 the
@@ -652,7 +663,7 @@ def enforce_goals(
     levels: int = 3,
     exact: bool = True,
     adjust_root: bool = True,
-    dls_options: dict[str, float] | None = None,
+    dls_options: dict[str, Any] | None = None,
 ) -> Motion:
     """Meet the goals with a smooth correction: IK, displacement map, IK.
 
@@ -888,7 +899,7 @@ def refine(
     spacing: float = 0.25,
     levels: int = 3,
     adjust_root: bool = True,
-    dls_options: dict[str, float] | None = None,
+    dls_options: dict[str, Any] | None = None,
 ) -> Motion:
     """Clean foot skate and enforce end-effector constraints (Kim et al. 2009 s4.3).
 
@@ -957,7 +968,7 @@ def _refine_one(
     spacing: float,
     levels: int,
     adjust_root: bool,
-    dls_options: dict[str, float] | None,
+    dls_options: dict[str, Any] | None,
 ) -> Motion:
     goals: list[Goal] = []
     if feet:
@@ -995,7 +1006,7 @@ def refine_scene(
     *,
     contacts: Sequence[Contacts | None] | None = None,
     references: Sequence[Motion | None] | None = None,
-    **options: object,
+    **options: Any,
 ) -> list[Motion]:
     """Refine several characters whose end effectors may refer to each other.
 
@@ -1048,7 +1059,10 @@ def refine_scene(
             raise ValueError(f"Expected characters with equal frame counts, got {ma.n_frames} and {mb.n_frames}")
         pa = ma.global_positions()[:, ma.skeleton.index(ea.joint)]
         pb = mb.global_positions()[:, mb.skeleton.index(eb.joint)]
-        gap = 0.5 * (np.asarray(ea.target.offset) - np.asarray(eb.target.offset))  # type: ignore[union-attr]
+        ta, tb = ea.target, eb.target
+        if not (isinstance(ta, RelativeTo) and isinstance(tb, RelativeTo)):  # pragma: no cover (by _mutual_pairs)
+            raise TypeError("mutual end effectors must both target RelativeTo")
+        gap = 0.5 * (np.asarray(ta.offset) - np.asarray(tb.offset))
         mid = 0.5 * (pa + pb)
         mutual[a] = mid + 0.5 * gap
         mutual[b] = mid - 0.5 * gap
@@ -1082,12 +1096,12 @@ def refine_scene(
     return current
 
 
-def _options(options: dict[str, object]) -> dict[str, object]:
+def _options(options: dict[str, Any]) -> dict[str, Any]:
     allowed = {"feet", "blend", "spacing", "levels", "adjust_root", "dls_options"}
     unknown = set(options) - allowed
     if unknown:
         raise TypeError(f"Unknown refine options {sorted(unknown)}; allowed: {sorted(allowed)}")
-    defaults: dict[str, object] = {
+    defaults: dict[str, Any] = {
         "feet": True, "blend": 0.1, "spacing": 0.25, "levels": 3, "adjust_root": True, "dls_options": None,
     }
     defaults.update(options)

@@ -264,3 +264,40 @@ def test_energy_terms(pair):
     E = deformation_energy(res, cs=2.0, ct=1.0)
     length = res.original_paths[0].length
     assert E == pytest.approx(e.total + 2.0 * abs(res.length_change[0]) * length, rel=1e-9)
+
+
+def test_u_shaped_drag_turns_smoothly(walk):
+    # keep the middle ahead and bring the end back beside the start: a U, the heading turns ~180 degrees, no flips
+    p = ground(walk)
+    F = len(p)
+    cons = [
+        PinPosition(0, 0, p[0], hard=True),
+        PinPosition(0, F // 2, p[0] + 0.5 * (p[-1] - p[0]) + [0.5, 0.0]),
+        PinPosition(0, F - 1, p[0] + [1.0, 0.0], hard=True),
+    ]
+    res = edit([walk], cons)
+    assert not res.flips[0].any()
+    turn = res.heading_change[0]
+    assert abs(abs(turn[-1] - turn[0]) - np.pi) < 0.6
+    assert np.abs(np.diff(turn)).max() < np.pi / 4
+
+
+def test_variational_constraints_are_sampled_every_tenth_frame(pair):
+    a, b = pair
+    cons = [
+        PinPosition(0, 0, ground(a)[0], hard=True),
+        PinPosition(0, 100, ground(a)[100] + [0.5, 0.5]),
+        Relative(1, None, 0, None, (0.0, 1.0), frames=(20, 60), other_frames=(30, 70), weight=100.0),
+        Sync(1, None, 0, None, frames=(20, 60), other_frames=(30, 70), hard=True),
+    ]
+    res = edit(pair, cons)
+    assert res.hard_residual_time < 1e-6
+    np.testing.assert_allclose(res.times[1][20:61:10], res.times[0][30:71:10], atol=1e-6)
+    from mocaplab.editing.paths import rot90
+
+    L = np.linalg.norm(res.original_paths[0].tangents, axis=1)
+    t0 = central_tangents(res.paths[0])
+    for i in range(20, 61, 10):
+        j = i + 10
+        want = res.paths[0][j] + rot90(t0[j]) / L[j]
+        assert np.linalg.norm(res.paths[1][i] - want) < 0.02

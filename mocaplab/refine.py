@@ -321,7 +321,7 @@ def _frames(seconds: float, fps: float, what: str) -> int:
 def _is_toe(skeleton: Skeleton, name: str, names: Sequence[str]) -> bool:
     j = skeleton.index(name)
     p = int(skeleton.parents[j])
-    return p >= 0 and (skeleton.names[p] in names or not skeleton.children(j))
+    return p >= 0 and skeleton.names[p] in names
 
 
 def foot_goals(
@@ -354,8 +354,10 @@ def foot_goals(
     -------
     list of Goal
         One per contact joint.  A joint whose parent is also a contact
-        joint, or that has no child joint, is a ``"toe"`` (it follows its
-        foot); the others are ``"foot"`` goals.  Stiffness is
+        joint is a ``"toe"`` (it follows its foot); the others are
+        ``"foot"`` goals, solved by two-bone IK on the limb they end (so
+        give the ankle with the toe: a toe alone would be treated as the
+        end of a leg ``shin -> ankle -> toe``).  Stiffness is
         ``1 / (speed + 0.05 m/s)`` (speed in ``reference``): where ankle and
         toe are both planted but the captured heel rises or the toe lands,
         the foot rolls about whichever joint was stiller.

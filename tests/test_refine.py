@@ -263,3 +263,16 @@ def test_end_effector_frames_forms(walk):
         EndEffector("RightHand", [3, 12], [0, 0, 0]).intervals(10)
     with pytest.raises(ValueError, match="`target` of shape"):
         EndEffector("RightHand", 3, [0, 0])
+
+
+def test_feet_without_toe_joints(mocap_dir):
+    # the Daz skeleton of the CMU salsa pair: lFoot and rFoot are leaf joints
+    salsa = mocaplab.cmu("60_10")[:300]
+    contacts = foot_contacts(salsa)
+    assert contacts.joints == ("lFoot", "rFoot")
+    bent_salsa = bend(salsa, np.pi / 6)
+    out = refine(bent_salsa, contacts=contacts, reference=salsa)
+    assert np.nanmean(foot_skate(out, contacts)) < 1.0
+    sk = salsa.skeleton
+    moved = {sk.names[j] for j in np.flatnonzero(np.any(np.abs(out.rotations - bent_salsa.rotations) > 1e-6, axis=(0, 2)))}
+    assert moved <= {"hip", "lThigh", "lShin", "lFoot", "rThigh", "rShin", "rFoot"}

@@ -157,7 +157,9 @@ def main() -> int:
         "stacking (10)": [368, 220, 250, 210, 298, 262, 216, 168, 307, 211],
         "crowd (100x300)": [300] * 100,
     }
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print("Laplacian path editing + time warping: one drag update through SceneEditor.drag (median ms)")
+    print(f"machine: {os.cpu_count()} cores, load average {load:.1f} (other work slows every figure)")
     print(
         f"{'scene':18s} {'frames':>7s} {'space':>8s} {'time':>8s} {'update':>8s} {'naive':>9s} {'x faster':>9s} "
         f"{'paper':>7s} {'vs paper':>9s} {'target':>7s}"

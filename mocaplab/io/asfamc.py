@@ -649,8 +649,10 @@ def load_asf_amc(
             cols.append(v)
         angles = np.stack(cols, axis=1)  # (F, G, k)
         m = _fixed_axes_quat(order, angles, amc_deg)
-        c = axes_q[joints]
-        rotations[:, joints] = quat.mul(quat.mul(c, m), quat.inv(c))
+        # C M C^-1 keeps the scalar part of M and rotates its vector part by C
+        c_matrix = quat.to_matrix(axes_q[joints])  # (G, 3, 3)
+        rotations[:, joints, :3] = np.einsum("gij,fgj->fgi", c_matrix, m[..., :3])
+        rotations[:, joints, 3] = m[..., 3]
     root = np.empty((n_frames, 3))
     root[:] = asf.root_position
     if "root" in values:

@@ -140,7 +140,9 @@ _read_text = read_text  # former private name
 def split_lines(text: str) -> list[str]:
     """Lines of ``text`` for LF, CRLF or CR line endings (no other separators)."""
     if "\r" in text:
-        text = text.replace("\r\n", "\n").replace("\r", "\n")
+        text = text.replace("\r\n", "\n")
+        if "\r" in text:
+            text = text.replace("\r", "\n")
     return text.split("\n")
 
 

@@ -35,7 +35,7 @@ from matplotlib.figure import Figure
 from mocaplab.motion import Motion
 from mocaplab.physics import Adjustment, TouchUpSession
 
-__all__ = ["TouchUpStepper"]
+__all__ = ["TouchUpStepper", "plot_zmp_distance", "plot_mean_distance", "plot_balance_top"]
 
 STEP_CLASS = "mocaplab-touchup-step"
 BACK_CLASS = "mocaplab-touchup-back"
@@ -114,6 +114,75 @@ class _Row:
         if self.stage.value != adj.stage:
             out["stage"] = self.stage.value
         return out
+
+
+# --------------------------------------------------------------------------- static figures
+def _axes(ax: Any, size: tuple[float, float]) -> Any:
+    if ax is not None:
+        return ax
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(figsize=size, layout="constrained")[1]
+
+
+def plot_zmp_distance(curves: dict[str, Any], *, fps: float, ax: Any = None) -> Any:
+    """Figure 8: distance of the ZMP outside the support polygon per frame (mm).
+
+    ``curves`` maps a label to distances in metres, shape (F,) (NaN in
+    flight, drawn as gaps).  Returns the axes.
+    """
+    ax = _axes(ax, (9, 3))
+    for k, (label, d) in enumerate(curves.items()):
+        d = np.asarray(d, dtype=float)
+        color = INPUT_COLOR if k == 0 else f"C{k - 1}"
+        ax.plot(np.arange(len(d)) / fps, 1000 * d, color=color, lw=1.2, label=f"{label}: mean {1000 * np.nanmean(d):.1f} mm")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("ZMP distance (mm)")
+    ax.set_title("Distance of the ZMP from the support polygon (Shin et al., Fig. 8)")
+    ax.legend()
+    return ax
+
+
+def plot_mean_distance(history: Any, *, ax: Any = None) -> Any:
+    """Figure 9: mean ZMP distance after each step of a touch-up history (mm)."""
+    ax = _axes(ax, (6, 3))
+    mean = 1000 * np.asarray(history.mean_zmp_distance)
+    ax.plot(np.arange(len(mean)), mean, "o-", color=CURRENT_COLOR, ms=4)
+    n = len(history.states[0].schedule)
+    for k in range(n, len(mean), n):
+        ax.axvline(k + 0.5, color="0.85", lw=0.8, zorder=0)
+    ax.set_xlabel("step (one adjustment each; grey lines end a pass)")
+    ax.set_ylabel("mean distance (mm)")
+    ax.set_title("Average distance at each step (Shin et al., Fig. 9)")
+    ax.set_ylim(0, None)
+    return ax
+
+
+def plot_balance_top(balance: Any, *, frames: Sequence[int] | None = None, ax: Any = None) -> Any:
+    """Top-down view: support polygons at some frames, the ZMP and the ground track of the COM.
+
+    The ground axis along which the clip travels furthest is drawn horizontally.
+    """
+    ax = _axes(ax, (9, 3.5))
+    n = len(balance.com)
+    frames = list(range(0, n, max(1, n // 12))) if frames is None else list(frames)
+    span = np.ptp(balance.com[:, [0, 2]], axis=0)
+    h, v = (0, 2) if span[0] >= span[1] else (2, 0)
+    for f in frames:
+        poly = balance.polygon(f)
+        if len(poly) >= 2:
+            closed = np.vstack([poly, poly[:1]])
+            ax.fill(closed[:, h], closed[:, v], color="#2ca02c", alpha=0.15, lw=0)
+            ax.plot(closed[:, h], closed[:, v], color="#2ca02c", lw=0.8)
+    ax.plot(balance.com[:, h], balance.com[:, v], color="#ff7f0e", lw=1.2, label="centre of mass (ground track)")
+    ax.plot(balance.zmp[:, h], balance.zmp[:, v], ".", color="#d62728", ms=3, label="ZMP")
+    ax.plot(balance.zmp[frames, h], balance.zmp[frames, v], "o", mfc="none", color="#d62728", ms=6)
+    ax.set_aspect("equal")
+    ax.set_xlabel("xyz"[h] + " (m)")
+    ax.set_ylabel("xyz"[v] + " (m)")
+    ax.set_title("Support polygons (green) at the circled frames, seen from above")
+    ax.legend(loc="best", fontsize="small")
+    return ax
 
 
 class TouchUpStepper:

@@ -50,9 +50,14 @@ Choices made where the paper leaves them open
   corrected motion really has the target angular velocity.  The paper's
   footnote writes the inertia of point masses as ``sum m r r^T``; the
   inertia tensor ``sum m (|r|^2 I - r r^T)`` is used here.
-* Ground frames within ``flight_window`` (0.5 s) of a flight keep the
-  flight's boundary adjustment, blended to zero with a raised cosine
-  (Figure 4); the ground adjustments are weighted by the complement.
+* Ground frames within ``flight_window`` (0.5 s) of a flight, and no
+  further than half-way to the next flight, keep the flight's boundary
+  adjustment, blended to zero with a raised cosine (Figure 4); the ground
+  adjustments still apply to them.  The parabola's correction is zero at
+  both ends of a flight, so only the angular-momentum rotation and the
+  S2 rotation of a non-empty S1 are carried into the windows.  (Continuing
+  them with their boundary slope was tried: it makes take-off and landing
+  far less balanced.)
 * Footplants are re-enforced after every step, per frame like the paper's
   choice (Kovar et al. 2002, "because of its efficiency"):
 
@@ -401,18 +406,31 @@ def flight_stages(contacts: Contacts, *, min_frames: int = 2) -> list[tuple[int,
     return [(int(a), int(b)) for a, b in zip(starts, stops, strict=True) if b - a >= min_frames]
 
 
+def _flight_windows(n: int, stages: list[tuple[int, int]], window: int) -> list[tuple[int, int, int, int]]:
+    """Ground windows ``(lo, a, b, hi)`` around each flight ``[a, b)``.
+
+    At most ``window`` frames on each side, and never more than half of the
+    ground gap to the neighbouring flight, so windows do not overlap.
+    """
+    out = []
+    for k, (a, b) in enumerate(stages):
+        prev_end = stages[k - 1][1] if k > 0 else None
+        next_start = stages[k + 1][0] if k + 1 < len(stages) else None
+        lo = max(0, a - window) if prev_end is None else max(a - window, a - (a - prev_end) // 2)
+        hi = min(n, b + window) if next_start is None else min(b + window, b + (next_start - b + 1) // 2)
+        out.append((lo, a, b, hi))
+    return out
+
+
 def _flight_weights(n: int, stages: list[tuple[int, int]], window: int) -> Array:
-    """1 on flight frames, a raised cosine down to 0 over ``window`` ground frames around them."""
+    """1 on flight frames, a raised cosine down to 0 over the ground windows around them."""
     w = np.zeros(n)
-    k = np.arange(1, window + 1)
-    ramp = 0.5 * (1.0 + np.cos(np.pi * k / (window + 1)))
-    for a, b in stages:
+    for lo, a, b, hi in _flight_windows(n, stages, window):
         w[a:b] = 1.0
-        lo = np.arange(a - 1, a - 1 - window, -1)
-        hi = np.arange(b, b + window)
-        for idx in (lo, hi):
-            ok = (idx >= 0) & (idx < n)
-            w[idx[ok]] = np.maximum(w[idx[ok]], ramp[ok])
+        k = np.arange(a - lo, 0, -1)  # distance of frames lo..a-1 from the flight
+        w[lo:a] = 0.5 * (1.0 + np.cos(np.pi * k / (window + 1)))
+        k = np.arange(1, hi - b + 1)
+        w[b:hi] = 0.5 * (1.0 + np.cos(np.pi * k / (window + 1)))
     return w
 
 
@@ -549,11 +567,9 @@ def _ground_rotation(motion: Motion, body: Body, sets: LinkSets, bal: Balance, w
     return omega, root_centre
 
 
-def _ground_step(
-    motion: Motion, body: Body, contacts: Contacts, adj: Adjustment, flight_w: Array, bal: Balance
-) -> Motion:
+def _ground_step(motion: Motion, body: Body, adj: Adjustment, bal: Balance) -> Motion:
     sets = link_sets(motion.skeleton, adj)
-    omega, centre = _ground_rotation(motion, body, sets, bal, 1.0 - flight_w)
+    omega, centre = _ground_rotation(motion, body, sets, bal, np.ones(motion.n_frames))
     omega *= adj.rho
     root_delta = None
     if 0 in sets.s2_tops:
@@ -583,14 +599,11 @@ def _flight_centre(motion: Motion, body: Body, sets: LinkSets, positions: Array)
 
 
 def _hold_into_windows(field: Array, stages: list[tuple[int, int]], flight_w: Array, window: int) -> Array:
-    """Carry each flight's boundary values into its ground window, times the window weight."""
+    """Carry each flight's boundary values into its ground windows, times the window weight."""
     out = np.array(field, copy=True)
-    n = field.shape[0]
-    for a, b in stages:
-        lo = np.arange(max(0, a - window), a)
-        hi = np.arange(b, min(n, b + window))
-        out[lo] = field[a] * flight_w[lo, None]
-        out[hi] = field[b - 1] * flight_w[hi, None]
+    for lo, a, b, hi in _flight_windows(field.shape[0], stages, window):
+        out[lo:a] = field[a] * flight_w[lo:a, None]
+        out[b:hi] = field[b - 1] * flight_w[b:hi, None]
     return out
 
 
@@ -652,7 +665,8 @@ def _flight_step(
         flight[a:b] = True
     if np.all(sets.roles == 2):
         # S1 empty: translate the root
-        delta = np.where(flight[:, None], wanted - com, 0.0) * adj.rho
+        delta = np.where(flight[:, None], wanted - com, 0.0)
+        delta = delta * adj.rho  # zero at both ends of the flight: nothing to carry into the windows
         return out.replace(root_positions=out.root_positions + _smooth(delta, width))
     # rotate S2 about the S1/S2 boundary so its centre of mass moves towards c*_M2
     centre = _flight_centre(out, body, sets, r)
@@ -661,7 +675,7 @@ def _flight_step(
     c1m1 = com * m.sum() - c2 * m2
     c2_star = (wanted * m.sum() - c1m1) / m2
     rot = quat.log(quat.between(c2 - centre, c2_star - centre))
-    rot = np.where(flight[:, None], rot, 0.0) * adj.rho
+    rot = _hold_into_windows(np.where(flight[:, None], rot, 0.0), stages, flight_w, window) * adj.rho
     root_delta = None
     if 0 in sets.s2_tops:
         p = out.root_positions
@@ -849,7 +863,7 @@ def step(state: TouchUpState) -> TouchUpState:
     window = int(round(state.flight_window * motion.fps))
     flight_w = _flight_weights(motion.n_frames, stages, window)
     if adj.stage == "ground":
-        new = _ground_step(motion, body, contacts, adj, flight_w, state.balance)
+        new = _ground_step(motion, body, adj, state.balance)
     elif stages:
         new = _flight_step(motion, body, adj, stages, flight_w, window)
     else:

@@ -1,0 +1,69 @@
+"""Staggered poses (Coleman et al. 2008): representation, extraction, editing.
+
+>>> from mocaplab import cmu, staggered                   # doctest: +SKIP
+>>> sm = staggered.extract(cmu("16_15"))                  # doctest: +SKIP
+>>> edited = sm.succession(0.03, 2.0, joint="LeftShoulder").evaluate()  # doctest: +SKIP
+
+Modules: :mod:`.representation` (section 3, the :class:`StaggeredMotion`
+container and its evaluation), :mod:`.features` (section 4.1, locating
+poses and refinements), :mod:`.fit` (section 4.1.1 and Appendix A, splines and
+displacement maps), :mod:`.edit` (section 5, geometric and timing edits, the
+contact constraint layer and the :class:`StaggeredEditor` used by the widget).
+"""
+
+from __future__ import annotations
+
+from .edit import (
+    ConstraintLayer,
+    StaggeredEditor,
+    delete_pose,
+    edit_pose,
+    exaggerate,
+    insert_pose,
+    randomize,
+    retime,
+    set_refinements,
+    succession,
+    succession_depths,
+)
+from .features import PoseAnalysis, analyze
+from .fit import extract, fit_representation, fit_rotation_tangents, fit_translation_tangents, rotation_objective
+from .representation import (
+    ROOT_POSITION,
+    StaggeredMotion,
+    StaggeredTimingWarning,
+    bezier,
+    compose_rotation,
+    factor_rotation,
+    quat_bezier,
+    variable_names,
+)
+
+__all__ = [
+    "ROOT_POSITION",
+    "StaggeredMotion",
+    "StaggeredTimingWarning",
+    "PoseAnalysis",
+    "ConstraintLayer",
+    "StaggeredEditor",
+    "analyze",
+    "extract",
+    "fit_representation",
+    "fit_translation_tangents",
+    "fit_rotation_tangents",
+    "rotation_objective",
+    "bezier",
+    "quat_bezier",
+    "compose_rotation",
+    "factor_rotation",
+    "variable_names",
+    "set_refinements",
+    "retime",
+    "succession",
+    "succession_depths",
+    "randomize",
+    "edit_pose",
+    "exaggerate",
+    "insert_pose",
+    "delete_pose",
+]

@@ -1,0 +1,578 @@
+"""Locating staggered poses in dense motion (Coleman et al. 2008, section 4.1).
+
+The pipeline, one function per step:
+
+1. :func:`motion_trails`: for every joint rotation and every child ``j``, the
+   local-space trails ``m1(j, t)`` (the tip of the unit axis toward the child)
+   and ``m2(j, t)`` (the tip of a unit axis orthogonal to it, which sees twist
+   about the limb); one trail of the root position for the root translation.
+2. :func:`laplacian_smooth`: iterated Laplacian smoothing of the trails
+   (discrete curvature is very sensitive to capture noise).
+3. :func:`bounded_curvature`: the modified Taubin measure
+   ``kappa_hat_i = n_i . e_i / |e_i|`` in ``[0, 1]``, averaged over the two
+   edges at a sample weighted by their lengths.  With the Frenet normal taken
+   along the change of unit tangent, both edges give the same value,
+   ``sin(phi / 2)`` for a turning angle ``phi``: 0 on a straight trail, 1 on
+   a reversal.  The local probability of a variable is the maximum over its
+   trails, ``p(t) = max_{i, j} kappa_hat(m_i(j, t))``.
+4. Global evidence: a binary signal that is 1 on the frames where a contact
+   starts or ends (:func:`contact_events`).
+5. :func:`pose_probability`: ``P(t) = f(sum_i w_i p_i(t) / sum_i w_i)`` with
+   ``w_i = sum_j |x_i - x_j| |m_j|`` (bone length times trail arc length) and a
+   tent low-pass filter ``f`` of width 0.15 s.
+6. :func:`candidate_poses`, :func:`pose_priorities`, :func:`cull_poses`:
+   candidates at the local maxima of ``P`` plus the first and last frames;
+   priorities ``w_k = P(t_k) (t_{k+1} - t_{k-1})``; culling by count, by
+   fraction or by a time interval.
+7. :func:`timing_refinements`: for each pose and variable, the highest local
+   maximum of ``p_i`` within 0.25 s of the pose time and closer to it than to
+   the neighbouring poses; zero when there is none.
+
+:func:`analyze` runs steps 1-6 once and returns a :class:`PoseAnalysis` whose
+:meth:`~PoseAnalysis.select` culls and refines without recomputing signals.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import quat
+from ..motion import Motion
+from .representation import variable_names
+
+__all__ = [
+    "Trails",
+    "PoseAnalysis",
+    "motion_trails",
+    "laplacian_smooth",
+    "bounded_curvature",
+    "contact_events",
+    "tent_filter",
+    "signal_weights",
+    "pose_probability",
+    "local_maxima",
+    "candidate_poses",
+    "pose_priorities",
+    "cull_poses",
+    "timing_refinements",
+    "analyze",
+]
+
+Array = NDArray[np.float64]
+
+MAX_REFINEMENT = 0.25
+"""Bound on timing refinements in seconds (section 4.1: clusters are about 0.5 s wide)."""
+
+FILTER_WIDTH = 0.15
+"""Width of the tent filter combining nearby peaks, seconds (section 4.1)."""
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Trails:
+    """Motion trails of a clip.
+
+    Attributes
+    ----------
+    points : ndarray, shape (F, T, 3)
+        Trail samples: unit-axis tips in the parent frame of the joint for
+        rotation trails, world root positions (metres) for the root trail.
+    variable : ndarray of int, shape (T,)
+        Control variable of each trail (0 = root translation, ``1 + j`` =
+        rotation of joint ``j``).
+    kind : ndarray of int, shape (T,)
+        1 for ``m1`` (axis toward the child), 2 for ``m2`` (orthogonal axis),
+        0 for the root translation trail.
+    bone_length : ndarray, shape (T,)
+        ``|x_i - x_j|``: the length from the joint to the child the trail
+        follows (metres; 0 for the root trail).
+    """
+
+    points: Array
+    variable: NDArray[np.int64]
+    kind: NDArray[np.int64]
+    bone_length: Array
+
+
+def motion_trails(motion: Motion) -> Trails:
+    """Local-space motion trails ``m1``/``m2`` of every joint and the root trail.
+
+    Each joint's children are its child joints and its BVH end sites with a
+    non-zero offset.  A joint with none (rare) gets trails of its local x and
+    y axes with unit length.  The orthogonal axis of ``m2`` is the cross
+    product of the limb axis with the coordinate axis least aligned with it.
+
+    Parameters
+    ----------
+    motion : Motion
+
+    Returns
+    -------
+    Trails
+    """
+    sk = motion.skeleton
+    J = sk.n_joints
+    rows: list[tuple[int, int, NDArray[np.float64], float]] = []  # (joint, kind, axis, length)
+    child_offsets: list[list[NDArray[np.float64]]] = [[] for _ in range(J)]
+    for c in range(1, J):
+        child_offsets[int(sk.parents[c])].append(sk.offsets[c])
+    for p, off in zip(sk.end_site_parents, sk.end_site_offsets, strict=True):
+        child_offsets[int(p)].append(off)
+    for j in range(J):
+        offs = [o for o in child_offsets[j] if np.linalg.norm(o) > 1e-9]
+        if not offs:
+            rows.append((j, 1, np.array([1.0, 0.0, 0.0]), 1.0))
+            rows.append((j, 2, np.array([0.0, 1.0, 0.0]), 1.0))
+            continue
+        for o in offs:
+            length = float(np.linalg.norm(o))
+            a = o / length
+            e = np.eye(3)[int(np.argmin(np.abs(a)))]
+            b = np.cross(a, e)
+            b /= np.linalg.norm(b)
+            rows.append((j, 1, a, length))
+            rows.append((j, 2, b, length))
+    joints = np.array([r[0] for r in rows], dtype=np.int64)
+    axes = np.array([r[2] for r in rows])
+    pts = quat.rotate(motion.rotations[:, joints], axes)  # (F, T, 3)
+    points = np.concatenate([np.asarray(motion.root_positions)[:, None, :], pts], axis=1)
+    return Trails(
+        points=points,
+        variable=np.concatenate([[0], joints + 1]).astype(np.int64),
+        kind=np.concatenate([[0], [r[1] for r in rows]]).astype(np.int64),
+        bone_length=np.concatenate([[0.0], [r[3] for r in rows]]),
+    )
+
+
+def laplacian_smooth(x: Array, *, iterations: int, lam: float = 0.5) -> Array:
+    """Iterated Laplacian smoothing along axis 0 (end samples held fixed).
+
+    Each iteration moves every interior sample a fraction ``lam`` toward the
+    mean of its two neighbours.  ``iterations`` passes of ``lam = 0.5``
+    approximate a Gaussian of ``sigma = sqrt(iterations / 2)`` samples.
+
+    Parameters
+    ----------
+    x : ndarray, shape (F, ...)
+    iterations : int
+    lam : float in (0, 1]
+
+    Returns
+    -------
+    ndarray, shape (F, ...)
+    """
+    if not 0.0 < lam <= 1.0:
+        raise ValueError(f"Expected `lam` in (0, 1], got {lam!r}")
+    if iterations < 0:
+        raise ValueError(f"Expected `iterations` >= 0, got {iterations!r}")
+    y = np.array(x, dtype=float, copy=True)
+    if y.shape[0] < 3:
+        return y
+    for _ in range(int(iterations)):
+        y[1:-1] += lam * (0.5 * (y[:-2] + y[2:]) - y[1:-1])
+    return y
+
+
+def bounded_curvature(points: Array, *, eps: float = 1e-12) -> Array:
+    """The bounded curvature ``kappa_hat`` of polylines, in ``[0, 1]``.
+
+    Parameters
+    ----------
+    points : ndarray, shape (F, ..., 3)
+        Polylines sampled along axis 0.
+    eps : float
+        Edges shorter than this (a standing trail) give 0.
+
+    Returns
+    -------
+    ndarray, shape (F, ...)
+        ``sin(phi / 2)`` of the turning angle ``phi`` at every interior
+        sample (the Taubin-style ``n . e / |e|`` of both edges, length
+        weighted); 0 at the two ends.
+    """
+    p = np.asarray(points, dtype=float)
+    out = np.zeros(p.shape[:-1])
+    if p.shape[0] < 3:
+        return out
+    e_in = p[1:-1] - p[:-2]
+    e_out = p[2:] - p[1:-1]
+    n_in = np.linalg.norm(e_in, axis=-1)
+    n_out = np.linalg.norm(e_out, axis=-1)
+    ok = (n_in > eps) & (n_out > eps)
+    c = np.einsum("...i,...i->...", e_in, e_out) / np.where(ok, n_in * n_out, 1.0)
+    out[1:-1] = np.where(ok, np.sqrt(np.clip(0.5 * (1.0 - c), 0.0, 1.0)), 0.0)
+    return out
+
+
+def contact_events(contacts: Any, n_frames: int) -> Array:
+    """Binary global evidence: 1 where any contact starts or ends, shape (F, C).
+
+    One column per contact joint; a contact starting on the first frame or
+    running to the end of the clip gives no event there.  ``contacts`` is a
+    :class:`mocaplab.contacts.Contacts`.
+    """
+    joints = tuple(contacts.joints)
+    out = np.zeros((n_frames, len(joints)))
+    for c, name in enumerate(joints):
+        for start, stop in contacts.intervals(name):
+            if 0 < start < n_frames:
+                out[start, c] = 1.0
+            if 0 < stop < n_frames:
+                out[stop, c] = 1.0
+    return out
+
+
+def tent_filter(signal: Array, width: float, fps: float) -> Array:
+    """Low-pass tent (triangle) filter of total width ``width`` seconds along axis 0.
+
+    The kernel is normalised to sum 1, and renormalised near the ends of the
+    clip so a constant signal stays constant.
+    """
+    x = np.asarray(signal, dtype=float)
+    half = max(1, int(round(0.5 * width * fps)))
+    k = 1.0 - np.abs(np.arange(-half, half + 1)) / (half + 1.0)
+    k /= k.sum()
+    flat = x.reshape(x.shape[0], -1)
+    ones = np.convolve(np.ones(x.shape[0]), k, mode="same")
+    out = np.stack([np.convolve(flat[:, c], k, mode="same") for c in range(flat.shape[1])], axis=1)
+    return (out / ones[:, None]).reshape(x.shape)
+
+
+def signal_weights(trails: Trails, n_variables: int, *, root_weight: float = 1.0) -> Array:
+    """Weights ``w_i = sum_j |x_i - x_j| |m_j|`` of the local signals, shape (V,).
+
+    ``|m_j|`` is the arc length of the ``m1`` trail toward child ``j`` (the
+    limb's swept angle; its product with the bone length is the distance the
+    child sweeps).  The root translation gets the arc length of the root
+    trail (the distance the root travels, also metres) times ``root_weight``.
+    Arc lengths are measured on the smoothed trails passed in.
+    """
+    arc = np.linalg.norm(np.diff(trails.points, axis=0), axis=-1).sum(axis=0)  # (T,)
+    w = np.zeros(n_variables)
+    m1 = trails.kind == 1
+    np.add.at(w, trails.variable[m1], trails.bone_length[m1] * arc[m1])
+    w[0] = root_weight * arc[trails.kind == 0].sum()
+    return w
+
+
+def pose_probability(
+    signals: Array,
+    weights: Array,
+    fps: float,
+    *,
+    events: Array | None = None,
+    event_weight: float = 0.0,
+    width: float = FILTER_WIDTH,
+) -> Array:
+    """The aggregate pose probability ``P(t) = f(sum_i w_i p_i / sum_i w_i)``.
+
+    Parameters
+    ----------
+    signals : ndarray, shape (F, V)
+        Local probabilities ``p_i(t)``.
+    weights : ndarray, shape (V,)
+    fps : float
+    events : ndarray, shape (F, C), optional
+        Global evidence signals, each weighted ``event_weight``.
+    width : float
+        Tent filter width in seconds.
+
+    Returns
+    -------
+    ndarray, shape (F,)
+    """
+    num = signals @ weights
+    den = float(weights.sum())
+    if events is not None and events.size:
+        num = num + event_weight * events.sum(axis=1)
+        den += event_weight * events.shape[1]
+    if den <= 0:
+        return np.zeros(signals.shape[0])
+    return tent_filter(num / den, width, fps)
+
+
+def local_maxima(x: Array) -> NDArray[np.int64]:
+    """Indices of interior local maxima of a 1-D signal (``x[i-1] < x[i] >= x[i+1]``)."""
+    x = np.asarray(x, dtype=float)
+    if x.size < 3:
+        return np.zeros(0, dtype=np.int64)
+    m = (x[1:-1] > x[:-2]) & (x[1:-1] >= x[2:])
+    return np.flatnonzero(m) + 1
+
+
+def candidate_poses(probability: Array) -> NDArray[np.int64]:
+    """Candidate pose frames: local maxima of ``P`` plus the first and last frames."""
+    n = probability.size
+    return np.unique(np.concatenate([[0], local_maxima(probability), [n - 1]])).astype(np.int64)
+
+
+def pose_priorities(probability: Array, frames: NDArray[np.int64], fps: float) -> Array:
+    """Priorities ``w_k = P(t_k) (t_{k+1} - t_{k-1})``; ``inf`` for the first and last poses."""
+    t = np.asarray(frames, dtype=float) / fps
+    w = np.full(t.size, np.inf)
+    if t.size > 2:
+        w[1:-1] = probability[frames[1:-1]] * (t[2:] - t[:-2])
+    return w
+
+
+def cull_poses(
+    frames: NDArray[np.int64],
+    priorities: Array,
+    fps: float,
+    *,
+    max_poses: int | None = None,
+    fraction: float | None = None,
+    interval: tuple[float, float] | None = None,
+) -> NDArray[np.int64]:
+    """Keep the highest-priority candidates (section 4.1, 'Prioritized Pose Extraction').
+
+    Parameters
+    ----------
+    frames : ndarray of int, shape (C,)
+        Candidate frames, sorted, first and last frames included.
+    priorities : ndarray, shape (C,)
+    fps : float
+    max_poses : int, optional
+        Keep at most this many poses in total (first and last included, so
+        at least 2).
+    fraction : float in [0, 1], optional
+        Keep this fraction of the interior candidates (rounded to nearest).
+    interval : (float, float), optional
+        Keep only interior candidates whose time lies in ``[t0, t1]`` seconds.
+
+    Returns
+    -------
+    ndarray of int, shape (K,)
+        Kept frames, sorted; the first and last frames always.
+    """
+    frames = np.asarray(frames, dtype=np.int64)
+    keep = np.ones(frames.size, dtype=bool)
+    interior = np.arange(frames.size)[1:-1]
+    if interval is not None:
+        t0, t1 = (float(v) for v in interval)
+        if not t0 <= t1:
+            raise ValueError(f"Expected `interval` (t0, t1) with t0 <= t1, got {interval!r}")
+        t = frames[interior] / fps
+        keep[interior[(t < t0) | (t > t1)]] = False
+    interior = interior[keep[interior]]
+    n_keep = interior.size
+    if fraction is not None:
+        if not 0.0 <= fraction <= 1.0:
+            raise ValueError(f"Expected `fraction` in [0, 1], got {fraction!r}")
+        n_keep = min(n_keep, int(round(fraction * interior.size)))
+    if max_poses is not None:
+        if int(max_poses) < 2:
+            raise ValueError(f"Expected `max_poses` >= 2 (the first and last frames), got {max_poses!r}")
+        n_keep = min(n_keep, int(max_poses) - 2)
+    order = interior[np.argsort(-priorities[interior], kind="stable")]
+    keep[order[n_keep:]] = False
+    return frames[keep]
+
+
+def timing_refinements(
+    signals: Array,
+    frames: NDArray[np.int64],
+    fps: float,
+    *,
+    max_refinement: float = MAX_REFINEMENT,
+) -> Array:
+    """Timing refinements from local extrema of the feature signals (section 4.1).
+
+    For pose ``k`` (interior poses only: the first and last poses keep zero
+    refinements so the clip's ends are reproduced) and variable ``i``, among
+    the local maxima of ``p_i`` that lie within ``max_refinement`` seconds of
+    ``t_k`` and strictly closer to ``t_k`` than to ``t_{k-1}`` and
+    ``t_{k+1}``, the highest one gives ``r_{k,i}`` (a whole number of
+    frames); none gives 0.  Refined knots are therefore strictly ordered.
+
+    Parameters
+    ----------
+    signals : ndarray, shape (F, V)
+    frames : ndarray of int, shape (K,)
+        Pose frames, sorted.
+    fps : float
+    max_refinement : float
+        Seconds.
+
+    Returns
+    -------
+    ndarray, shape (K, V)
+        Refinements in seconds.
+    """
+    F, V = signals.shape
+    frames = np.asarray(frames, dtype=np.int64)
+    K = frames.size
+    x = signals
+    peak = np.zeros_like(x, dtype=bool)
+    if F >= 3:
+        peak[1:-1] = (x[1:-1] > x[:-2]) & (x[1:-1] >= x[2:])
+    score = np.where(peak, x, -np.inf)
+    R = int(np.floor(max_refinement * fps + 1e-9))
+    out = np.zeros((K, V))
+    for k in range(1, K - 1):
+        f = int(frames[k])
+        lo = max(f - R, (f + int(frames[k - 1])) // 2 + 1)
+        hi = min(f + R, -((-(f + int(frames[k + 1]))) // 2) - 1)
+        if hi < lo:
+            continue
+        win = score[lo : hi + 1]
+        best = np.argmax(win, axis=0)
+        found = np.isfinite(win[best, np.arange(V)])
+        out[k] = np.where(found, (lo + best - f) / fps, 0.0)
+    return out
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PoseAnalysis:
+    """Everything :func:`analyze` computes for a clip (the signals of Figure 5).
+
+    Attributes
+    ----------
+    fps : float
+    variables : tuple of str, length V
+    signals : ndarray, shape (F, V)
+        Local probabilities ``p_i(t)`` (smoothed bounded curvature).
+    weights : ndarray, shape (V,)
+        ``w_i`` of the local signals.
+    events : ndarray, shape (F, C)
+        Contact start/end events (global evidence), one column per contact joint.
+    event_joints : tuple of str, length C
+    event_weight : float
+        Weight of each event signal in ``P``.
+    probability : ndarray, shape (F,)
+        The pose probability signal ``P(t)``.
+    candidates : ndarray of int, shape (C,)
+        Candidate pose frames (maxima of ``P`` plus the first and last frames).
+    priorities : ndarray, shape (C,)
+        ``w_k`` of the candidates (``inf`` at the ends).
+    """
+
+    fps: float
+    variables: tuple[str, ...]
+    signals: Array
+    weights: Array
+    events: Array
+    event_joints: tuple[str, ...]
+    event_weight: float
+    probability: Array
+    candidates: NDArray[np.int64]
+    priorities: Array
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.probability.size)
+
+    @property
+    def times(self) -> Array:
+        """Time of each frame, seconds, shape (F,)."""
+        return np.arange(self.n_frames) / self.fps
+
+    def select(
+        self,
+        *,
+        max_poses: int | None = None,
+        fraction: float | None = None,
+        interval: tuple[float, float] | None = None,
+    ) -> NDArray[np.int64]:
+        """Culled pose frames (see :func:`cull_poses`)."""
+        return cull_poses(
+            self.candidates, self.priorities, self.fps, max_poses=max_poses, fraction=fraction, interval=interval
+        )
+
+    def priorities_of(self, frames: NDArray[np.int64]) -> Array:
+        """Priorities ``w_k`` of a chosen pose set (neighbours taken within the set)."""
+        return pose_priorities(self.probability, np.asarray(frames, dtype=np.int64), self.fps)
+
+    def refinements(self, frames: NDArray[np.int64], *, max_refinement: float = MAX_REFINEMENT) -> Array:
+        """Timing refinements of a chosen pose set, seconds, shape (K, V)."""
+        return timing_refinements(self.signals, frames, self.fps, max_refinement=max_refinement)
+
+
+def analyze(
+    motion: Motion,
+    *,
+    contacts: Any = "auto",
+    smoothing: int | None = None,
+    filter_width: float = FILTER_WIDTH,
+    root_weight: float = 1.0,
+    event_weight: float | Literal["auto"] = "auto",
+    contact_joints: Sequence[str] | None = None,
+) -> PoseAnalysis:
+    """Signals, pose probability and prioritised candidate poses of a clip.
+
+    Parameters
+    ----------
+    motion : Motion
+    contacts : Contacts, "auto" or None
+        Environmental contacts for the global evidence.  ``"auto"`` detects
+        them with :func:`mocaplab.contacts.stillness_contacts` (Coleman
+        Appendix B) on ``contact_joints`` (default: the feet); ``None`` uses
+        local evidence only.
+    smoothing : int, optional
+        Iterations of Laplacian smoothing (``lam = 0.5``) applied to every
+        trail.  Default ``round(24 (fps / 120)^2)``: a Gaussian of about 3.5
+        frames (29 ms) whatever the frame rate, set once for the CMU
+        collection by watching the signals settle, as the paper suggests.
+    filter_width : float
+        Tent filter width in seconds (0.15 s in the paper).
+    root_weight : float
+        Multiplier of the root translation signal's weight.
+    event_weight : float or "auto"
+        Weight of each contact-event signal.  ``"auto"``: the largest local
+        signal weight, so a contact change counts as much as the strongest
+        moving limb (the paper only asks for a non-zero value).
+    contact_joints : sequence of str, optional
+        Joints for ``contacts="auto"``.
+
+    Returns
+    -------
+    PoseAnalysis
+    """
+    if not isinstance(motion, Motion):
+        raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
+    if filter_width <= 0:
+        raise ValueError(f"Expected `filter_width` > 0 seconds, got {filter_width!r}")
+    fps = motion.fps
+    V = motion.n_joints + 1
+    iters = int(round(24 * (fps / 120.0) ** 2)) if smoothing is None else int(smoothing)
+    trails = motion_trails(motion)
+    # continuous quaternion signs do not matter here: trails are rotated vectors
+    pts = laplacian_smooth(trails.points, iterations=iters)
+    kappa = bounded_curvature(pts)  # (F, T)
+    signals = np.zeros((motion.n_frames, V))
+    np.maximum.at(signals.T, trails.variable, kappa.T)
+    smoothed_trails = dataclasses.replace(trails, points=pts)
+    weights = signal_weights(smoothed_trails, V, root_weight=root_weight)
+    if isinstance(contacts, str):
+        if contacts != "auto":
+            raise ValueError(f"Expected `contacts` to be a Contacts, 'auto' or None, got {contacts!r}")
+        from ..contacts import stillness_contacts
+
+        contacts = stillness_contacts(motion, joints=contact_joints)
+    if contacts is None:
+        events = np.zeros((motion.n_frames, 0))
+        event_joints: tuple[str, ...] = ()
+    else:
+        events = contact_events(contacts, motion.n_frames)
+        event_joints = tuple(contacts.joints)
+    ew = float(weights.max()) if event_weight == "auto" else float(event_weight)
+    if ew < 0:
+        raise ValueError(f"Expected `event_weight` >= 0, got {event_weight!r}")
+    P = pose_probability(signals, weights, fps, events=events, event_weight=ew, width=filter_width)
+    cand = candidate_poses(P)
+    return PoseAnalysis(
+        fps=fps,
+        variables=variable_names(motion.skeleton),
+        signals=signals,
+        weights=weights,
+        events=events,
+        event_joints=event_joints,
+        event_weight=ew,
+        probability=P,
+        candidates=cand,
+        priorities=pose_priorities(P, cand, fps),
+    )

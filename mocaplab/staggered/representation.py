@@ -1,0 +1,876 @@
+"""The staggered pose representation (Coleman et al. 2008, section 3).
+
+A motion is a sparse sequence of staggered poses ``S_k`` at times ``t_k``.
+Each pose holds, for every *control variable* ``i``, a value ``v_{k,i}`` and a
+timing refinement ``r_{k,i}``; the equivalent spline knot is
+``(t_k + r_{k,i}, v_{k,i})``.
+
+Control variables
+-----------------
+For a skeleton of ``J`` joints there are ``V = J + 1`` variables, in this
+order:
+
+* variable ``0``: the root translation (metres), name ``"root_position"``;
+* variable ``1 + j``: the local rotation of joint ``j`` (unit quaternion),
+  named after the joint (variable 1 is the root orientation).
+
+Concatenation and factorisation (the paper's ``+`` in a circle and ``-`` in a
+circle)
+-------------------------------------------------------------------------------
+For translations ``a (+) b = a + b`` and ``c (-) a = c - a``.  For rotations
+``a (+) b = quat.mul(a, b)`` and ``c (-) a = quat.mul(quat.inv(a), c)``:
+``b`` is applied *after* ``a`` in ``a``'s own (body) frame, the intrinsic order
+used by motion displacement maps, so ``a (+) (c (-) a) == c``.  The order
+matters for rotations and is fixed everywhere in this package.
+
+Evaluation (section 3)
+----------------------
+Variable ``i`` at time ``t`` lies between its refined knots
+``T_k = t_k + r_{k,i}`` and ``T_{k+1}``; with the normalised time
+``t' = (t - T_k) / (T_{k+1} - T_k)`` its value is
+
+    v_i(t) = s_i(t') (+) d_i(t')
+
+where ``s_i`` is a cubic spline and ``d_i`` a displacement map, both defined on
+``t'`` so that moving knots in time warps them with the knots.
+
+* Translation splines are cubic Bezier curves with end points ``v_k`` and
+  ``v_{k+1}``; the inner control points are stored *relative to* their end
+  points (``P1 = v_k + a``, ``P2 = v_{k+1} + b``) so a moved knot carries its
+  tangent with it.
+* Rotation splines are Shoemake's cubic quaternion Bezier curves evaluated by
+  recursive spherical linear interpolation (de Casteljau with slerp), with
+  control orientations ``q1 = v_k``, ``q2 = v_k (+) alpha``,
+  ``q3 = v_{k+1} (+) beta``, ``q4 = v_{k+1}``.
+* Displacement maps are dense samples on the normalised time of their
+  segment (the frames of the clip they were measured on).  Translation
+  displacements are vectors; rotation displacements are stored as rotation
+  vectors ``log(d)``.  Between samples they are interpolated linearly; on a
+  sample they are returned exactly, which is what makes extraction followed by
+  evaluation reproduce a clip to rounding error.
+* Before a variable's first knot and after its last one the value is held.
+
+Partial poses (section 6) control a subset of the variables: ``active[k, i]``
+says whether pose ``k`` has a knot for variable ``i``; a variable's spline
+runs between consecutive *active* knots.
+
+Editing knots (section 3, Figure 3b): for every active knot with
+``r_{k,i} != 0`` there is an editing knot at the pose time ``t_k`` whose value
+is the true value of the variable at ``t_k``.  Here an editing knot is not
+stored: its value is always obtained by evaluation (so it is re-created at
+``t_k`` after every retiming, as in Figure 6c), and geometric edits
+(:mod:`mocaplab.staggered.edit`) use its position to give the editing knot and
+the extreme knot equal changes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .. import quat
+from ..motion import Motion, Skeleton
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .edit import ReferencePose
+
+__all__ = [
+    "StaggeredMotion",
+    "StaggeredTimingWarning",
+    "ROOT_POSITION",
+    "compose_rotation",
+    "factor_rotation",
+    "slerp_unit",
+    "bezier",
+    "quat_bezier",
+    "variable_names",
+    "locate",
+    "next_active",
+    "casteljau",
+]
+
+Array = NDArray[np.float64]
+
+ROOT_POSITION = "root_position"
+"""Name of control variable 0, the root translation."""
+
+
+class StaggeredTimingWarning(UserWarning):
+    """A refined knot time came closer to a neighbouring pose than to its own
+    pose (section 5.2): large nonlinear time warps may add sudden accelerations."""
+
+
+# --------------------------------------------------------------------- kernels
+def compose_rotation(a: ArrayLike, b: ArrayLike) -> Array:
+    """``a (+) b`` for rotations: ``quat.mul(a, b)`` (``b`` applied after ``a``, in ``a``'s frame)."""
+    return quat.mul(a, b)
+
+
+def factor_rotation(c: ArrayLike, a: ArrayLike) -> Array:
+    """``c (-) a`` for rotations: the ``b`` with ``a (+) b == c``, i.e. ``inv(a) * c``."""
+    return quat.mul(quat.inv(a), c)
+
+
+def slerp_unit(a: Array, b: Array, t: Array, *, unit: bool = False) -> Array:
+    """Spherical linear interpolation *without* a shortest-arc sign flip.
+
+    Parameters
+    ----------
+    a, b : ndarray, shape (..., 4)
+        Quaternions.  With ``unit=False`` they may have any length: the angle
+        is taken between their directions and the result interpolates their
+        lengths too (the Appendix A objective needs this while its control
+        points are not yet unit).
+    t : ndarray, shape (...,)
+        Interpolation parameter (0 gives ``a``, 1 gives ``b``).
+    unit : bool
+        Promise that ``a`` and ``b`` are unit (skips two norms).
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+
+    Notes
+    -----
+    Spline control orientations are kept in one hemisphere, so flipping ``b``
+    to the shorter arc inside the recursive construction is neither needed nor
+    wanted (it would make the curve jump where a dot product changes sign).
+    """
+    dot = np.einsum("...i,...i->...", a, b)
+    if not unit:
+        na = np.sqrt(np.einsum("...i,...i->...", a, a))
+        nb = np.sqrt(np.einsum("...i,...i->...", b, b))
+        dot = dot / np.maximum(na * nb, 1e-300)
+    theta = np.arccos(np.clip(dot, -1.0, 1.0))
+    s = np.sin(theta)
+    small = s < 1e-9
+    inv = 1.0 / np.where(small, 1.0, s)
+    w0 = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) * inv)
+    w1 = np.where(small, t, np.sin(t * theta) * inv)
+    return w0[..., None] * a + w1[..., None] * b
+
+
+def bezier(p0: Array, p1: Array, p2: Array, p3: Array, t: Array) -> Array:
+    """Cubic Bezier curve ``sum_j B_j(t) P_j`` (Bernstein basis), broadcasting.
+
+    ``p*`` have shape (..., D) and ``t`` shape (...,).
+    """
+    t = np.asarray(t, dtype=float)[..., None]
+    s = 1.0 - t
+    return (s * s * s) * p0 + (3.0 * s * s * t) * p1 + (3.0 * s * t * t) * p2 + (t * t * t) * p3
+
+
+def quat_bezier(q1: Array, q2: Array, q3: Array, q4: Array, t: Array, *, unit: bool = True) -> Array:
+    """Cubic quaternion spline by recursive slerp (Shoemake 1985; Appendix A's ``s``).
+
+    ``s(q1, q2, q3, q4, t)``: de Casteljau's construction with every linear
+    interpolation replaced by :func:`slerp_unit`.  Interpolates ``q1`` at
+    ``t = 0`` and ``q4`` at ``t = 1``; ``q2`` and ``q3`` are the tangent
+    orientations.  Shapes (..., 4) with ``t`` (...,).  With unit inputs
+    (``unit=True``, the default) the result is unit; ``unit=False`` accepts
+    control quaternions of any length.
+    """
+    t = np.asarray(t, dtype=float)
+    a = slerp_unit(q1, q2, t, unit=unit)
+    b = slerp_unit(q2, q3, t, unit=unit)
+    c = slerp_unit(q3, q4, t, unit=unit)
+    d = slerp_unit(a, b, t, unit=unit)
+    e = slerp_unit(b, c, t, unit=unit)
+    return slerp_unit(d, e, t, unit=unit)
+
+
+def variable_names(skeleton: Skeleton) -> tuple[str, ...]:
+    """Names of the ``J + 1`` control variables: ``("root_position", *joint names)``."""
+    return (ROOT_POSITION,) + tuple(skeleton.names)
+
+
+def _frame_times(duration: float, fps: float) -> Array:
+    n = int(np.floor(duration * fps + 1e-9)) + 1
+    return np.arange(n) / fps
+
+
+def _smoothstep(x: Array) -> Array:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+# -------------------------------------------------------------- the container
+@dataclasses.dataclass(frozen=True, eq=False)
+class StaggeredMotion:
+    """A motion as staggered poses, splines and displacement maps.
+
+    Build one with :func:`mocaplab.staggered.extract` (from a clip) rather
+    than by hand.  Every editing method returns a new object.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    fps : float
+        Frame rate of :meth:`evaluate`'s output.
+    times : ndarray, shape (K,)
+        Pose times ``t_k`` in seconds, strictly increasing.
+    refinements : ndarray, shape (K, V)
+        Timing refinements ``r_{k,i}`` in seconds (``V = J + 1``).
+    root_values : ndarray, shape (K, 3)
+        Extreme values of the root translation (metres).
+    rotation_values : ndarray, shape (K, J, 4)
+        Extreme values of the joint rotations (unit quaternions).
+    root_tangents : ndarray, shape (K, 2, 3)
+        For the segment starting at pose ``k``: ``P1 - v_k`` and ``P2 - v_next``.
+    rotation_tangents : ndarray, shape (K, J, 2, 4)
+        For the segment starting at pose ``k``: ``alpha`` and ``beta``, with
+        ``q2 = v_k (+) alpha`` and ``q3 = v_next (+) beta``.
+    sample_u : ndarray, shape (N, V)
+        Displacement-map sample positions of each variable, as
+        ``k + t' (k_next - k)`` (pose-index units, increasing).
+    root_displacement : ndarray, shape (N, 3)
+    rotation_displacement : ndarray, shape (N, J, 3)
+        Rotation vectors of the rotation displacements.
+    active : ndarray of bool, shape (K, V), optional
+        Which variables each pose controls (all by default; first and last
+        poses must control every variable).
+    priorities : ndarray, shape (K,), optional
+        Extraction priorities ``w_k`` (``inf`` for the forced first and last
+        poses, NaN for poses created by editing).
+    name : str
+    translations : ndarray, shape (F, J, 3), optional
+        Animated non-root translations of the source clip, carried through
+        unchanged (they are not staggered).
+    constraints : ConstraintLayer, optional
+        The contact constraint displacement layer (see
+        :class:`mocaplab.staggered.edit.ConstraintLayer`).
+    """
+
+    skeleton: Skeleton
+    fps: float
+    times: Array
+    refinements: Array
+    root_values: Array
+    rotation_values: Array
+    root_tangents: Array
+    rotation_tangents: Array
+    sample_u: Array
+    root_displacement: Array
+    rotation_displacement: Array
+    active: NDArray[np.bool_] | None = None
+    priorities: Array | None = None
+    name: str = ""
+    translations: Array | None = None
+    constraints: Any = None
+
+    def __post_init__(self) -> None:
+        J = self.skeleton.n_joints
+        V = J + 1
+        times = np.array(self.times, dtype=float).reshape(-1)
+        K = times.size
+        if K < 2:
+            raise ValueError(f"Expected at least 2 poses in `times`, got {K}")
+        if not np.all(np.diff(times) > 0):
+            raise ValueError(f"Expected strictly increasing pose `times`, got {times}")
+
+        def arr(x: Any, shape: tuple[int, ...], label: str, dtype: Any = float) -> NDArray[Any]:
+            a = np.array(x, dtype=dtype, copy=True)
+            if a.shape != shape:
+                raise ValueError(f"Expected `{label}` of shape {shape}, got {a.shape}")
+            if dtype is float and not np.all(np.isfinite(a)):
+                raise ValueError(f"Expected finite `{label}`, got NaN or inf")
+            a.flags.writeable = False
+            return a
+
+        refinements = arr(self.refinements, (K, V), "refinements")
+        active = arr(np.ones((K, V), bool) if self.active is None else self.active, (K, V), "active", bool)
+        if not (active[0].all() and active[-1].all()):
+            raise ValueError("Expected the first and last poses to control every variable (`active` rows 0 and -1)")
+        knots = np.where(active, times[:, None] + refinements, np.nan)
+        for i in range(V):
+            col = knots[active[:, i], i]
+            if not np.all(np.diff(col) > 0):
+                bad = int(np.flatnonzero(np.diff(col) <= 0)[0])
+                raise ValueError(
+                    f"Refined knot times of variable {variable_names(self.skeleton)[i]!r} are out of order "
+                    f"(knot {bad} at {col[bad]:.4f} s, next at {col[bad + 1]:.4f} s): reduce the timing edit"
+                )
+        N = np.asarray(self.sample_u).shape[0]
+        object.__setattr__(self, "fps", float(self.fps))
+        times.flags.writeable = False
+        object.__setattr__(self, "times", times)
+        object.__setattr__(self, "refinements", refinements)
+        object.__setattr__(self, "active", active)
+        object.__setattr__(self, "root_values", arr(self.root_values, (K, 3), "root_values"))
+        rv = arr(self.rotation_values, (K, J, 4), "rotation_values")
+        object.__setattr__(self, "rotation_values", rv)
+        object.__setattr__(self, "root_tangents", arr(self.root_tangents, (K, 2, 3), "root_tangents"))
+        object.__setattr__(self, "rotation_tangents", arr(self.rotation_tangents, (K, J, 2, 4), "rotation_tangents"))
+        object.__setattr__(self, "sample_u", arr(self.sample_u, (N, V), "sample_u"))
+        object.__setattr__(self, "root_displacement", arr(self.root_displacement, (N, 3), "root_displacement"))
+        object.__setattr__(
+            self, "rotation_displacement", arr(self.rotation_displacement, (N, J, 3), "rotation_displacement")
+        )
+        pr = np.full(K, np.nan) if self.priorities is None else np.array(self.priorities, dtype=float, copy=True)
+        if pr.shape != (K,):
+            raise ValueError(f"Expected `priorities` of shape ({K},), got {pr.shape}")
+        pr.flags.writeable = False
+        object.__setattr__(self, "priorities", pr)
+        object.__setattr__(self, "name", str(self.name))
+
+    # ----------------------------------------------------------------- sizes
+    @property
+    def n_poses(self) -> int:
+        """Number of staggered poses ``K``."""
+        return int(self.times.size)
+
+    @property
+    def n_joints(self) -> int:
+        return self.skeleton.n_joints
+
+    @property
+    def n_variables(self) -> int:
+        """Number of control variables ``V = J + 1``."""
+        return self.skeleton.n_joints + 1
+
+    @property
+    def variables(self) -> tuple[str, ...]:
+        """Control variable names (see the module docstring)."""
+        return variable_names(self.skeleton)
+
+    @property
+    def duration(self) -> float:
+        """Seconds from 0 to the last pose."""
+        return float(self.times[-1])
+
+    @property
+    def n_frames(self) -> int:
+        """Frames produced by :meth:`evaluate` at ``fps``."""
+        return int(_frame_times(self.duration, self.fps).size)
+
+    @property
+    def knot_times(self) -> Array:
+        """Refined knot times ``t_k + r_{k,i}``, shape (K, V) (NaN where inactive)."""
+        return np.where(self.active, self.times[:, None] + self.refinements, np.nan)
+
+    @property
+    def editing_knots(self) -> NDArray[np.bool_]:
+        """Where an editing knot exists (active and ``r_{k,i} != 0``), shape (K, V)."""
+        return self.active & (self.refinements != 0.0)
+
+    def variable_index(self, name: str) -> int:
+        """Index of a control variable by name (a joint name or ``"root_position"``)."""
+        names = self.variables
+        if name not in names:
+            raise KeyError(f"No control variable {name!r}; variables are {list(names)}")
+        return names.index(name)
+
+    def __repr__(self) -> str:
+        label = f" {self.name!r}" if self.name else ""
+        return (
+            f"<StaggeredMotion{label}: {self.n_poses} poses over {self.duration:.2f} s, "
+            f"{self.n_variables} variables, {int(self.editing_knots.sum())} refined knots>"
+        )
+
+    # ------------------------------------------------------------ evaluation
+    def locate(self, t: ArrayLike, *, staggered: bool = True) -> tuple[NDArray[np.int64], NDArray[np.int64], Array]:
+        """Segment and normalised time of every variable at times ``t``.
+
+        Parameters
+        ----------
+        t : array_like, shape (F,)
+            Times in seconds.
+        staggered : bool
+            False evaluates the non-staggered motion (all refinements zero).
+
+        Returns
+        -------
+        k0, k1 : ndarray of int, shape (F, V)
+            Poses bounding the segment of each variable (consecutive active
+            knots).
+        tn : ndarray, shape (F, V)
+            Normalised time ``t'`` in ``[0, 1]`` (held outside the knots).
+        """
+        return locate(self.times, self.refinements, self.active, t, staggered=staggered)
+
+    def spline_values(
+        self, k0: NDArray[np.int64], k1: NDArray[np.int64], tn: Array
+    ) -> tuple[Array, Array]:
+        """The spline layer ``s_i(t')`` at given segments and normalised times.
+
+        ``k0, k1, tn`` have shape (..., V) as returned by :meth:`locate`.
+        Returns root positions (..., 3) and rotations (..., J, 4).
+        """
+        return _spline(
+            self.root_values,
+            self.rotation_values,
+            self.root_tangents,
+            self.rotation_tangents,
+            k0,
+            k1,
+            tn,
+            self.control_points(),
+        )
+
+    def control_points(self) -> tuple[Array, Array, Array]:
+        """Absolute spline control points, indexed by the segment's start pose (cached).
+
+        Returns root controls (K, 4, 3) ``P0..P3``, rotation controls
+        (K, J, 4, 4) ``q1..q4`` and the angles between consecutive rotation
+        controls (K, J, 3).
+        """
+        ctrl = self.__dict__.get("_ctrl")
+        if ctrl is None:
+            ctrl = _controls(
+                self.root_values, self.rotation_values, self.root_tangents, self.rotation_tangents, self.active
+            )
+            object.__setattr__(self, "_ctrl", ctrl)
+        return ctrl
+
+    def displacement_values(self, u: Array) -> tuple[Array, Array]:
+        """The displacement layer at positions ``u`` (shape (F, V)).
+
+        Returns translations (F, 3) and rotation vectors (F, J, 3).
+        """
+        return _interp_columns(self.sample_u, self.root_displacement, self.rotation_displacement, u)
+
+    def evaluate(
+        self,
+        times: ArrayLike | None = None,
+        *,
+        staggered: bool = True,
+        constraints: bool = True,
+    ) -> Motion:
+        """Evaluate the representation into a dense Motion.
+
+        Parameters
+        ----------
+        times : array_like, shape (F,), optional
+            Times in seconds; default every frame ``i / fps`` from 0 to the
+            last pose time.
+        staggered : bool
+            False gives the non-staggered motion: every refinement treated as
+            zero (the splines and displacement maps are warped with the knots).
+        constraints : bool
+            Apply the contact constraint layer if this object has one.
+
+        Returns
+        -------
+        Motion
+            At ``fps``.  Rotations are ``s (+) d = mul(s, exp(d))``, the root
+            position ``s + d``.
+        """
+        default = times is None
+        if default and staggered and constraints and "_dense" in self.__dict__:
+            return self.__dict__["_dense"]
+        t = _frame_times(self.duration, self.fps) if default else np.asarray(times, dtype=float).reshape(-1)
+        if default and staggered:
+            root, rot = self._raw()
+        else:
+            root, rot = self._compose(t, staggered=staggered)
+        tr = self.translations
+        if tr is not None and tr.shape[0] != t.size:
+            tr = None
+        motion = Motion(self.skeleton, rot, root, self.fps, translations=tr, name=self.name)
+        if constraints and self.constraints is not None:
+            motion = self.constraints.apply(self, motion, t, staggered=staggered)
+        if default and staggered and constraints:
+            object.__setattr__(self, "_dense", motion)
+        return motion
+
+    def _raw(self) -> tuple[Array, Array]:
+        """Dense staggered composition on the default frames, before constraints (cached).
+
+        An edit that changed only some variables hands its result the
+        parent's dense arrays and the changed-variable mask
+        (``_parent_raw``); only those columns are recomputed here.
+        """
+        raw = self.__dict__.get("_raw_cache")
+        if raw is not None:
+            return raw
+        t = _frame_times(self.duration, self.fps)
+        parent = self.__dict__.get("_parent_raw")
+        if parent is not None and parent[0].shape[0] == t.size:
+            p_root, p_rot, changed = parent
+            root, rot = np.array(p_root, copy=True), np.array(p_rot, copy=True)
+            cols = np.flatnonzero(changed)
+            if cols.size:
+                c_root, c_rot, js = self._compose_columns(t, cols, staggered=True)
+                if c_root is not None:
+                    root = c_root
+                rot[:, js] = c_rot
+        else:
+            root, rot = self._compose(t)
+        root.flags.writeable = False
+        rot.flags.writeable = False
+        object.__setattr__(self, "_raw_cache", (root, rot))
+        self.__dict__.pop("_parent_raw", None)
+        return root, rot
+
+    def _inherit_raw(self, parent: StaggeredMotion, changed: NDArray[np.bool_]) -> None:
+        """Let this (edited) object reuse ``parent``'s dense evaluation outside ``changed`` (V,)."""
+        if "_raw_cache" in parent.__dict__:
+            root, rot = parent.__dict__["_raw_cache"]
+            object.__setattr__(self, "_parent_raw", (root, rot, np.asarray(changed, dtype=bool)))
+        elif "_parent_raw" in parent.__dict__:
+            root, rot, prev = parent.__dict__["_parent_raw"]
+            object.__setattr__(self, "_parent_raw", (root, rot, prev | np.asarray(changed, dtype=bool)))
+
+    def _compose(self, t: Array, *, staggered: bool = True) -> tuple[Array, Array]:
+        k0, k1, tn = self.locate(t, staggered=staggered)
+        s_root, s_rot = self.spline_values(k0, k1, tn)
+        u = k0 + tn * (k1 - k0)
+        d_root, d_rot = self.displacement_values(u)
+        return s_root + d_root, quat.mul(s_rot, quat.exp(d_rot))
+
+    def _compose_columns(
+        self, t: Array, cols: NDArray[np.int64], *, staggered: bool = True
+    ) -> tuple[Array | None, Array, NDArray[np.int64]]:
+        """Composition of a subset of variables: root (F, 3) or None, rotations (F, n, 4), joint indices."""
+        k0, k1, tn = locate(self.times, self.refinements, self.active, t, staggered=staggered, columns=cols)
+        u = k0 + tn * (k1 - k0)
+        root_c, rot_c, rot_th = self.control_points()
+        root = None
+        sel = cols == 0
+        if sel.any():
+            c = int(np.flatnonzero(sel)[0])
+            P = root_c[k0[:, c]]
+            s_root = bezier(P[:, 0], P[:, 1], P[:, 2], P[:, 3], tn[:, c])
+            d_root, _ = _interp_columns(
+                self.sample_u[:, [0]], self.root_displacement, self.rotation_displacement[:, :0], u[:, [c]]
+            )
+            root = s_root + d_root
+        rc = np.flatnonzero(~sel)
+        js = cols[rc] - 1
+        kk = k0[:, rc]
+        s_rot = casteljau(rot_c[kk, js], rot_th[kk, js], tn[:, rc])
+        xp = np.concatenate([self.sample_u[:, :1], self.sample_u[:, cols[rc]]], axis=1)
+        uu = np.concatenate([np.zeros((t.size, 1)), u[:, rc]], axis=1)
+        _, d_rot = _interp_columns(xp, self.root_displacement, self.rotation_displacement[:, js], uu)
+        return root, quat.mul(s_rot, quat.exp(d_rot)), js
+
+    def true_pose(self, k: int) -> tuple[Array, Array]:
+        """The pose at the staggered pose time ``t_k``: root (3,), rotations (J, 4)."""
+        k = self._pose_index(k)
+        root, rot = self._compose(np.array([self.times[k]]))
+        return root[0], rot[0]
+
+    def non_staggered_pose(self, k: int) -> tuple[Array, Array]:
+        """The non-staggered pose: every variable at its extreme value ``v_{k,i}``.
+
+        Variables the pose does not control (partial poses) take their true
+        value at ``t_k``.  Returns root (3,), rotations (J, 4).
+        """
+        k = self._pose_index(k)
+        root, rot = self.true_pose(k)
+        act = self.active[k]
+        root = np.where(act[0], self.root_values[k], root)
+        rot = np.where(act[1:, None], self.rotation_values[k], rot)
+        return root, rot
+
+    def pose_motion(self, k: int, *, which: Literal["true", "non-staggered"] = "true") -> Motion:
+        """A one-frame Motion of pose ``k`` (``which``: true or non-staggered pose)."""
+        if which == "true":
+            root, rot = self.true_pose(k)
+        elif which == "non-staggered":
+            root, rot = self.non_staggered_pose(k)
+        else:
+            raise ValueError(f"Expected `which` in ('true', 'non-staggered'), got {which!r}")
+        return Motion(self.skeleton, rot[None], root[None], self.fps, name=f"{self.name} pose {k} ({which})")
+
+    def editing_knot_values(self) -> tuple[Array, Array]:
+        """Values of all editing knots (true values at ``t_k``): root (K, 3), rotations (K, J, 4).
+
+        Entries where :attr:`editing_knots` is False equal the extreme values.
+        """
+        root, rot = self._compose(self.times)
+        ek = self.editing_knots
+        root = np.where(ek[:, :1], root, self.root_values)
+        rot = np.where(ek[:, 1:, None], rot, self.rotation_values)
+        return root, rot
+
+    def _pose_index(self, k: int) -> int:
+        if not isinstance(k, (int, np.integer)) or not -self.n_poses <= k < self.n_poses:
+            raise IndexError(f"Expected a pose index in [0, {self.n_poses}), got {k!r}")
+        return int(k) % self.n_poses
+
+    # ------------------------------------------------------------- warnings
+    def timing_conflicts(self) -> NDArray[np.bool_]:
+        """Knots closer to a neighbouring pose than to their own, shape (K, V) (section 5.2)."""
+        T = self.times[:, None] + self.refinements
+        own = np.abs(self.refinements)
+        prev = np.full_like(T, np.inf)
+        nxt = np.full_like(T, np.inf)
+        prev[1:] = np.abs(T[1:] - self.times[:-1, None])
+        nxt[:-1] = np.abs(T[:-1] - self.times[1:, None])
+        return self.active & ((prev < own) | (nxt < own))
+
+    def _warn_timing(self) -> None:
+        bad = self.timing_conflicts()
+        if bad.any():
+            k, i = np.argwhere(bad)[0]
+            warnings.warn(
+                f"{int(bad.sum())} refined knot(s) are closer to a neighbouring pose than to their own, e.g. "
+                f"{self.variables[i]!r} of pose {k} at {self.times[k] + self.refinements[k, i]:.3f} s",
+                StaggeredTimingWarning,
+                stacklevel=3,
+            )
+
+    # -------------------------------------------------------------- editing
+    # (implemented in mocaplab.staggered.edit; thin methods for discoverability)
+    def with_refinements(self, refinements: ArrayLike) -> StaggeredMotion:
+        """A copy with new timing refinements (shape (K, V)); warns on conflicts."""
+        from . import edit
+
+        return edit.set_refinements(self, refinements)
+
+    def retime(self, k: int, time: float) -> StaggeredMotion:
+        """Move pose ``k`` to ``time`` seconds (section 5.2, 'retiming as a unit')."""
+        from . import edit
+
+        return edit.retime(self, k, time)
+
+    def zero_refinements(self) -> StaggeredMotion:
+        """The non-staggered representation: all refinements set to zero."""
+        from . import edit
+
+        return edit.set_refinements(self, np.zeros_like(self.refinements))
+
+    def succession(
+        self,
+        s: float,
+        l: float = 1.0,
+        *,
+        joint: str | Sequence[str] | None = None,
+        poses: Sequence[int] | None = None,
+    ) -> StaggeredMotion:
+        """Nonlinear succession ``r + s d(i)^l`` (section 5.2); see :func:`edit.succession`."""
+        from . import edit
+
+        return edit.succession(self, s, l, joint=joint, poses=poses)
+
+    def randomize(
+        self,
+        tau: float,
+        *,
+        joints: Sequence[str] | None = None,
+        poses: Sequence[int] | None = None,
+        seed: int | None = 0,
+    ) -> StaggeredMotion:
+        """Bounded random refinement offsets ``rand(-tau, tau)`` (section 5.2)."""
+        from . import edit
+
+        return edit.randomize(self, tau, joints=joints, poses=poses, seed=seed)
+
+    def edit_pose(
+        self,
+        k: int,
+        *,
+        root_position: ArrayLike | None = None,
+        rotations: ArrayLike | dict[str, ArrayLike] | None = None,
+        which: Literal["true", "non-staggered"] = "non-staggered",
+    ) -> StaggeredMotion:
+        """Set new values for pose ``k`` (section 5.1); see :func:`edit.edit_pose`."""
+        from . import edit
+
+        return edit.edit_pose(self, k, root_position=root_position, rotations=rotations, which=which)
+
+    def exaggerate(
+        self,
+        w_r: float,
+        *,
+        reference: ReferencePose = "average",
+        poses: Sequence[int] | None = None,
+        joints: Sequence[str] | None = None,
+        which: Literal["true", "non-staggered"] = "non-staggered",
+    ) -> StaggeredMotion:
+        """Relative pose editing ``v (+) w_r (v (-) v^r)`` (section 5.1)."""
+        from . import edit
+
+        return edit.exaggerate(self, w_r, reference=reference, poses=poses, joints=joints, which=which)
+
+    def insert_pose(self, time: float, *, joints: Sequence[str] | None = None) -> StaggeredMotion:
+        """Create a (possibly partial) pose at ``time``; the motion is unchanged (section 5.1)."""
+        from . import edit
+
+        return edit.insert_pose(self, time, joints=joints)
+
+    def delete_pose(self, k: int) -> StaggeredMotion:
+        """Remove pose ``k``; displacement maps keep the motion unchanged (section 5.1)."""
+        from . import edit
+
+        return edit.delete_pose(self, k)
+
+
+# ------------------------------------------------------------------ helpers
+def locate(
+    times: Array,
+    refinements: Array,
+    active: NDArray[np.bool_],
+    t: ArrayLike,
+    *,
+    staggered: bool = True,
+    columns: ArrayLike | None = None,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], Array]:
+    """Segment (bounding active poses ``k0, k1``) and normalised time of every variable.
+
+    ``times`` (K,), ``refinements`` and ``active`` (K, V), ``t`` (F,) or
+    (F, V) (one time column per variable); returns ``k0, k1`` (F, V) int and
+    ``t'`` (F, V) clipped to [0, 1] (only the variables ``columns`` if
+    given).  A time exactly on a knot belongs to the segment that starts
+    there.
+    """
+    t = np.asarray(t, dtype=float)
+    K, V = refinements.shape
+    cols = np.arange(V) if columns is None else np.asarray(columns, dtype=np.int64)
+    F = t.shape[0]
+    knots = times[:, None] + (refinements if staggered else np.zeros_like(refinements))
+    n = cols.size
+    k0 = np.empty((F, n), dtype=np.int64)
+    k1 = np.empty((F, n), dtype=np.int64)
+    tn = np.empty((F, n))
+    full = bool(active.all())
+    all_idx = np.arange(K)
+    for c, i in enumerate(cols):
+        idx = all_idx if full else np.flatnonzero(active[:, i])
+        T = knots[idx, i]
+        tc = t[:, i] if t.ndim == 2 else t
+        s = np.searchsorted(T, tc, side="right") - 1
+        np.clip(s, 0, idx.size - 2, out=s)
+        a, b = T[s], T[s + 1]
+        k0[:, c] = idx[s]
+        k1[:, c] = idx[s + 1]
+        x = (tc - a) / (b - a)
+        np.clip(x, 0.0, 1.0, out=x)
+        tn[:, c] = x
+    return k0, k1, tn
+
+
+def next_active(active: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """For each (k, i), the next pose after ``k`` controlling variable ``i`` (-1 if none), shape (K, V)."""
+    K, V = active.shape
+    out = np.full((K, V), -1, dtype=np.int64)
+    nxt = np.full(V, -1, dtype=np.int64)
+    for k in range(K - 1, -1, -1):
+        out[k] = nxt
+        nxt = np.where(active[k], k, nxt)
+    return out
+
+
+def _spline(
+    root_values: Array,
+    rotation_values: Array,
+    root_tangents: Array,
+    rotation_tangents: Array,
+    k0: NDArray[np.int64],
+    k1: NDArray[np.int64],
+    tn: Array,
+    controls: tuple[Array, Array, Array] | None = None,
+) -> tuple[Array, Array]:
+    """Spline layer at (..., V) segment indices; see :meth:`StaggeredMotion.spline_values`."""
+    if controls is None:
+        controls = _controls(root_values, rotation_values, root_tangents, rotation_tangents, None)
+    root_c, rot_c, rot_th = controls
+    a0, t0 = k0[..., 0], tn[..., 0]
+    P = root_c[a0]  # (..., 4, 3)
+    root = bezier(P[..., 0, :], P[..., 1, :], P[..., 2, :], P[..., 3, :], t0)
+    j = np.arange(rotation_values.shape[1])
+    r0 = k0[..., 1:]
+    return root, casteljau(rot_c[r0, j], rot_th[r0, j], tn[..., 1:])
+
+
+def _controls(
+    root_values: Array,
+    rotation_values: Array,
+    root_tangents: Array,
+    rotation_tangents: Array,
+    active: NDArray[np.bool_] | None,
+) -> tuple[Array, Array, Array]:
+    """Absolute control points of every segment, indexed by its start pose.
+
+    Returns root controls (K, 4, 3), rotation controls (K, J, 4, 4) and the
+    angles between consecutive rotation controls (K, J, 3).
+    """
+    K, J = rotation_values.shape[:2]
+    if active is None:
+        active = np.ones((K, J + 1), dtype=bool)
+    nxt = next_active(active)
+    nxt = np.where(nxt < 0, np.arange(K)[:, None], nxt)
+    p0 = root_values
+    p3 = root_values[nxt[:, 0]]
+    root_c = np.stack([p0, p0 + root_tangents[:, 0], p3 + root_tangents[:, 1], p3], axis=1)
+    j = np.arange(J)
+    q1 = rotation_values
+    q4 = rotation_values[nxt[:, 1:], j]
+    q2 = quat.mul(q1, rotation_tangents[:, :, 0])
+    q3 = quat.mul(q4, rotation_tangents[:, :, 1])
+    rot_c = np.stack([q1, q2, q3, q4], axis=2)
+    dots = np.einsum("...i,...i->...", rot_c[:, :, :3], rot_c[:, :, 1:])
+    return root_c, rot_c, np.arccos(np.clip(dots, -1.0, 1.0))
+
+
+def casteljau(ctrl: Array, theta: Array, t: Array) -> Array:
+    """Recursive slerp of unit control quaternions (the evaluation kernel).
+
+    The same curve as :func:`quat_bezier`, computed level by level with the
+    slerps of a level stacked in one array operation, and with the first
+    level's angles precomputed.
+
+    Parameters
+    ----------
+    ctrl : ndarray, shape (..., 4, 4)
+        Control quaternions ``q1 .. q4`` (unit, one hemisphere).
+    theta : ndarray, shape (..., 3)
+        Angles between consecutive controls (``arccos`` of their dots).
+    t : ndarray, shape (...,)
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+
+    Notes
+    -----
+    Angles are floored at 1e-7 rad, where ``sin(x theta) / sin(theta)``
+    equals ``x`` to 1e-14, which replaces the small-angle branch.
+    """
+    tt = np.asarray(t, dtype=float)[..., None]
+    u = 1.0 - tt
+    th = np.maximum(theta, 1e-7)
+    inv = 1.0 / np.sin(th)
+    lev = (np.sin(u * th) * inv)[..., None] * ctrl[..., :3, :] + (np.sin(tt * th) * inv)[..., None] * ctrl[..., 1:, :]
+    for _ in range(2):
+        a, b = lev[..., :-1, :], lev[..., 1:, :]
+        th = np.maximum(np.arccos(np.clip(np.einsum("...i,...i->...", a, b), -1.0, 1.0)), 1e-7)
+        inv = 1.0 / np.sin(th)
+        lev = (np.sin(u * th) * inv)[..., None] * a + (np.sin(tt * th) * inv)[..., None] * b
+    return lev[..., 0, :]
+
+
+def _interp_columns(xp: Array, f_root: Array, f_rot: Array, u: Array) -> tuple[Array, Array]:
+    """Per-variable linear interpolation of displacement samples.
+
+    ``xp`` (N, V) increasing per column, ``u`` (F, V); returns (F, 3), (F, J, 3).
+    Exact on the samples: the weight of the next sample is exactly 0 there.
+    """
+    N, V = xp.shape
+    F = u.shape[0]
+    lo = np.empty((F, V), dtype=np.int64)
+    w = np.empty((F, V))
+    for i in range(V):
+        x = xp[:, i]
+        idx = np.clip(np.searchsorted(x, u[:, i], side="right") - 1, 0, max(N - 2, 0))
+        if N == 1:
+            lo[:, i], w[:, i] = 0, 0.0
+            continue
+        x0, x1 = x[idx], x[idx + 1]
+        span = x1 - x0
+        lo[:, i] = idx
+        w[:, i] = np.clip(np.where(span > 0, (u[:, i] - x0) / np.where(span > 0, span, 1.0), 0.0), 0.0, 1.0)
+    hi = np.minimum(lo + 1, N - 1)
+    r0 = f_root[lo[:, 0]]
+    root = r0 + w[:, :1] * (f_root[hi[:, 0]] - r0)
+    J = f_rot.shape[1]
+    j = np.arange(J)
+    g0 = f_rot[lo[:, 1:], j]
+    rot = g0 + w[:, 1:, None] * (f_rot[hi[:, 1:], j] - g0)
+    return root, rot

@@ -448,27 +448,30 @@ def load_bvh(path: str | PathLike[str], *, scale: float | None = None, name: str
             col += 1
         if order:
             groups.setdefault(order, []).append((ji, rot_cols))
-    rotations = None
+    # Rotations are built component-major, (4, J, F): the layout forward
+    # kinematics works in, so Motion.rotations is its (F, J, 4) transposed
+    # view and no copy is made on the way.
+    table = np.ascontiguousarray(data.T)  # (C, F): each channel contiguous
+    rot4 = np.empty((4, n, n_frames))
+    if len(groups) != 1 or sum(len(m) for m in groups.values()) != n:
+        rot4[:3] = 0.0
+        rot4[3] = 1.0
     for order, members in groups.items():
         idx = [m[0] for m in members]
         cols = np.array([m[1] for m in members])  # (G, len(order))
-        first = int(cols[0, 0])
-        if np.array_equal(cols.ravel(), np.arange(first, first + cols.size)):
-            # consecutive columns (the usual layout): a view, no gather copy
-            angles = data[:, first : first + cols.size].reshape(n_frames, len(idx), len(order))
+        channels = []
+        for k in range(len(order)):
+            c = cols[:, k]
+            step = int(c[1] - c[0]) if len(c) > 1 else 1
+            if step > 0 and np.array_equal(c, c[0] + step * np.arange(len(c))):
+                channels.append(table[c[0] : c[-1] + 1 : step])  # evenly spaced: a view
+            else:
+                channels.append(table[c])
+        if idx == list(range(n)):
+            euler.to_quat_channels(order, channels, rot4, degrees=True)
         else:
-            angles = data[:, cols]  # (F, G, k)
-        q = euler.to_quat(order, angles, degrees=True)
-        if len(idx) == n and len(groups) == 1 and idx == list(range(n)):
-            rotations = q
-        else:
-            if rotations is None:
-                rotations = np.zeros((n_frames, n, 4))
-                rotations[..., 3] = 1.0
-            rotations[:, idx] = q
-    if rotations is None:
-        rotations = np.zeros((n_frames, n, 4))
-        rotations[..., 3] = 1.0
+            rot4[:, idx] = euler.to_quat_channels(order, channels, np.empty((4, len(idx), n_frames)), degrees=True)
+    rotations = rot4.transpose(2, 1, 0)
     with np.errstate(over="ignore"):  # overflow is reported below
         root *= scale
         if translations is not None:

@@ -104,15 +104,53 @@ def to_quat(order: str, angles: ArrayLike, *, degrees: bool = True) -> NDArray[n
     for start in range(0, n_rows, step):
         rows = slice(start, start + step)
         block = a3[rows].reshape(-1, k)
-        _compose(axes, block.T, scale, out[rows].reshape(-1, 4))
+        dst = out[rows].reshape(-1, 4)
+        _compose(axes, block.T, scale, [dst[:, 0], dst[:, 1], dst[:, 2], dst[:, 3]])
     return out.reshape(lead + (4,))
 
 
 _BLOCK = 5000
 
 
-def _compose(axes: tuple[int, ...], comp: NDArray[np.float64], scale: float, out: NDArray[np.float64]) -> None:
-    """Write the quaternions of angles ``comp`` (k, n) about ``axes`` into ``out`` (n, 4)."""
+def to_quat_channels(
+    order: str, channels: list[NDArray[np.float64]], out: NDArray[np.float64], *, degrees: bool = True
+) -> NDArray[np.float64]:
+    """Like :func:`to_quat`, in component-major layout (for file readers).
+
+    Parameters
+    ----------
+    order : str
+        As for :func:`to_quat`.
+    channels : list of ndarray, each shape (G, F)
+        One array per axis of ``order``: the angle of each of G joints on each
+        of F frames (views into a channel table are fine).
+    out : ndarray, shape (4, G, F)
+        Written in place with the quaternion components ``x, y, z, w``.
+
+    Returns
+    -------
+    ndarray, shape (4, G, F)
+        ``out``.
+    """
+    up = _check(order)
+    if len(channels) != len(up) or out.ndim != 3 or out.shape[0] != 4:
+        raise ValueError(f"Expected {len(up)} channel arrays and `out` of shape (4, G, F), got {len(channels)} and {out.shape}")
+    axes = tuple(_AXIS[ch] for ch in up)
+    scale = np.pi / 180.0 if degrees else 1.0
+    n_joints, n_frames = out.shape[1:]
+    step = max(1, _BLOCK // max(n_frames, 1))
+    for start in range(0, n_joints, step):
+        rows = slice(start, start + step)
+        block = np.stack([np.asarray(ch[rows], dtype=float) for ch in channels]).reshape(len(up), -1)
+        _compose(axes, block, scale, [out[c, rows].reshape(-1) for c in range(4)])
+    return out
+
+
+def _compose(
+    axes: tuple[int, ...], comp: NDArray[np.float64], scale: float, out: list[NDArray[np.float64]]
+) -> None:
+    """Write the quaternions of angles ``comp`` (k, n) about ``axes`` into the
+    four component arrays ``out`` (each (n,), views allowed)."""
     c, s = _half_cos_sin(comp, scale)
     if len(axes) == 3:
         # (c1 + s1 e_i)(c2 + s2 e_j)(c3 + s3 e_k) with e_i e_j = eps e_k,
@@ -125,23 +163,23 @@ def _compose(axes: tuple[int, ...], comp: NDArray[np.float64], scale: float, out
         s1, s2, s3 = s
         es3 = s3 if eps > 0 else -s3
         cc, ss, cs, sc = c1 * c2, s1 * s2, c1 * s2, s1 * c2
-        out[:, 3] = cc * c3 - ss * es3
-        out[:, i] = sc * c3 + cs * es3
-        out[:, j] = cs * c3 - sc * es3
-        out[:, k] = cc * s3 + eps * (ss * c3)
+        out[3][...] = cc * c3 - ss * es3
+        out[i][...] = sc * c3 + cs * es3
+        out[j][...] = cs * c3 - sc * es3
+        out[k][...] = cc * s3 + eps * (ss * c3)
     elif len(axes) == 2:
         # (c1 + s1 e_i)(c2 + s2 e_j) = c1c2 + s1c2 e_i + c1s2 e_j + eps s1s2 e_k
         i, j = axes
         k = 3 - i - j
         eps = 1.0 if (i, j, k) in _CYCLIC else -1.0
-        out[:, 3] = c[0] * c[1]
-        out[:, i] = s[0] * c[1]
-        out[:, j] = c[0] * s[1]
-        out[:, k] = eps * (s[0] * s[1])
+        out[3][...] = c[0] * c[1]
+        out[i][...] = s[0] * c[1]
+        out[j][...] = c[0] * s[1]
+        out[k][...] = eps * (s[0] * s[1])
     else:
-        out[:, :3] = 0.0
-        out[:, 3] = c[0]
-        out[:, axes[0]] = s[0]
+        for a in range(3):
+            out[a][...] = s[0] if a == axes[0] else 0.0
+        out[3][...] = c[0]
 
 
 def from_quat(order: str, q: ArrayLike, *, degrees: bool = True) -> NDArray[np.float64]:

@@ -18,6 +18,16 @@ Reading
 
 Every problem raises :class:`~mocaplab.io.MocapFormatError` with the file
 name, the line and what was expected; no partial Motion is ever returned.
+Numbers are plain ASCII decimals or exponent floats (``1e-5``, ``+2.5E3``);
+``nan``/``inf``, digit separators and non-ASCII digits are rejected.  LF,
+CRLF and CR line endings and a UTF-8 byte-order mark are accepted; blank lines
+between frame rows are skipped.
+
+Speed: the frame rows are read by numpy's C reader in one call and checked
+afterwards (row by row only when something is wrong, to name the line), and
+the rotations are built in the component-major layout forward kinematics
+uses, so reading CMU 49_03 (1504 frames) and computing its joint positions
+takes a few times less than pure-Python readers (``benchmarks/bench_io.py``).
 """
 
 from __future__ import annotations

@@ -376,7 +376,9 @@ class LessonPage:
     # -- opening and running -----------------------------------------------
     def open(self, *, timeout: float = 90.0) -> None:
         """Open the notebook and wait for its kernel to be idle."""
-        url = f"{self.server.url}/lab/tree/{self.notebook}?token={self.server.token}"
+        # a workspace of its own, reset: tabs of earlier pages are not restored (nor their kernels started)
+        workspace = re.sub(r"[^A-Za-z0-9_-]", "-", Path(self.notebook).stem) + "-" + secrets.token_hex(3)
+        url = f"{self.server.url}/lab/workspaces/{workspace}/tree/{self.notebook}?reset&token={self.server.token}"
         self.page.goto(url, wait_until="domcontentloaded", timeout=timeout * 1000)
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -425,6 +427,26 @@ class LessonPage:
             if not todo and not state["running"] and state["status"] == "idle":
                 return time.monotonic() - t0
         raise AssertionError(f"{self.notebook}: cells not done after {timeout:.0f} s; last state {state}")
+
+    def wait_idle(self, *, timeout: float = 120.0, settle: float = 1.0) -> None:
+        """Wait until the kernel has been idle for ``settle`` seconds (work started by a click is done)."""
+        deadline = time.monotonic() + timeout
+        idle_since: float | None = None
+        while time.monotonic() < deadline:
+            status = self.page.evaluate(
+                "() => { const p = window.jupyterapp.shell.currentWidget;"
+                " const k = p && p.sessionContext.session && p.sessionContext.session.kernel;"
+                " return k ? k.status : 'none'; }"
+            )
+            now = time.monotonic()
+            if status == "idle":
+                idle_since = idle_since if idle_since is not None else now
+                if now - idle_since >= settle:
+                    return
+            else:
+                idle_since = None
+            self.page.wait_for_timeout(200)
+        raise AssertionError(f"{self.notebook}: kernel still busy after {timeout:.0f} s")
 
     def stderr_tracebacks(self) -> list[str]:
         """Tracebacks printed to a cell's output stream (a student sees them even if the cell "worked")."""

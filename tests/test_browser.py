@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -130,6 +131,7 @@ def open_lesson(request: pytest.FixtureRequest) -> Iterator[Any]:
     def opener(number: str, *needs: str) -> LessonPage:
         notebook = lesson_or_skip(number, *needs)
         lab = request.getfixturevalue("lab")
+        shutil.copy2(notebook, lab.root_dir / notebook.name)  # the lesson as it is now (it may have landed late)
         browser = request.getfixturevalue("browser")
         shots = request.getfixturevalue("shots_dir")
         context = browser.new_context(viewport={"width": 1500, "height": 1100})
@@ -310,17 +312,58 @@ def test_lesson_01_viewer_renders_and_is_interactive(open_lesson: Any) -> None:
     print(f"lesson 01 ran in {seconds:.1f} s in JupyterLab")
 
 
-def _drag_handle(lesson: LessonPage, prefix: str, offset: tuple[float, float]) -> dict[str, Any]:
+# The kernel side of a drag view: find the displayed instance by its handles, map pixels to data.
+_KERNEL_FIND = """
+import json as _j
+_found = None
+for _name, _obj in list(globals().items()):
+    if type(_obj).__name__ == {cls!r} and not _name.startswith("_"):
+        if [h["data"] for h in _obj.handle_positions()] == _j.loads({data!r}):
+            _found = _name
+            break
+print(_j.dumps(_found))
+del _j, _found
+"""
+
+_KERNEL_PIXEL_TO_DATA = """
+import json as _j
+_w = {name}
+_ratio = float(getattr(_w.canvas, "device_pixel_ratio", 1.0) or 1.0)
+_h = _w.figure.bbox.height
+_inv = _w.ax.transData.inverted()
+_px = [({x} * _ratio, _h - {y} * _ratio), ({x} + 1.0) * _ratio, _h - ({y} + 1.0) * _ratio]
+_a = _inv.transform(_px[0])
+_b = _inv.transform((_px[1], _px[2]))
+print(_j.dumps({{"data": [float(v) for v in _a], "per_px": [abs(float(v)) for v in (_b - _a)]}}))
+del _j, _w, _ratio, _h, _inv, _px, _a, _b
+"""
+
+_KERNEL_HANDLES = """
+import json as _j
+print(_j.dumps({name}.handle_positions()))
+del _j
+"""
+
+
+def _kernel_json(lesson: LessonPage, code: str) -> Any:
+    out = lesson.kernel_eval(code).strip()
+    assert out and not out.startswith("ERROR"), f"kernel said {out!r} to:\n{code}"
+    return json.loads(out.splitlines()[-1])
+
+
+def _drag_handle(lesson: LessonPage, prefix: str, class_name: str, offset: tuple[float, float]) -> dict[str, Any]:
     """Drag the first handle of the ``mocaplab-{prefix}-*`` editor by ``offset`` CSS pixels.
 
-    Returns the handle before, the status text before and after, and where the
-    mouse was released (CSS pixels from the canvas' top-left corner).
+    Before the drag, the kernel names the displayed instance (the one whose
+    handles are those published in the page) and tells which data point lies
+    under the release pixel. Returns the instance name, the handle before, the
+    expected data under the release point (with data units per pixel), and the
+    status text before and after.
     """
     page = lesson.page
     editor = page.locator(f".mocaplab-{prefix}-editor").first
     editor.wait_for(timeout=60000)
-    canvas_widget = editor.locator(f".mocaplab-{prefix}-canvas").first
-    canvas = canvas_widget.locator(".jupyter-matplotlib-canvas-div canvas").last
+    canvas = editor.locator(f".mocaplab-{prefix}-canvas").first.locator(".jupyter-matplotlib-canvas-div canvas").last
     canvas.wait_for(timeout=60000)
     canvas.scroll_into_view_if_needed()
     status = editor.locator(f".mocaplab-{prefix}-status").first
@@ -329,39 +372,48 @@ def _drag_handle(lesson: LessonPage, prefix: str, offset: tuple[float, float]) -
     if not handles:
         raise AssertionError(f"the {prefix} editor of {lesson.notebook} shows no handle to drag")
     handle = handles[0]
+    name = _kernel_json(lesson, _KERNEL_FIND.format(cls=class_name, data=json.dumps([h["data"] for h in handles])))
+    assert name, f"no {class_name} in the kernel has the handles shown in the page: {handles}"
+    release = (handle["css"][0] + offset[0], handle["css"][1] + offset[1])
+    expected = _kernel_json(lesson, _KERNEL_PIXEL_TO_DATA.format(name=name, x=release[0], y=release[1]))
     before = text_of(status)
+
     box = canvas.bounding_box()
+    page.mouse.move(box["x"] + handle["css"][0], box["y"] + handle["css"][1])
+    page.wait_for_timeout(200)
+    box = canvas.bounding_box()  # measured again once the page is still under the mouse
     start = (box["x"] + handle["css"][0], box["y"] + handle["css"][1])
-    end = (start[0] + offset[0], start[1] + offset[1])
-    mouse_drag(page, start, end)
+    mouse_drag(page, start, (box["x"] + release[0], box["y"] + release[1]))
     page.wait_for_function(
-        "([el, before]) => el.textContent.trim() !== before && /moved|drag/.test(el.textContent)",
+        "([el, before]) => el.textContent.trim() !== before && /moved/.test(el.textContent)",
         arg=[status.element_handle(), before],
         timeout=60000,
     )
     page.wait_for_timeout(300)
     return {
+        "name": name,
         "handle": handle,
+        "expected": expected,
         "before": before,
         "after": text_of(status),
-        "release_css": [handle["css"][0] + offset[0], handle["css"][1] + offset[1]],
         "handles_after": json.loads(info.text_content() or "[]"),
     }
 
 
-def _kernel_handles(lesson: LessonPage, class_name: str) -> list[dict[str, Any]]:
-    """The first ``class_name`` widget's handles as the kernel sees them."""
-    out = lesson.kernel_eval(
-        "import json as _j\n"
-        f"_w = [v for v in list(globals().values()) if type(v).__name__ == {class_name!r}]\n"
-        "print(_j.dumps(_w[0].handle_positions() if _w else None))\n"
-        "del _w, _j\n"
-    )
-    assert not out.startswith("ERROR"), out
-    value = json.loads(out.strip().splitlines()[-1])
-    if value is None:
-        raise AssertionError(f"no {class_name} object in the user namespace of {lesson.notebook}")
-    return value
+def _assert_handle_under_mouse(lesson: LessonPage, result: dict[str, Any], axes: tuple[int, ...]) -> dict[str, Any]:
+    """The kernel's handle lies (within 4 px) on the data point that was under the mouse at release."""
+    kernel = _kernel_json(lesson, _KERNEL_HANDLES.format(name=result["name"]))
+    moved = next(h for h in kernel if h["index"] == result["handle"]["index"])
+    for axis in axes:
+        miss_px = abs(moved["data"][axis] - result["expected"]["data"][axis]) / result["expected"]["per_px"][axis]
+        assert miss_px < 4, (
+            f"kernel handle at {moved['data']}, the mouse was released over {result['expected']['data']} "
+            f"(axis {axis} off by {miss_px:.1f} px)"
+        )
+    # the page shows the handles the kernel has
+    page_handles = {h["index"]: h["data"] for h in result["handles_after"]}
+    assert page_handles.get(moved["index"]) == moved["data"], (page_handles, moved)
+    return moved
 
 
 def test_lesson_03_drag_a_path_handle(open_lesson: Any) -> None:
@@ -375,31 +427,29 @@ def test_lesson_03_drag_a_path_handle(open_lesson: Any) -> None:
     src_before = iframe.get_attribute("src")
     lesson.screenshot("path-editor-before", editor)
 
-    result = _drag_handle(lesson, "path", (70.0, -45.0))
+    result = _drag_handle(lesson, "path", "PathEditor", (70.0, -45.0))
     lesson.screenshot("path-editor-dragged", editor)
     after = result["after"]
-    assert "residual" in after, f"status label shows no residual after the drag: {after!r}"
-    assert re.search(r"target \(x, z\) = ", after), f"status label shows no target position: {after!r}"
+    target = re.search(r"target \(x, z\) = \(([-\d.]+), ([-\d.]+)\)", after)
+    assert target, f"status label shows no target position after the drag: {after!r}"
+    residual = re.search(r"residual ([-+\d.e]+)", after)
+    assert residual, f"status label shows no residual after the drag: {after!r}"
 
-    # the kernel holds the handle where the mouse let go (within a few pixels)
-    kernel = _kernel_handles(lesson, "PathEditor")
-    moved = next(h for h in kernel if h["index"] == result["handle"]["index"])
-    dx = moved["css"][0] - result["release_css"][0]
-    dy = moved["css"][1] - result["release_css"][1]
-    assert abs(dx) < 4 and abs(dy) < 4, f"kernel handle at {moved['css']}, mouse released at {result['release_css']}"
+    # the kernel holds the handle where the mouse let go, and the label reports it
+    moved = _assert_handle_under_mouse(lesson, result, axes=(0, 1))
+    assert [float(target.group(1)), float(target.group(2))] == pytest.approx(moved["data"], abs=2e-3)
     assert moved["data"] != result["handle"]["data"]
 
-    # the 3D view shows the edited motion (the viewer is rebuilt on release)
+    # the 3D view shows the edited motion (the viewer may be rebuilt on release)
     def surface() -> Any:
         return _largest_surface(trame_frame(page.locator(".mocaplab-path-editor").first).content_frame)
 
-    new_iframe = trame_frame(editor)
-    rendered_view(lesson, new_iframe)
-    view_after, change = wait_view_change(lesson, surface, view_before, timeout=45)
+    rendered_view(lesson, trame_frame(editor))
+    _, change = wait_view_change(lesson, surface, view_before, timeout=45)
     lesson.screenshot("path-editor-3d-after", editor)
     assert change > MIN_CHANGE, (
         f"the 3D view did not change after the path edit (mean change {change:.3f}; "
-        f"iframe src {src_before} -> {new_iframe.get_attribute('src')})"
+        f"iframe src {src_before} -> {trame_frame(editor).get_attribute('src')})"
     )
     assert_no_widget_errors(lesson)
 
@@ -411,14 +461,11 @@ def test_lesson_04_drag_a_time_handle(open_lesson: Any) -> None:
     editor.wait_for(timeout=60000)
     editor.scroll_into_view_if_needed()
     lesson.screenshot("time-editor-before", editor)
-    result = _drag_handle(lesson, "time", (60.0, 0.0))
+    result = _drag_handle(lesson, "time", "TimeTrackEditor", (60.0, 0.0))
     lesson.screenshot("time-editor-dragged", editor)
     assert result["after"] != result["before"]
-    kernel = _kernel_handles(lesson, "TimeTrackEditor")
-    moved = next(h for h in kernel if h["index"] == result["handle"]["index"])
-    assert abs(moved["css"][0] - result["release_css"][0]) < 4, (
-        f"kernel time handle at {moved['css']}, mouse released at {result['release_css']}"
-    )
+    moved = _assert_handle_under_mouse(lesson, result, axes=(0,))
+    assert moved["data"][0] > result["handle"]["data"][0], "dragging right did not make the time later"
     assert_no_widget_errors(lesson)
 
 
@@ -433,21 +480,27 @@ def test_lesson_09_touchup_step_lowers_mean_zmp_distance(open_lesson: Any) -> No
     lesson = open_lesson("09", "TouchUpStepper")
     lesson.run_all()
     page = lesson.page
+    widget = page.locator(".mocaplab-touchup").first
     button = page.locator(".mocaplab-touchup-step").first
     button.wait_for(timeout=60000)
     button.scroll_into_view_if_needed()
+    scope = widget if widget.count() else page.locator(".jp-OutputArea-output", has=button).first
     mean = page.locator(".mocaplab-touchup-mean").first
     before_text = text_of(mean)
     before = _number(before_text)
-    lesson.screenshot("touchup-before", page.locator(".mocaplab-touchup-step").first.locator("xpath=../.."))
+    lesson.screenshot("touchup-before", scope)
     button.click()
     page.wait_for_function(
         "([el, before]) => el.textContent.trim() !== before",
         arg=[mean.element_handle(), before_text],
         timeout=90000,
     )
+    lesson.wait_idle()
     after = _number(text_of(mean))
-    lesson.screenshot("touchup-after-step", page.locator(".mocaplab-touchup-step").first.locator("xpath=../.."))
+    iframe = trame_frame(scope)
+    if iframe.count():
+        rendered_view(lesson, iframe)
+    lesson.screenshot("touchup-after-step", scope)
     assert after < before, f"mean ZMP distance did not fall: {before_text!r} -> {text_of(mean)!r}"
     assert_no_widget_errors(lesson)
 

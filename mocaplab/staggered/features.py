@@ -449,6 +449,8 @@ class PoseAnalysis:
         Candidate pose frames (maxima of ``P`` plus the first and last frames).
     priorities : ndarray, shape (C,)
         ``w_k`` of the candidates (``inf`` at the ends).
+    contacts : Contacts or None
+        The contacts used as global evidence.
     """
 
     fps: float
@@ -461,6 +463,7 @@ class PoseAnalysis:
     probability: Array
     candidates: NDArray[np.int64]
     priorities: Array
+    contacts: Any = None
 
     @property
     def n_frames(self) -> int:
@@ -575,4 +578,5 @@ def analyze(
         probability=P,
         candidates=cand,
         priorities=pose_priorities(P, cand, fps),
+        contacts=contacts,
     )

@@ -432,6 +432,8 @@ def extract(
     start: Literal["tangent", "linear"] = "tangent",
     optimize: bool = True,
     maxiter: int = 30,
+    constraints: bool = False,
+    constraint_window: float = 0.1,
     analysis: Any = None,
     **analysis_options: Any,
 ) -> StaggeredMotion:
@@ -450,6 +452,14 @@ def extract(
         Bound on timing refinements, seconds (0.25 in the paper).
     start, optimize, maxiter
         Rotation fitting options (see :func:`fit_rotation_tangents`).
+    constraints : bool
+        Attach the contact constraint layer
+        (:class:`~mocaplab.staggered.edit.ConstraintLayer`, two-bone IK on the
+        feet during the analysis' contacts, blended over
+        ``constraint_window`` seconds).  It is the identity on the unedited
+        motion.
+    constraint_window : float
+        Seconds.
     analysis : PoseAnalysis, optional
         Reuse signals computed by :func:`~mocaplab.staggered.features.analyze`.
     **analysis_options
@@ -484,7 +494,7 @@ def extract(
     refinements = analysis.refinements(frames, max_refinement=max_refinement)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        return fit_representation(
+        sm = fit_representation(
             motion,
             frames / motion.fps,
             refinements,
@@ -493,3 +503,11 @@ def extract(
             optimize=optimize,
             maxiter=maxiter,
         )
+    if constraints:
+        from .edit import ConstraintLayer
+
+        if analysis.contacts is None:
+            raise ValueError("`constraints=True` needs contacts: pass `contacts` (or keep 'auto')")
+        layer = ConstraintLayer.from_contacts(motion, analysis.contacts, sm.times, window=constraint_window)
+        sm = _with(sm, constraints=layer)
+    return sm

@@ -1,0 +1,335 @@
+"""The staggered-pose explorer: a thin view over :class:`mocaplab.staggered.StaggeredEditor`.
+
+Coleman et al. 2008 represent a motion as staggered poses whose knots carry
+timing refinements.  :class:`StaggeredExplorer` shows, for one clip:
+
+* **joint curves** of a chosen control variable (rotation vector
+  components of a joint, or the root position) as played, over the original
+  clip (grey), with the pose times (vertical lines, the selected pose bold)
+  and the refined knots (dots) drawn on them;
+* a **toggle** (CSS class ``mocaplab-staggered-toggle``) between staggered
+  playback and non-staggered playback (every refinement zeroed);
+* sliders for the **succession** offset ``s`` and exponent ``l``
+  (``r + s d(i)^l``, depth measured from a chosen joint), the **random**
+  timing bound ``tau`` (seeded), relative **exaggeration** ``w_r`` against
+  the average pose, and the **pose count** (culling by priority);
+* the **pose list** with the priorities ``w_k`` and number of refined knots;
+* a 3D overlay (:class:`~mocaplab.widgets.MotionViewer`) of the
+  non-staggered pose (orange) against the true pose at ``t_k`` (yellow) of
+  the selected pose (Figure 6), and a 3D player of the current motion over
+  the original.
+
+Every control forwards its value in one line to the core editor; the widget
+only draws.  Messages (timing warnings, rejected edits) appear in a status
+line (class ``mocaplab-staggered-status``).  The current curve statistics
+are published as JSON in a hidden HTML widget (class
+``mocaplab-staggered-curves``) for browser tests.
+
+Examples
+--------
+>>> from mocaplab import cmu                                # doctest: +SKIP
+>>> from mocaplab.widgets import StaggeredExplorer          # doctest: +SKIP
+>>> StaggeredExplorer(cmu("16_15"), max_poses=12)           # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import traceback
+from collections.abc import Callable
+from typing import Any
+
+import ipywidgets as W
+import numpy as np
+from matplotlib.figure import Figure
+
+from mocaplab.motion import Motion
+from mocaplab.staggered import StaggeredEditor
+
+from .path_editor import make_canvas
+
+__all__ = ["StaggeredExplorer"]
+
+_COMPONENT_COLORS = ("#d62728", "#2ca02c", "#1f77b4")
+NON_STAGGERED_COLOR = "#ff7f0e"  # orange, as in Figure 6
+TRUE_POSE_COLOR = "#e6c700"  # yellow
+
+
+class StaggeredExplorer:
+    """Explore the staggered poses of a clip and edit their timing.
+
+    Parameters
+    ----------
+    motion : Motion or StaggeredEditor
+        The clip (an editor is built for it), or an existing editor.
+    max_poses : int, optional
+        Initial pose count (culling by priority); default every candidate.
+    curve_joint : str, optional
+        Variable whose curves are drawn (a joint name or ``"root_position"``);
+        default the first joint with the largest signal weight.
+    joint : str, optional
+        Joint the succession depth is measured from (default the root).
+    viewer : bool
+        Build the 3D views (:class:`~mocaplab.widgets.MotionViewer`).
+    backend : str, optional
+        ``"auto"``, ``"ipympl"`` or ``"agg"`` for the curve canvas.
+    viewer_backend : str, optional
+        MotionViewer backend (default ``MOCAPLAB_JUPYTER_BACKEND``).
+    **extract_options
+        Passed to :func:`mocaplab.staggered.extract`.
+
+    Attributes
+    ----------
+    editor : StaggeredEditor
+    toggle : ipywidgets.ToggleButton
+        Staggered (pressed) or non-staggered playback.
+    s_slider, l_slider, tau_slider, wr_slider : ipywidgets.FloatSlider
+    count_slider : ipywidgets.IntSlider
+    pose_list : ipywidgets.Select
+    joint_dropdown, succession_dropdown : ipywidgets.Dropdown
+    figure : matplotlib.figure.Figure
+    """
+
+    def __init__(
+        self,
+        motion: Motion | StaggeredEditor,
+        *,
+        max_poses: int | None = None,
+        curve_joint: str | None = None,
+        joint: str | None = None,
+        viewer: bool = True,
+        backend: str = "auto",
+        viewer_backend: str | None = None,
+        **extract_options: Any,
+    ) -> None:
+        if isinstance(motion, StaggeredEditor):
+            self.editor = motion
+        elif isinstance(motion, Motion):
+            self.editor = StaggeredEditor(motion, max_poses=max_poses, joint=joint, **extract_options)
+        else:
+            raise TypeError(f"Expected `motion` to be a Motion or a StaggeredEditor, got {type(motion).__name__}")
+        ed = self.editor
+        if curve_joint is None:
+            w = ed.analysis.weights
+            curve_joint = ed.analysis.variables[1 + int(np.argmax(w[1:]))]
+        ed.set_curve_joint(curve_joint)
+        self._viewer_enabled = bool(viewer)
+        self._syncing = False
+        self._viewer_backend = viewer_backend
+        self._build_controls()
+        self._build_figure(backend)
+        self.overlay_box = W.Box(layout=W.Layout(min_height="40px"))
+        self.player_box = W.Box(layout=W.Layout(min_height="40px"))
+        self.overlay_viewer: Any = None
+        self.player_viewer: Any = None
+        self.status = W.HTML(value="")
+        self.status.add_class("mocaplab-staggered-status")
+        self.curves_info = W.HTML(value="", layout=W.Layout(display="none"))
+        self.curves_info.add_class("mocaplab-staggered-curves")
+        self._refresh_all()
+
+    # ------------------------------------------------------------ controls
+    def _build_controls(self) -> None:
+        ed = self.editor
+        sk = ed.motion.skeleton
+        self.toggle = W.ToggleButton(value=ed.staggered, description="staggered", tooltip="refinements on/off")
+        self.toggle.add_class("mocaplab-staggered-toggle")
+        slider = dict(continuous_update=False, style={"description_width": "110px"}, layout=W.Layout(width="330px"))
+        self.s_slider = W.FloatSlider(
+            value=ed.s, min=-0.06, max=0.06, step=0.005, readout_format=".3f", description="succession s", **slider
+        )
+        self.l_slider = W.FloatSlider(value=ed.l, min=0.5, max=4.0, step=0.1, description="exponent l", **slider)
+        self.tau_slider = W.FloatSlider(
+            value=ed.tau, min=0.0, max=0.1, step=0.005, readout_format=".3f", description="random tau", **slider
+        )
+        self.wr_slider = W.FloatSlider(value=ed.w_r, min=-0.5, max=1.0, step=0.05, description="exaggerate w_r", **slider)
+        n_cand = ed.n_candidates
+        self.count_slider = W.IntSlider(
+            value=ed.current.n_poses, min=2, max=n_cand, step=1, description="poses", **slider
+        )
+        self.joint_dropdown = W.Dropdown(
+            options=list(ed.current.variables), value=ed.curve_joint, description="curves",
+            layout=W.Layout(width="260px"),
+        )
+        self.succession_dropdown = W.Dropdown(
+            options=list(sk.names), value=ed.joint, description="depth from", layout=W.Layout(width="260px")
+        )
+        self.pose_list = W.Select(options=[], rows=8, description="poses", layout=W.Layout(width="330px"))
+        self.toggle.observe(self._guard(lambda v: self.editor.set_staggered(v), redraw_viewers=True), names="value")
+        self.s_slider.observe(self._guard(lambda v: self.editor.set_succession(s=v)), names="value")
+        self.l_slider.observe(self._guard(lambda v: self.editor.set_succession(l=v)), names="value")
+        self.tau_slider.observe(self._guard(lambda v: self.editor.set_random(tau=v)), names="value")
+        self.wr_slider.observe(self._guard(lambda v: self.editor.set_exaggeration(v)), names="value")
+        self.count_slider.observe(self._guard(lambda v: self.editor.set_pose_count(v)), names="value")
+        self.succession_dropdown.observe(self._guard(lambda v: self.editor.set_succession(joint=v)), names="value")
+        self.joint_dropdown.observe(self._guard(lambda v: self.editor.set_curve_joint(v), viewers=False), names="value")
+        self.pose_list.observe(self._guard(self._on_select, viewers=False), names="value")
+
+    def _guard(self, action: Callable[[Any], None], *, viewers: bool = True, redraw_viewers: bool = False) -> Callable:
+        """An observer calling ``action(new value)`` then redrawing; errors go to the status line."""
+
+        def observer(change: dict[str, Any]) -> None:
+            if self._syncing:
+                return
+            try:
+                action(change["new"])
+                self._refresh_all(viewers=viewers or redraw_viewers)
+            except Exception as err:  # show it in the widget instead of losing it in the log
+                self.status.value = (
+                    f"<pre style='color:#b00'>{html.escape(type(err).__name__)}: {html.escape(str(err))}\n"
+                    f"{html.escape(traceback.format_exc(limit=3))}</pre>"
+                )
+
+        return observer
+
+    def _on_select(self, value: Any) -> None:
+        if value is None or self._syncing:
+            return
+        self.editor.select(int(value))
+        self._refresh_overlay()
+
+    # -------------------------------------------------------------- figure
+    def _build_figure(self, backend: str) -> None:
+        self.figure = Figure(figsize=(7.5, 3.6), layout="constrained")
+        self.ax = self.figure.add_subplot(1, 1, 1)
+        self.canvas = make_canvas(self.figure, backend=backend)  # type: ignore[arg-type]
+        self.interactive = isinstance(self.canvas, W.DOMWidget)
+        self.image = None if self.interactive else W.Image(format="png")
+
+    def _draw_curves(self) -> None:
+        ed = self.editor
+        c = ed.curves()
+        ax = self.ax
+        ax.clear()
+        name = ed.curve_joint
+        for d in range(3):
+            ax.plot(c["t0"], c["original"][:, d], color="0.75", lw=1.0)
+            ax.plot(c["t"], c["values"][:, d], color=_COMPONENT_COLORS[d], lw=1.4, label="xyz"[d])
+            ax.plot(c["knot_times"], c["knot_values"][:, d], "o", ms=3.5, color=_COMPONENT_COLORS[d])
+        sel = ed.selected
+        for k, t in enumerate(c["pose_times"]):
+            ax.axvline(t, color="k", lw=1.6 if k == sel else 0.5, alpha=0.8 if k == sel else 0.35)
+        unit = "m" if name == "root_position" else "rad (rotation vector)"
+        mode = "staggered" if ed.staggered else "non-staggered (refinements zeroed)"
+        ax.set_title(f"{name}: {mode}", fontsize=10)
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel(unit)
+        ax.legend(loc="upper right", fontsize=8, ncols=3)
+        if self.interactive:
+            self.canvas.draw_idle()
+        else:
+            import io
+
+            buf = io.BytesIO()
+            self.figure.savefig(buf, format="png")
+            self.image.value = buf.getvalue()  # type: ignore[union-attr]
+        self.curves_info.value = json.dumps(
+            {
+                "variable": name,
+                "staggered": ed.staggered,
+                "n_poses": int(c["pose_times"].size),
+                "mean": float(np.mean(c["values"])),
+                "checksum": float(np.sum(np.abs(c["values"]))),
+            }
+        )
+
+    # --------------------------------------------------------------- views
+    def _refresh_list(self) -> None:
+        rows = self.editor.pose_table()
+        opts = [(f"{k:3d}  t={t:6.3f} s  w={w if np.isfinite(w) else float('inf'):7.4f}  refined {n:2d}", k)
+                for k, t, w, n in rows]
+        self._syncing = True
+        try:
+            self.pose_list.options = opts
+            self.pose_list.value = self.editor.selected
+        finally:
+            self._syncing = False
+
+    def _refresh_overlay(self) -> None:
+        self._draw_curves()
+        if not self._viewer_enabled:
+            return
+        from .viewer import MotionViewer
+
+        ns, true = self.editor.overlay()
+        if self.overlay_viewer is not None:
+            self.overlay_viewer.close()
+        self.overlay_viewer = MotionViewer(
+            [ns, true],
+            colors=[NON_STAGGERED_COLOR, TRUE_POSE_COLOR],
+            labels=["non-staggered pose", "true pose at t_k"],
+            backend=self._viewer_backend,
+            window_size=(420, 320),
+        )
+        self.overlay_box.children = [self.overlay_viewer.widget]
+
+    def _refresh_player(self) -> None:
+        if not self._viewer_enabled:
+            return
+        from .viewer import MotionViewer
+
+        if self.player_viewer is not None:
+            self.player_viewer.close()
+        played = self.editor.evaluate()
+        self.player_viewer = MotionViewer(
+            [self.editor.motion, played],
+            colors=["#9ecae1", "#6a3d9a"],
+            labels=["original", "edited" if self.editor.staggered else "edited, non-staggered"],
+            backend=self._viewer_backend,
+            window_size=(420, 320),
+        )
+        self.player_box.children = [self.player_viewer.widget]
+
+    def _refresh_all(self, *, viewers: bool = True) -> None:
+        ed = self.editor
+        self.status.value = html.escape(ed.message) if ed.message else ""
+        if self.count_slider.value != ed.current.n_poses:
+            self._syncing = True
+            try:
+                self.count_slider.value = ed.current.n_poses
+            finally:
+                self._syncing = False
+        self._refresh_list()
+        self._draw_curves()
+        if viewers:
+            self._refresh_overlay()
+            self._refresh_player()
+
+    # --------------------------------------------------------------- layout
+    @property
+    def widget(self) -> W.Widget:
+        """The whole explorer as one ipywidgets box (class ``mocaplab-staggered-explorer``)."""
+        if getattr(self, "_box", None) is None:
+            canvas = self.canvas if self.interactive else self.image
+            controls = W.VBox(
+                [
+                    W.HBox([self.toggle, self.joint_dropdown]),
+                    self.s_slider,
+                    self.l_slider,
+                    self.succession_dropdown,
+                    self.tau_slider,
+                    self.wr_slider,
+                    self.count_slider,
+                    self.pose_list,
+                ]
+            )
+            views = W.HBox([self.overlay_box, self.player_box])
+            self._box = W.VBox([W.HBox([canvas, controls]), views, self.status, self.curves_info])
+            self._box.add_class("mocaplab-staggered-explorer")
+        return self._box
+
+    def _ipython_display_(self) -> None:
+        from IPython.display import display
+
+        display(self.widget)
+
+    def close(self) -> None:
+        """Release the 3D render windows."""
+        for v in (self.overlay_viewer, self.player_viewer):
+            if v is not None:
+                v.close()
+
+    def __repr__(self) -> str:
+        ed = self.editor
+        return f"<StaggeredExplorer {ed.motion.name!r}: {ed.current.n_poses} poses, staggered={ed.staggered}>"

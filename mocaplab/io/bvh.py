@@ -471,12 +471,12 @@ def load_bvh(path: str | PathLike[str], *, scale: float | None = None, name: str
         cols = np.array([m[1] for m in members])  # (G, len(order))
         channels = []
         for k in range(len(order)):
-            c = cols[:, k]
-            step = int(c[1] - c[0]) if len(c) > 1 else 1
-            if step > 0 and np.array_equal(c, c[0] + step * np.arange(len(c))):
-                channels.append(table[c[0] : c[-1] + 1 : step])  # evenly spaced: a view
+            at = cols[:, k]
+            step = int(at[1] - at[0]) if len(at) > 1 else 1
+            if step > 0 and np.array_equal(at, at[0] + step * np.arange(len(at))):
+                channels.append(table[at[0] : at[-1] + 1 : step])  # evenly spaced: a view
             else:
-                channels.append(table[c])
+                channels.append(table[at])
         if idx == list(range(n)):
             euler.to_quat_channels(order, channels, rot4, degrees=True)
         else:

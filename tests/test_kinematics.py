@@ -158,3 +158,13 @@ def test_velocities_of_linear_motion():
     vel = kinematics.velocities(pos, 30.0)
     assert np.allclose(vel[:, 0], [2.0, 0.0, -1.0])
     assert np.array_equal(kinematics.velocities(pos[:1], 30.0), np.zeros((1, 1, 3)))
+
+
+@pytest.mark.parametrize("order", ["ZXY", "YX", "Z"])
+def test_euler_channels_component_major_matches_to_quat(order, rng):
+    table = rng.uniform(-360, 360, size=(3 * 7 + 2, 50))  # (channels, frames), as a file reader holds it
+    channels = [table[k : k + 3 * 7 : 3] for k in range(len(order))]  # (7, 50) views
+    out = np.empty((4, 7, 50))
+    euler.to_quat_channels(order, channels, out)
+    angles = np.stack(channels, axis=-1)  # (7, 50, k)
+    assert np.allclose(out.transpose(1, 2, 0), euler.to_quat(order, angles), atol=1e-15)

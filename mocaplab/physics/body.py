@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -473,7 +474,9 @@ class Body:
                 f"{list(self.joint_names[:3])}), got {motion.n_joints} joints starting {list(motion.skeleton.names[:3])}"
             )
 
-    def support_points(self, motion: Motion, joints: Sequence[str]) -> tuple[Array, NDArray[np.int64]]:
+    def support_points(
+        self, motion: Motion, joints: Sequence[str], *, fk: tuple[Array, Array] | None = None
+    ) -> tuple[Array, NDArray[np.int64]]:
         """World positions of the support points of the given contact joints.
 
         Parameters
@@ -481,6 +484,8 @@ class Body:
         motion : Motion
         joints : sequence of str, length n
             Contact joints (the columns of a :class:`~mocaplab.contacts.Contacts` mask).
+        fk : (global_rotations, global_positions), optional
+            The motion's forward kinematics when already at hand.
 
         Returns
         -------
@@ -491,7 +496,7 @@ class Body:
         """
         self.check(motion)
         o, offsets, column = self._support_layout(motion.skeleton, tuple(joints))
-        grot, gpos = motion.global_rotations(), motion.global_positions()
+        grot, gpos = (motion.global_rotations(), motion.global_positions()) if fk is None else fk
         pts = gpos[:, o] + quat.rotate(grot[:, o], offsets)
         return pts, column
 
@@ -519,10 +524,13 @@ class Body:
 
 
 # ---------------------------------------------------------------- kinematics
-def link_positions(motion: Motion, body: Body) -> Array:
-    """World positions of the link centres, shape (F, L, 3)."""
+def link_positions(motion: Motion, body: Body, *, fk: tuple[Array, Array] | None = None) -> Array:
+    """World positions of the link centres, shape (F, L, 3).
+
+    ``fk`` optionally gives the motion's (global rotations, global positions).
+    """
     body.check(motion)
-    grot, gpos = motion.global_rotations(), motion.global_positions()
+    grot, gpos = (motion.global_rotations(), motion.global_positions()) if fk is None else fk
     return gpos[:, body.owners] + quat.rotate(grot[:, body.owners], body.offsets)
 
 
@@ -579,12 +587,17 @@ def smoothed_derivatives(
 
 def _extrapolate(samples: Array, at: NDArray[np.int64]) -> Array:
     """Least-squares parabola (line for two samples) through ``samples`` (q, K) at indices ``at``."""
-    q = samples.shape[0]
+    return _extrapolator(samples.shape[0], tuple(int(a) for a in at)) @ samples
+
+
+@lru_cache(maxsize=64)
+def _extrapolator(q: int, at: tuple[int, ...]) -> Array:
+    """The linear map from ``q`` samples to their least-squares parabola at ``at``."""
     deg = min(2, q - 1)
-    t = np.arange(q, dtype=float)
-    basis = np.vander(t, deg + 1)
-    coef, *_ = np.linalg.lstsq(basis, samples, rcond=None)
-    return np.vander(at.astype(float), deg + 1) @ coef
+    basis = np.vander(np.arange(q, dtype=float), deg + 1)
+    out = np.vander(np.asarray(at, dtype=float), deg + 1) @ np.linalg.pinv(basis)
+    out.flags.writeable = False
+    return out
 
 
 def center_of_mass(motion: Motion, body: Body) -> Array:

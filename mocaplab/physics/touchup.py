@@ -90,7 +90,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Sequence
 from functools import lru_cache
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -450,45 +450,73 @@ def _rotate_about(omega: Array, centre: Array, point: Array) -> Array:
     return centre + quat.rotate(quat.exp(omega), point - centre)
 
 
-def _apply(motion: Motion, sets: LinkSets, omega: Array, root_delta: Array | None) -> Motion:
+class _Posed(NamedTuple):
+    """A motion with its forward kinematics (computed once, passed along)."""
+
+    motion: Motion
+    grot: Array  # (F, J, 4)
+    gpos: Array  # (F, J, 3)
+
+
+def _posed(motion: Motion) -> _Posed:
+    return _Posed(motion, motion.global_rotations(), motion.global_positions())
+
+
+def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None) -> _Posed:
     """Rotate every S2 part by the world rotation vectors ``omega`` (F, 3).
 
     S2 tops are pre-rotated in world space (expressed locally by conjugating
     with the parent's global rotation), carried tops are counter-rotated so
     their global orientation is unchanged, and the root moves by
-    ``root_delta`` when it belongs to S2.
+    ``root_delta`` when it belongs to S2.  The new global transforms follow
+    in closed form: an S2 part moves rigidly about its pivot, a carried part
+    translates with its top joint, S1 stays.
     """
+    motion, grot, gpos = posed
     rot = np.array(motion.rotations, copy=True)
     root = np.array(motion.root_positions, copy=True)
-    grot = motion.global_rotations()
     parents = motion.skeleton.parents
     q = quat.exp(omega)
-    for t in sets.s2_tops:
+    new_grot = np.array(grot, copy=True)
+    new_gpos = np.array(gpos, copy=True)
+    for k, t in enumerate(sets.s2_tops):
         if t == 0:
             rot[:, 0] = quat.mul(q, rot[:, 0])
-            if root_delta is not None:
-                root = root + root_delta
+            pivot = gpos[:, 0]
+            moved_pivot = pivot + (root_delta if root_delta is not None else 0.0)
+            root = root + (root_delta if root_delta is not None else 0.0)
         else:
             gp = grot[:, parents[t]]
             rot[:, t] = quat.mul(quat.inv(gp), quat.mul(q, grot[:, t]))
+            pivot = moved_pivot = gpos[:, t]
+        rigid = np.flatnonzero((sets.part == k) & (sets.roles == 2))
+        qk = q[:, None, :]
+        new_grot[:, rigid] = quat.mul(qk, grot[:, rigid])
+        new_gpos[:, rigid] = moved_pivot[:, None] + quat.rotate(qk, gpos[:, rigid] - pivot[:, None])
+        for u, part in sets.carried:
+            if part == k:
+                shift = moved_pivot + quat.rotate(q, gpos[:, u] - pivot) - gpos[:, u]
+                new_gpos[:, sets.carried_top == u] += shift[:, None]
     qi = quat.inv(q)
     for u, _ in sets.carried:
         gp = grot[:, parents[u]]
         rot[:, u] = quat.mul(quat.inv(gp), quat.mul(qi, grot[:, u]))
-    return motion.replace(rotations=quat.normalize(rot), root_positions=root)
+    return _Posed(motion.replace(rotations=rot, root_positions=root), new_grot, new_gpos)
 
 
 # ======================================================================
 # ground frames (section 3.3)
 # ======================================================================
-def _ground_rotation(motion: Motion, body: Body, sets: LinkSets, bal: Balance, weight: Array) -> tuple[Array, Array]:
+def _ground_rotation(
+    motion: Motion, body: Body, sets: LinkSets, bal: Balance, weight: Array, gpos: Array | None = None
+) -> tuple[Array, Array]:
     """Per-frame world rotation vectors (F, 3) and S2 centres of the root part (F, 3).
 
     Closed form of equations 6 and 7 in the frame whose x axis points from
     the ZMP to its projection on the support polygon.
     """
     n = motion.n_frames
-    gpos = motion.global_positions()
+    gpos = motion.global_positions() if gpos is None else gpos
     z = bal.zmp
     target = bal.projection
     todo = np.isfinite(bal.distance) & (bal.distance > 0) & (weight > 0)
@@ -567,9 +595,10 @@ def _ground_rotation(motion: Motion, body: Body, sets: LinkSets, bal: Balance, w
     return omega, root_centre
 
 
-def _ground_step(motion: Motion, body: Body, adj: Adjustment, bal: Balance) -> Motion:
+def _ground_step(posed: _Posed, body: Body, adj: Adjustment, bal: Balance) -> _Posed:
+    motion = posed.motion
     sets = link_sets(motion.skeleton, adj)
-    omega, centre = _ground_rotation(motion, body, sets, bal, np.ones(motion.n_frames))
+    omega, centre = _ground_rotation(motion, body, sets, bal, np.ones(motion.n_frames), posed.gpos)
     omega *= adj.rho
     root_delta = None
     if 0 in sets.s2_tops:
@@ -577,16 +606,15 @@ def _ground_step(motion: Motion, body: Body, adj: Adjustment, bal: Balance) -> M
         root_delta = np.where(np.any(omega != 0, axis=1)[:, None], _rotate_about(omega, centre, p) - p, 0.0)
         root_delta = _smooth(root_delta, adj.width(motion.fps))
     omega = _smooth(omega, adj.width(motion.fps))
-    return _apply(motion, sets, omega, root_delta)
+    return _apply(posed, sets, omega, root_delta)
 
 
 # ======================================================================
 # flight frames (section 3.4)
 # ======================================================================
-def _flight_centre(motion: Motion, body: Body, sets: LinkSets, positions: Array) -> Array:
+def _flight_centre(motion: Motion, body: Body, sets: LinkSets, positions: Array, gpos: Array) -> Array:
     """Rotation centre of the (single) S2 part on every frame, shape (F, 3)."""
     top = sets.s2_tops[0]
-    gpos = motion.global_positions()
     if top != 0:
         return np.array(gpos[:, top])
     below = [u for (u, _), s1 in zip(sets.carried, sets.carried_s1, strict=True) if s1]
@@ -608,13 +636,14 @@ def _hold_into_windows(field: Array, stages: list[tuple[int, int]], flight_w: Ar
 
 
 def _flight_step(
-    motion: Motion,
+    posed: _Posed,
     body: Body,
     adj: Adjustment,
     stages: list[tuple[int, int]],
     flight_w: Array,
     window: int,
-) -> Motion:
+) -> _Posed:
+    motion = posed.motion
     sets = link_sets(motion.skeleton, adj)
     if len(sets.s2_tops) != 1:
         names = [motion.skeleton.names[t] for t in sets.s2_tops]
@@ -628,10 +657,10 @@ def _flight_step(
 
     # ---- 3.4.1 angular momentum: average of the flight, by rotating S2
     width5 = paper_width(5.0, motion.fps)
-    s, v, _ = smoothed_derivatives(link_positions(motion, body), motion.fps, width=width5)
+    s, v, _ = smoothed_derivatives(link_positions(motion, body, fk=posed[1:]), motion.fps, width=width5)
     com = np.einsum("l,flc->fc", m, s) / m.sum()
     h = np.einsum("l,flc->fc", m, np.cross(s - com[:, None], v))
-    centre = _flight_centre(motion, body, sets, s)
+    centre = _flight_centre(motion, body, sets, s, posed.gpos)
     phi = np.zeros((n, 3))
     for a, b in stages:
         target = h[a:b].mean(axis=0)
@@ -648,10 +677,10 @@ def _flight_step(
     if 0 in sets.s2_tops:
         p = motion.root_positions
         root_delta = _smooth(_rotate_about(phi, centre, p) - p, width)
-    out = _apply(motion, sets, _smooth(phi, width), root_delta)
+    out = _apply(posed, sets, _smooth(phi, width), root_delta)
 
     # ---- 3.4.2 parabolic centre of mass, on the adjusted motion
-    r = link_positions(out, body)
+    r = link_positions(out.motion, body, fk=out[1:])
     com = np.einsum("l,flc->fc", m, r) / m.sum()
     wanted = com.copy()
     for a, b in stages:
@@ -666,10 +695,11 @@ def _flight_step(
     if np.all(sets.roles == 2):
         # S1 empty: translate the root
         delta = np.where(flight[:, None], wanted - com, 0.0)
-        delta = delta * adj.rho  # zero at both ends of the flight: nothing to carry into the windows
-        return out.replace(root_positions=out.root_positions + _smooth(delta, width))
+        delta = _smooth(delta * adj.rho, width)  # zero at both ends of the flight: nothing to carry into windows
+        moved = out.motion.replace(root_positions=out.motion.root_positions + delta)
+        return _Posed(moved, out.grot, out.gpos + delta[:, None, :])
     # rotate S2 about the S1/S2 boundary so its centre of mass moves towards c*_M2
-    centre = _flight_centre(out, body, sets, r)
+    centre = _flight_centre(out.motion, body, sets, r, out.gpos)
     m2 = m[in_s2].sum()
     c2 = np.einsum("l,flc->fc", m[in_s2], r[:, in_s2]) / m2
     c1m1 = com * m.sum() - c2 * m2
@@ -678,7 +708,7 @@ def _flight_step(
     rot = _hold_into_windows(np.where(flight[:, None], rot, 0.0), stages, flight_w, window) * adj.rho
     root_delta = None
     if 0 in sets.s2_tops:
-        p = out.root_positions
+        p = out.motion.root_positions
         root_delta = _smooth(_rotate_about(rot, centre, p) - p, width)
     return _apply(out, sets, _smooth(rot, width), root_delta)
 
@@ -703,17 +733,26 @@ def _ik_footplants(motion: Motion, contacts: Contacts, reference: Motion) -> Mot
 
     On planted frames the ankle's position and global orientation are those
     of ``reference``; the correction fades out over :data:`FOOT_BLEND`
-    seconds around each plant.  The legs are independent chains, so one
-    forward-kinematics pass serves every foot.
+    seconds around each plant.
     """
-    from ..ik import two_bone_ik
+    return _ik_posed(_posed(motion), contacts, reference).motion
 
+
+def _ik_posed(posed: _Posed, contacts: Contacts, reference: Motion) -> _Posed:
+    """:func:`_ik_footplants` on a motion with known kinematics, updating them for the legs only.
+
+    The legs are independent chains, so one forward-kinematics pass serves
+    every foot, and only the legs' transforms change.
+    """
+    from ..ik import limb_joints, two_bone_ik
+
+    motion, grot, gpos = posed
     mask = np.asarray(contacts.mask, dtype=bool)
     ramp = max(1, int(round(FOOT_BLEND * motion.fps)))
     sk = motion.skeleton
-    grot, gpos = motion.global_rotations(), motion.global_positions()
     ref_pos, ref_rot = reference.global_positions(), reference.global_rotations()
     rot = motion.rotations
+    uppers = []
     for ankle, cols in _feet(sk, contacts):
         planted = mask[:, cols].any(axis=1)
         if not planted.any():
@@ -724,16 +763,37 @@ def _ik_footplants(motion: Motion, contacts: Contacts, reference: Motion) -> Mot
         target = gpos[:, ankle] + w[:, None] * err
         want = quat.slerp(grot[:, ankle], ref_rot[nearest, ankle], w)
         rot = two_bone_ik(rot, motion.root_positions, sk, ankle, target, end_rotation=want, fk=(grot, gpos))
-    return motion.replace(rotations=rot)
+        uppers.append(limb_joints(sk, ankle)[0])
+    if not uppers:
+        return posed
+    new = motion.replace(rotations=rot)
+    return _Posed(new, *_refresh_fk(new, grot, gpos, uppers))
 
 
-def _footplant_fn(footplants: Footplants, contacts: Contacts, reference: Motion) -> Callable[[Motion], Motion] | None:
-    """The footplant step ``motion -> motion`` of a touch-up, built once."""
+def _refresh_fk(motion: Motion, grot: Array, gpos: Array, tops: Sequence[int]) -> tuple[Array, Array]:
+    """Global transforms with those of the subtrees of ``tops`` recomputed from ``motion``."""
+    sk = motion.skeleton
+    redo = np.zeros(sk.n_joints, dtype=bool)
+    for t in tops:
+        redo |= _subtree(sk, t)
+    grot, gpos = np.array(grot, copy=True), np.array(gpos, copy=True)
+    for j in np.flatnonzero(redo):
+        p = sk.parents[j]
+        local = sk.offsets[j] if motion.translations is None else motion.translations[:, j]
+        grot[:, j] = quat.mul(grot[:, p], motion.rotations[:, j])
+        gpos[:, j] = gpos[:, p] + quat.rotate(grot[:, p], local)
+    return grot, gpos
+
+
+def _footplant_fn(
+    footplants: Footplants, contacts: Contacts, reference: Motion
+) -> Callable[[_Posed], _Posed] | None:
+    """The footplant step of a touch-up, built once."""
     if footplants is None:
         return None
     if callable(footplants):
         fn = footplants
-        return lambda m: fn(m, contacts, reference)
+        return lambda p: _posed(fn(p.motion, contacts, reference))
     if footplants not in ("auto", "plant", "refine", "ik"):
         raise ValueError(f"Expected `footplants` 'auto', 'plant', 'refine', 'ik', a callable or None, got {footplants!r}")
     if footplants == "auto":
@@ -744,13 +804,13 @@ def _footplant_fn(footplants: Footplants, contacts: Contacts, reference: Motion)
         else:
             footplants = "plant"
     if footplants == "ik":
-        return lambda m: _ik_footplants(m, contacts, reference)
+        return lambda p: _ik_posed(p, contacts, reference)
     from ..refine import foot_goals, refine, solve_goals
 
     if footplants == "refine":
-        return lambda m: refine(m, contacts=contacts, reference=reference)
+        return lambda p: _posed(refine(p.motion, contacts=contacts, reference=reference))
     goals = foot_goals(reference, contacts, reference=reference, blend=PLANT_BLEND)
-    return lambda m: solve_goals(m, goals, adjust_root=False)
+    return lambda p: _posed(solve_goals(p.motion, goals, adjust_root=False))
 
 
 # ======================================================================
@@ -782,7 +842,11 @@ class TouchUpState:
     footplants : str, callable or None
         How footplants are re-enforced after each step (the option given).
     fix : callable or None
-        The footplant step built from ``footplants`` (``motion -> motion``).
+        The footplant step built from ``footplants``.
+    kinematics : (ndarray (F, J, 4), ndarray (F, J, 3))
+        Global rotations and positions of :attr:`motion`, computed by the
+        touch-up (the same values as ``motion.global_rotations()`` and
+        ``motion.global_positions()``, without recomputing them).
     """
 
     motion: Motion
@@ -795,7 +859,8 @@ class TouchUpState:
     label: str = "input"
     flight_window: float = 0.5
     footplants: Footplants = "auto"
-    fix: Callable[[Motion], Motion] | None = None
+    fix: Callable[[_Posed], _Posed] | None = None
+    kinematics: tuple[Array, Array] | None = None
 
     @property
     def next_adjustment(self) -> Adjustment:
@@ -849,8 +914,11 @@ def start(
     sched = _as_schedule(schedule, contacts)
     for adj in sched:
         link_sets(motion.skeleton, adj)  # validate the link sets early
-    bal = balance(motion, body, contacts=contacts)
-    return TouchUpState(motion, motion, body, contacts, sched, 0, bal, "input", float(flight_window), footplants, fix)
+    posed = _posed(motion)
+    bal = balance(motion, body, contacts=contacts, fk=posed[1:])
+    return TouchUpState(
+        motion, motion, body, contacts, sched, 0, bal, "input", float(flight_window), footplants, fix, posed[1:]
+    )
 
 
 def step(state: TouchUpState) -> TouchUpState:
@@ -859,19 +927,27 @@ def step(state: TouchUpState) -> TouchUpState:
         raise TypeError(f"Expected a TouchUpState (see mocaplab.physics.start), got {type(state).__name__}")
     adj = state.next_adjustment
     motion, body, contacts = state.motion, state.body, state.contacts
+    posed = _Posed(motion, *state.kinematics) if state.kinematics is not None else _posed(motion)
     stages = flight_stages(contacts)
     window = int(round(state.flight_window * motion.fps))
-    flight_w = _flight_weights(motion.n_frames, stages, window)
     if adj.stage == "ground":
-        new = _ground_step(motion, body, adj, state.balance)
+        new = _ground_step(posed, body, adj, state.balance)
     elif stages:
-        new = _flight_step(motion, body, adj, stages, flight_w, window)
+        new = _flight_step(posed, body, adj, stages, _flight_weights(motion.n_frames, stages, window), window)
     else:
-        new = motion
-    if state.fix is not None and new is not motion:
+        new = posed
+    if state.fix is not None and new is not posed and _moves_contacts(motion.skeleton, adj, contacts):
         new = state.fix(new)
-    bal = balance(new, body, contacts=contacts)
-    return dataclasses.replace(state, motion=new, index=state.index + 1, balance=bal, label=adj.label)
+    bal = balance(new.motion, body, contacts=contacts, fk=new[1:])
+    return dataclasses.replace(
+        state, motion=new.motion, index=state.index + 1, balance=bal, label=adj.label, kinematics=new[1:]
+    )
+
+
+def _moves_contacts(skeleton: Skeleton, adj: Adjustment, contacts: Contacts) -> bool:
+    """Whether the adjustment can move a contact joint (else footplants need no repair)."""
+    sets = link_sets(skeleton, adj)
+    return any(sets.part[skeleton.index(name)] >= 0 for name in contacts.joints)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

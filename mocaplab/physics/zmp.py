@@ -42,8 +42,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, QhullError
 
+from .. import quat
 from ..motion import Motion
-from .body import GRAVITY, Body, link_positions, paper_width, smoothed_derivatives
+from .body import GRAVITY, Body, paper_width, smoothed_derivatives
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..contacts import Contacts
@@ -345,6 +346,7 @@ def balance(
     *,
     contacts: Contacts | None = None,
     width: float | None = None,
+    fk: tuple[Array, Array] | None = None,
 ) -> Balance:
     """ZMP (equation 4), support polygons and distances of a clip.
 
@@ -358,6 +360,8 @@ def balance(
     width : float, optional
         Gaussian width in frames for the accelerations (default: 5 frames at
         30 fps, scaled to the clip's rate).
+    fk : (global_rotations, global_positions), optional
+        The motion's forward kinematics when already at hand.
 
     Returns
     -------
@@ -367,13 +371,18 @@ def balance(
     contacts = default_contacts(motion) if contacts is None else contacts
     _check_contacts(contacts, motion)
     w = paper_width(5.0, motion.fps) if width is None else float(width)
-    raw = link_positions(motion, body)
+    body.check(motion)
+    # link centres and support points in one rotation pass
+    owners, offsets, column = body._support_layout(motion.skeleton, tuple(contacts.joints))
+    grot, gpos = (motion.global_rotations(), motion.global_positions()) if fk is None else fk
+    idx = np.concatenate([body.owners, owners])
+    pts = gpos[:, idx] + quat.rotate(np.ascontiguousarray(grot[:, idx]), np.concatenate([body.offsets, offsets]))
+    raw, support = pts[:, : body.n_links], pts[:, body.n_links :]
     r, _, acc = smoothed_derivatives(raw, motion.fps, width=w)
     mask = np.asarray(contacts.mask, dtype=bool)
     ground = mask.any(axis=1)
     z = zmp_from_links(r, acc, body.masses)
     z[~ground] = np.nan
-    support, column = body.support_points(motion, contacts.joints)
     active = mask[:, column]
     dist, proj2 = polygon_distance(z[:, [0, 2]], support[..., [0, 2]], active, depth=False)
     proj = np.column_stack([proj2[:, 0], np.zeros(len(proj2)), proj2[:, 1]])

@@ -366,7 +366,9 @@ class TouchUpStepper:
         from .viewer import MotionViewer
 
         s = self.session
-        options = {"window_size": (640, 360)} | self.viewer_options
+        frame = getattr(self.viewer, "frame", None) if getattr(self, "viewer", None) is not None else None
+        middle = s.input.motion.n_frames // 2 if frame is None else frame
+        options = {"window_size": (640, 360), "follow": True, "frame": middle} | self.viewer_options
         viewer = MotionViewer(
             [s.input.motion, s.current.motion], colors=[INPUT_COLOR, CURRENT_COLOR], labels=["input", "touched up"], **options
         )
@@ -393,11 +395,8 @@ class TouchUpStepper:
             setter([s.input.motion, s.current.motion])
             self._add_overlays(self.viewer)
         else:
-            frame = getattr(self.viewer, "frame", 0)
             old = self.viewer
-            self.viewer = self._make_viewer()
-            if frame:
-                self.viewer.set_frame(frame)
+            self.viewer = self._make_viewer()  # opens at the old viewer's frame
             self._viewer_box.children = [self.viewer.widget]
             old.close()
         self.viewer_updates += 1

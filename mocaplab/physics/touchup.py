@@ -33,8 +33,9 @@ Choices made where the paper leaves them open
   is shared by all parts of S2 (e.g. both arms), each turning about its own
   top joint.
 * Rotation centre: the top joint of the S2 part when it has a parent in S1
-  (the S1/S2 boundary); when S2 holds the root it is the ZMP's projection
-  on the ground (ground frames, S1 holds no planted joint) or, in flight,
+  (the S1/S2 boundary, e.g. ``LowerBack`` with the legs in S1).  When S2
+  holds the root (then S1 holds no planted foot in any sensible split), it
+  is the ZMP's projection on the ground on ground frames; in flight it is
   the S1/S2 boundary joint, or the centre of mass when S1 is empty.  On
   ground frames, S1 parts hanging below a root-holding S2 are carried like
   S3.
@@ -58,8 +59,10 @@ Choices made where the paper leaves them open
   S2 rotation of a non-empty S1 are carried into the windows.  (Continuing
   them with their boundary slope was tried: it makes take-off and landing
   far less balanced.)
-* Footplants are re-enforced after every step, per frame like the paper's
-  choice (Kovar et al. 2002, "because of its efficiency"):
+* Footplants are re-enforced after every step that can move a contact
+  joint (an adjustment of the upper body or the arms leaves the feet
+  alone), per frame like the paper's choice (Kovar et al. 2002, "because
+  of its efficiency"):
 
   - ``"plant"`` (what ``"auto"`` picks): the refinement module's plant goals
     (:func:`mocaplab.refine.foot_goals`, one plant position per contact
@@ -76,6 +79,10 @@ Choices made where the paper leaves them open
     where the input motion had it, frame by frame (blended over 0.2 s);
     the fastest, and the fallback when the refinement module is missing;
   - ``None`` skips the step.
+
+* Speed: the forward kinematics of the current motion travel with the
+  state; after an adjustment they follow in closed form (S2 moves rigidly,
+  carried parts translate), after the leg IK only the legs are recomputed.
 
 Examples
 --------

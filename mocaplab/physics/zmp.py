@@ -380,7 +380,7 @@ def balance(
     raw, support = pts[:, : body.n_links], pts[:, body.n_links :]
     r, _, acc = smoothed_derivatives(raw, motion.fps, width=w)
     mask = np.asarray(contacts.mask, dtype=bool)
-    ground = mask.any(axis=1)
+    ground: NDArray[np.bool_] = np.asarray(mask.any(axis=1), dtype=bool)
     z = zmp_from_links(r, acc, body.masses)
     z[~ground] = np.nan
     active = mask[:, column]

@@ -37,7 +37,16 @@ default (``start="tangent"``):
 
 ``start="linear"`` follows the paper literally: every segment starts from
 the linear (slerp) spline with scipy's default simplex and runs Nelder-Mead
-with no skipping (``maxiter`` still bounds it).
+with no skipping (``maxiter`` still bounds it).  Nelder-Mead uses scipy's
+``adaptive=True`` coefficients (Gao and Han), which converge in 8 dimensions
+where the classic ones stall.
+
+Measured on CMU clips (16_15, 16_05), Nelder-Mead started from the tangent
+solution lowers the Appendix A objective by less than 1e-4 relative: the
+tangent start is already at the optimum to that precision, and segments with
+a large residual are those a cubic cannot follow (their detail goes to the
+displacement map).  From the linear start, ``maxiter=200`` costs about 100
+times more and ends slightly worse on average.
 """
 
 from __future__ import annotations
@@ -167,15 +176,24 @@ def rotation_objective(
 
     Notes
     -----
-    The spline value is normalised before the angle is measured, so inflating
-    the quaternion norms cannot lower ``f_f`` (only ``f_c`` sees the norms);
-    ``|q_k . s|`` makes the angle independent of the sign of ``q_k``.
+    A choice the paper leaves open: how the spline treats non-unit control
+    quaternions while the optimiser moves them.  Here ``q2`` and ``q3`` are
+    normalised inside the spline (a rotation is a direction in R^4), so
+    ``f_f`` measures rotations only and the final renormalisation leaves the
+    fitted curve unchanged; ``f_c`` keeps the parameters near unit length as
+    the paper intends.  (Letting the norms shape the curve, as a literal
+    slerp of raw 4-vectors would, gives Nelder-Mead degenerate minima with
+    ``|q2|^2 + |q3|^2 = 2`` but very unequal norms, which renormalisation then
+    spoils.)  ``|q_k . s|`` makes the angle independent of the sign of ``q_k``.
     """
     q2, q3 = x[:4], x[4:]
-    f_c = abs(float(q2 @ q2 + q3 @ q3) - 2.0)
+    n2, n3 = float(q2 @ q2), float(q3 @ q3)
+    f_c = abs(n2 + n3 - 2.0)
     if t.size == 0:
         return w_c * f_c
-    s = _casteljau_fast(np.stack([q1, q2, q3, q4]), t)
+    if n2 <= 0.0 or n3 <= 0.0:
+        return np.inf
+    s = _casteljau_fast(np.stack([q1, q2 / np.sqrt(n2), q3 / np.sqrt(n3), q4]), t)
     n = np.sqrt(np.einsum("ij,ij->i", s, s))
     c = np.abs(np.einsum("ij,ij->i", q, s)) / np.maximum(n, 1e-300)
     ang = np.arccos(np.minimum(c, 1.0))
@@ -277,7 +295,7 @@ def fit_rotation_tangents(
                 idx = idx[np.linspace(0, idx.size - 1, max_samples).round().astype(np.int64)]
             t, qs = tn[idx], q[idx]
             x0 = np.concatenate([q2[s], q3[s]])
-            options: dict[str, Any] = {"maxiter": int(maxiter), "xatol": 1e-6, "fatol": 1e-9}
+            options: dict[str, Any] = {"maxiter": int(maxiter), "xatol": 1e-6, "fatol": 1e-9, "adaptive": True}
             if start == "tangent":
                 step = float(np.clip(err0[s], 1e-3, 0.05))
                 options["initial_simplex"] = np.vstack([x0, x0 + step * np.eye(8)])

@@ -1,0 +1,147 @@
+"""Locating staggered poses (Coleman 2008, section 4.1): signals, probability, priorities, refinements."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocaplab.contacts import Contacts, stillness_contacts
+from mocaplab.staggered import analyze, extract
+from mocaplab.staggered.features import (
+    bounded_curvature,
+    candidate_poses,
+    contact_events,
+    cull_poses,
+    laplacian_smooth,
+    local_maxima,
+    motion_trails,
+    pose_priorities,
+    tent_filter,
+    timing_refinements,
+)
+
+
+def test_bounded_curvature_of_line_corner_and_reversal() -> None:
+    line = np.stack([np.linspace(0, 1, 5), np.zeros(5), np.zeros(5)], axis=1)
+    assert np.allclose(bounded_curvature(line), 0.0)
+    corner = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0]], dtype=float)
+    assert np.isclose(bounded_curvature(corner)[1], np.sin(np.pi / 4))
+    back = np.array([[0, 0, 0], [1, 0, 0], [0.5, 0, 0]], dtype=float)
+    assert np.isclose(bounded_curvature(back)[1], 1.0)
+    still = np.zeros((4, 3))
+    assert np.all(bounded_curvature(still) == 0.0)
+
+
+def test_bounded_curvature_stays_in_unit_interval(rng: np.random.Generator) -> None:
+    k = bounded_curvature(rng.normal(size=(200, 3)))
+    assert k.min() >= 0.0 and k.max() <= 1.0
+
+
+def test_laplacian_smoothing_keeps_lines_and_ends(rng: np.random.Generator) -> None:
+    line = np.linspace(0, 2, 50)[:, None] * np.array([1.0, -2.0, 0.5])
+    assert np.allclose(laplacian_smooth(line, iterations=30), line)
+    noisy = line + rng.normal(scale=0.05, size=line.shape)
+    smooth = laplacian_smooth(noisy, iterations=30)
+    assert np.allclose(smooth[[0, -1]], noisy[[0, -1]])
+    assert np.abs(smooth - line)[5:-5].mean() < np.abs(noisy - line)[5:-5].mean()
+    with pytest.raises(ValueError, match="lam"):
+        laplacian_smooth(line, iterations=1, lam=0.0)
+
+
+def test_tent_filter_preserves_constants_and_mass() -> None:
+    assert np.allclose(tent_filter(np.full(50, 0.3), 0.15, 120.0), 0.3)
+    impulse = np.zeros(101)
+    impulse[50] = 1.0
+    out = tent_filter(impulse, 0.15, 120.0)
+    assert np.isclose(out.sum(), 1.0) and out.argmax() == 50
+    half = int(round(0.075 * 120))
+    assert np.count_nonzero(out) == 2 * half + 1  # support of 0.15 s
+
+
+def test_contact_events_mark_starts_and_ends() -> None:
+    mask = np.zeros((20, 1), dtype=bool)
+    mask[0:5, 0] = True
+    mask[10:15, 0] = True
+    ev = contact_events(Contacts(("LeftFoot",), mask, 30.0), 20)
+    assert np.flatnonzero(ev[:, 0]).tolist() == [5, 10, 15]
+
+
+def test_candidates_priorities_and_culling() -> None:
+    P = np.array([0.0, 0.2, 0.1, 0.5, 0.3, 0.4, 0.1, 0.0])
+    assert local_maxima(P).tolist() == [1, 3, 5]
+    cand = candidate_poses(P)
+    assert cand.tolist() == [0, 1, 3, 5, 7]
+    w = pose_priorities(P, cand, 1.0)
+    assert np.isinf(w[[0, -1]]).all()
+    assert np.allclose(w[1:-1], [0.2 * 3, 0.5 * 4, 0.4 * 4])
+    assert cull_poses(cand, w, 1.0, max_poses=3).tolist() == [0, 3, 7]
+    assert cull_poses(cand, w, 1.0, fraction=2 / 3).tolist() == [0, 3, 5, 7]
+    assert cull_poses(cand, w, 1.0, interval=(0.5, 4.0)).tolist() == [0, 1, 3, 7]
+    with pytest.raises(ValueError, match="max_poses"):
+        cull_poses(cand, w, 1.0, max_poses=1)
+    with pytest.raises(ValueError, match="fraction"):
+        cull_poses(cand, w, 1.0, fraction=1.5)
+
+
+def test_refinements_from_local_peaks_within_bounds() -> None:
+    fps = 100.0
+    F = 200
+    sig = np.zeros((F, 3))
+    sig[108, 0] = 1.0  # 8 frames after the pose at 100
+    sig[92, 1] = 0.5  # 8 frames before
+    sig[140, 2] = 1.0  # 0.4 s away: beyond 0.25 s
+    frames = np.array([0, 100, 199])
+    r = timing_refinements(sig, frames, fps)
+    assert np.allclose(r[1], [0.08, -0.08, 0.0])
+    assert np.all(r[[0, -1]] == 0.0)
+    # a peak closer to the neighbouring pose than to its own is ignored
+    r2 = timing_refinements(sig, np.array([0, 100, 110, 199]), fps)
+    assert r2[1, 0] == 0.0 and r2[2, 0] == pytest.approx(-0.02)
+
+
+def test_trails_cover_children_and_end_sites(cmu) -> None:
+    walk = cmu("16_15")
+    tr = motion_trails(walk[:10])
+    sk = walk.skeleton
+    offsets = list(zip(sk.parents[1:], sk.offsets[1:], strict=True))
+    offsets += list(zip(sk.end_site_parents, sk.end_site_offsets, strict=True))
+    per_joint = [sum(1 for p, o in offsets if p == j and np.linalg.norm(o) > 1e-9) for j in range(sk.n_joints)]
+    n_trails = 1 + 2 * sum(max(1, n) for n in per_joint)  # root trail + m1, m2 per child (x, y axes if none)
+    assert tr.points.shape == (10, n_trails, 3)
+    assert set(np.unique(tr.variable)) == set(range(walk.n_joints + 1))
+    unit = tr.kind > 0
+    assert np.allclose(np.linalg.norm(tr.points[:, unit], axis=-1), 1.0)
+
+
+def test_analysis_of_a_walk(cmu) -> None:
+    walk = cmu("16_15")
+    a = analyze(walk)
+    assert a.signals.shape == (walk.n_frames, walk.n_joints + 1)
+    assert a.signals.min() >= 0.0 and a.signals.max() <= 1.0
+    # constant CMU joints (hip joints, shoulders) carry no weight
+    for name in ("LHipJoint", "RHipJoint", "LeftShoulder"):
+        assert a.weights[a.variables.index(name)] == 0.0
+    # legs weigh more than the head
+    assert a.weights[a.variables.index("RightLeg")] > 10 * a.weights[a.variables.index("Head")]
+    assert a.candidates[0] == 0 and a.candidates[-1] == walk.n_frames - 1
+    assert a.candidates.size < walk.n_frames / 10
+    assert a.events.shape[1] == len(a.event_joints) > 0
+
+
+def test_walk_poses_fall_near_contact_changes(cmu) -> None:
+    """Section 4/Figure 4: chosen poses correspond to contact and release with the ground."""
+    walk = cmu("16_15")
+    contacts = stillness_contacts(walk)
+    changes = []
+    for name in contacts.joints:
+        for a, b in contacts.intervals(name):
+            changes += [a] if a > 0 else []
+            changes += [b] if b < walk.n_frames else []
+    ev = np.array(sorted(changes)) / walk.fps
+    sm = extract(walk, max_poses=12, contacts=contacts, optimize=False)
+    t = sm.times[1:-1]
+    d = np.abs(t[:, None] - ev[None]).min(axis=1)
+    grid = np.linspace(0, walk.duration, 1001)
+    baseline = np.median(np.abs(grid[:, None] - ev[None]).min(axis=1))
+    assert np.median(d) < 0.5 * baseline
+    assert np.mean(d < 0.05) >= 0.6

@@ -1,0 +1,129 @@
+"""Fitting splines and displacement maps (Coleman 2008, section 4.1.1, Appendix A); extraction."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocaplab import quat
+from mocaplab.staggered import (
+    extract,
+    fit_rotation_tangents,
+    fit_translation_tangents,
+    quat_bezier,
+    rotation_objective,
+)
+from mocaplab.staggered.fit import W_C, W_F
+
+
+def reconstruction_error(a, b) -> tuple[float, float]:
+    rot = float(quat.angle(quat.mul(quat.inv(a.rotations), b.rotations)).max())
+    pos = float(np.abs(a.root_positions - b.root_positions).max())
+    return rot, pos
+
+
+@pytest.mark.parametrize("clip", ["16_15", "05_02", "16_05"])
+def test_extract_then_evaluate_reproduces_every_frame(cmu, clip: str) -> None:
+    m = cmu(clip)
+    sm = extract(m)
+    out = sm.evaluate()
+    assert out.n_frames == m.n_frames and out.fps == m.fps
+    rot, pos = reconstruction_error(out, m)
+    assert rot < 1e-6 and pos < 1e-6
+    # sparse: far fewer poses than frames, refinements bounded by 0.25 s
+    assert sm.n_poses < m.n_frames / 10
+    assert np.abs(sm.refinements).max() <= 0.25 + 1e-12
+    assert sm.times[0] == 0.0 and sm.times[-1] == pytest.approx(m.duration)
+    assert np.all(sm.refinements[[0, -1]] == 0.0)
+    assert sm.refinements.shape == (sm.n_poses, m.n_joints + 1)
+
+
+def test_culling_options(cmu) -> None:
+    m = cmu("16_05")
+    full = extract(m, optimize=False)
+    few = extract(m, max_poses=6, optimize=False)
+    assert few.n_poses == 6 and set(np.round(few.times, 9)) <= set(np.round(full.times, 9))
+    half = extract(m, fraction=0.5, optimize=False)
+    assert 2 < half.n_poses < full.n_poses
+    window = extract(m, interval=(0.5, 1.5), optimize=False)
+    inner = window.times[1:-1]
+    assert np.all((inner >= 0.5) & (inner <= 1.5))
+    rot, pos = reconstruction_error(few.evaluate(), m)
+    assert rot < 1e-6 and pos < 1e-6
+
+
+def test_translation_least_squares_recovers_a_cubic(rng: np.random.Generator) -> None:
+    P = rng.normal(size=(2, 4, 3))
+    t = np.tile(np.linspace(0, 1, 25), 2)
+    seg = np.repeat([0, 1], 25)
+    from mocaplab.staggered import bezier
+
+    y = bezier(P[seg, 0], P[seg, 1], P[seg, 2], P[seg, 3], t)
+    a, b = fit_translation_tangents(seg, t, y, P[:, 0], P[:, 3])
+    assert np.allclose(P[:, 0] + a, P[:, 1], atol=1e-5)
+    assert np.allclose(P[:, 3] + b, P[:, 2], atol=1e-5)
+
+
+def test_translation_fit_without_samples_is_the_linear_spline() -> None:
+    p0, p3 = np.array([[0.0, 0, 0]]), np.array([[3.0, 0, 0]])
+    a, b = fit_translation_tangents(np.array([0, 0]), np.array([0.0, 1.0]), np.vstack([p0, p3]), p0, p3)
+    assert np.allclose(a, [[1.0, 0, 0]]) and np.allclose(b, [[-1.0, 0, 0]])
+
+
+def _spherical_samples(n: int = 30):
+    q1 = quat.from_axis_angle([0, 0, 1], 0.0)
+    q2 = quat.from_axis_angle([1, 0.2, 0], 0.5)
+    q3 = quat.from_axis_angle([0.2, 1, 0], 0.4)
+    q4 = quat.from_axis_angle([0, 0.5, 1], 0.9)
+    t = np.linspace(0, 1, n)
+    return q1, q2, q3, q4, t, quat_bezier(q1, q2, q3, q4, t)
+
+
+def test_appendix_a_objective_terms() -> None:
+    q1, q2, q3, q4, t, q = _spherical_samples()
+    x = np.concatenate([q2, q3])
+    inner = slice(1, -1)
+    assert rotation_objective(x, q1, q4, t[inner], q[inner]) == pytest.approx(0.0, abs=1e-12)
+    # the unit-length term: | |q2|^2 + |q3|^2 - 2 |
+    assert rotation_objective(1.1 * x, q1, q4, t[:0], q[:0]) == pytest.approx(W_C * abs(2 * 1.21 - 2))
+    assert W_F == 1000 * W_C
+
+
+@pytest.mark.parametrize("start", ["tangent", "linear"])
+def test_rotation_tangents_fit_a_spherical_cubic(start: str) -> None:
+    q1, q2, q3, q4, t, q = _spherical_samples()
+    seg = np.zeros(t.size, dtype=np.int64)
+    alpha, beta, info = fit_rotation_tangents(
+        seg, t, q, q1[None], q4[None], start=start, maxiter=3000, polish_tol=0.0
+    )
+    # unit (renormalised) tangent quaternions
+    assert np.allclose(np.linalg.norm(alpha, axis=-1), 1.0) and np.allclose(np.linalg.norm(beta, axis=-1), 1.0)
+    s = quat_bezier(q1, quat.mul(q1, alpha[0]), quat.mul(q4, beta[0]), q4, t)
+    err = quat.angle(quat.mul(quat.inv(s), q))
+    assert err.max() < np.deg2rad(1.0)
+    assert info["error"][0] <= info["start_error"][0] + 1e-12
+    if start == "linear":
+        # Nelder-Mead improves substantially on the linear spline it starts from
+        assert info["nfev"] > 0 and info["error"][0] < 0.3 * info["start_error"][0]
+
+
+def test_tangent_start_is_close_on_real_data(cmu) -> None:
+    """The tangent-space start (the documented speed-up) fits about as well as Nelder-Mead."""
+    m = cmu("16_05")
+    fast = extract(m, optimize=False)
+    slow = extract(m, start="tangent", optimize=True, maxiter=200)
+    for sm in (fast, slow):
+        rot, pos = reconstruction_error(sm.evaluate(), m)
+        assert rot < 1e-6 and pos < 1e-6
+    # same poses, refinements and knots: only tangents may differ
+    assert np.array_equal(fast.refinements, slow.refinements)
+    d_fast = np.linalg.norm(fast.rotation_displacement, axis=-1).mean()
+    d_slow = np.linalg.norm(slow.rotation_displacement, axis=-1).mean()
+    assert d_slow <= d_fast * 1.05
+
+
+def test_extract_rejects_bad_input(cmu) -> None:
+    with pytest.raises(TypeError, match="Motion"):
+        extract(np.zeros((3, 3)))  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="max_refinement"):
+        extract(cmu("16_05"), max_refinement=-1.0)

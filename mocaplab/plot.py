@@ -13,8 +13,14 @@ Axes conventions
 * In 3D plots the world axes are shown cyclically permuted, matplotlib's
   ``(X, Y, Z) = (z, x, y)``, so that the world's up axis is matplotlib's
   vertical axis and the view stays right-handed (no mirror image).
-* Top-down plots (:func:`root_path`, ``projection="top"``) draw ``x`` along
-  the horizontal axis and ``z`` along the vertical axis, equal aspect.
+* Top-down plots (:func:`root_path`, ``projection="top"``) look down from
+  +Y: ``x`` to the right and ``z`` **down the page** (the vertical axis is
+  inverted), equal aspect.  This is what a camera above a right-handed, Y-up
+  scene sees (with ``z`` up the page the scene would be mirrored, turning a
+  left turn into a right turn), and it agrees with the path editor
+  (:class:`mocaplab.widgets.PathEditor`).  The inversion is idempotent:
+  drawing several top views into one Axes never flips it back, so callers
+  must not invert the axis themselves.
 
 Examples
 --------
@@ -90,6 +96,12 @@ def _bones(motion: Motion, frame: int, end_sites: bool) -> tuple[NDArray[np.floa
     return pos, np.concatenate(segs, axis=0)
 
 
+def _top_view(ax: Axes) -> None:
+    """Make ``ax`` a view from above: z grows down the page (idempotent)."""
+    if not ax.yaxis_inverted():
+        ax.invert_yaxis()
+
+
 def _to_mpl3d(p: NDArray[np.float64]) -> NDArray[np.float64]:
     """World (x, y, z) to matplotlib 3D (X, Y, Z) = (z, x, y)."""
     return p[..., [2, 0, 1]]
@@ -130,7 +142,8 @@ def skeleton(
         Where to draw; a 3D Axes when ``projection="3d"``.  Default: a new figure.
     projection : {"3d", "front", "side", "top"}
         ``"3d"``: perspective view; ``"front"``: (x, y); ``"side"``: (z, y);
-        ``"top"``: (x, z) seen from above.
+        ``"top"``: (x, z) seen from above, z down the page (see the module
+        notes).
     color : str, optional
         Bone colour (default the first of :data:`COLORS`).
     highlight : sequence of str
@@ -190,6 +203,8 @@ def skeleton(
         ax.autoscale_view()
         ax.set_xlabel(f"{_AXIS_NAMES[h]} (m)")
         ax.set_ylabel(f"{_AXIS_NAMES[v]} (m)")
+        if projection == "top":
+            _top_view(ax)
     title = f"{motion.name + ', ' if motion.name else ''}frame {f} (t = {f / motion.fps:.2f} s)"
     ax.set_title(title)
     return ax
@@ -219,6 +234,13 @@ def root_path(
     linewidth: float = 2.0,
 ) -> Axes:
     """Top-down view of root paths on the ground plane.
+
+    The view looks down from above (+Y): ``x`` to the right and ``z`` down the
+    page, i.e. the Axes' y axis is inverted (once, however many times this
+    draws into the same Axes), as in
+    :class:`mocaplab.widgets.PathEditor`.  A walk turning to its left turns
+    to the left on the page.  Do not call ``ax.invert_yaxis()`` afterwards:
+    that would mirror the scene again.
 
     Parameters
     ----------
@@ -261,6 +283,7 @@ def root_path(
     ax.set_xlabel("x (m)")
     ax.set_ylabel("z (m)")
     ax.set_title("root path, top view")
+    _top_view(ax)
     ax.grid(True, alpha=0.3)
     if len(items) > 1 or labels is not None:
         ax.legend(loc="best", fontsize="small")

@@ -82,6 +82,41 @@ def test_root_path_motions_and_arrays(walk, cmu):
         plot.root_path([])
 
 
+def _screen_turning(ax, xz: np.ndarray) -> float:
+    """Total signed turning (radians, counter-clockwise > 0) of a path as drawn on the screen."""
+    d = np.diff(ax.transData.transform(xz), axis=0)
+    cross = d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0]
+    return float(np.sum(np.arctan2(cross, np.sum(d[:-1] * d[1:], axis=1))))
+
+
+def test_top_views_look_down_from_above_with_z_down_the_page(walk):
+    # a left turn, seen from above (+Y) in a right-handed scene, turns counter-clockwise:
+    # heading +z, then +x (a positive rotation about +y)
+    s = np.linspace(0.0, np.pi / 2, 30)
+    left_turn = np.c_[1.0 - np.cos(s), np.sin(s)]
+    ax = plot.root_path(left_turn)
+    assert ax.yaxis_inverted() and not ax.xaxis_inverted()
+    ax.figure.canvas.draw()  # settle the equal aspect: screen angles are true angles
+    assert _screen_turning(ax, left_turn) == pytest.approx(np.pi / 2 * 28 / 29, abs=1e-3)  # 29 chords
+    lo, hi = ax.transData.transform([[0.0, 0.0], [0.0, 1.0]])
+    assert hi[1] < lo[1], "+z points down the page"
+    plot.root_path(left_turn, ax=ax)  # a second path in the same Axes does not flip it back
+    assert ax.yaxis_inverted()
+    plot.skeleton(walk, 0, ax=ax, projection="top")
+    assert ax.yaxis_inverted()
+    assert plot.skeleton(walk, 0, projection="top").yaxis_inverted()
+    assert not plot.skeleton(walk, 0, projection="front").yaxis_inverted()
+    assert not plot.skeleton(walk, 0, projection="side").yaxis_inverted()
+
+
+def test_a_real_left_turn_turns_left_on_the_page(cmu):
+    turn = cmu("16_17")  # walk, 90-degree left turn
+    yaw = np.unwrap(quat.yaw(turn.rotations[:, 0]))
+    assert np.degrees(yaw[-1] - yaw[0]) > 60, "the root yaws left (counter-clockwise about +y)"
+    ax = plot.root_path(turn)
+    assert _screen_turning(ax, turn.root_positions[::10, [0, 2]]) > np.radians(60)
+
+
 def test_joint_curves_components(walk):
     contacts = foot_contacts(walk)
     ax = plot.joint_curves(walk, ["LeftFoot", "RightFoot"], contacts=contacts)

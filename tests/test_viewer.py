@@ -180,6 +180,100 @@ def test_trame_backend_builds_an_updatable_view(walk):
     v.close()
 
 
+def test_set_motions_updates_the_meshes_in_place(walk, monkeypatch):
+    v = MotionViewer(walk[:240], backend="static", window_size=(200, 150))
+    box = v.widget
+    v.set_frame(100)
+    plotter, view, actors = v.plotter, v._view, dict(v.plotter.actors)
+    meshes = (v.characters[0].bones, v.characters[0].joints)
+    png = view.value
+
+    def no_plotter(*args, **kwargs):
+        raise AssertionError("set_motions must not create a plotter")
+
+    monkeypatch.setattr(pv, "Plotter", no_plotter)
+    edited = walk[:300].transformed(yaw=0.3, translation=(1.0, 0.0, 0.5))
+    v.set_motions(edited)
+    assert v.plotter is plotter and v.widget is box and v._view is view
+    assert dict(v.plotter.actors).keys() == actors.keys()
+    assert all(v.plotter.actors[k] is a for k, a in actors.items()), "no actor re-created"
+    assert (v.characters[0].bones, v.characters[0].joints) == meshes, "same meshes, new points"
+    assert v.characters[0].motion is edited
+    assert v.frame == 100 and v.slider.value == 100
+    centres = _sphere_centres(v)
+    assert np.allclose(centres[: walk.n_joints], edited.global_positions()[100], atol=1e-9)
+    assert np.allclose(centres[walk.n_joints :], edited.end_site_positions()[100], atol=1e-9)
+    assert v.n_frames == 300 and v.slider.max == 299 and v.play.max == 299
+    assert view.value != png, "the static image was re-rendered"
+    x0, x1, z0, z1 = v._ground_extent
+    root = edited.root_positions
+    assert x0 <= root[:, 0].min() and root[:, 0].max() <= x1 and z0 <= root[:, 2].min() and root[:, 2].max() <= z1
+
+    # shorter motions: the current frame is clamped to the new last frame
+    v.set_motions(walk[:50])
+    assert v.n_frames == 50 and v.slider.max == 49 and v.play.max == 49
+    assert v.frame == 49 and v.slider.value == 49
+    assert np.allclose(_sphere_centres(v)[: walk.n_joints], walk.global_positions()[49], atol=1e-9)
+    v.slider.value = 10  # the slider still drives the new motions
+    assert np.allclose(_sphere_centres(v)[: walk.n_joints], walk.global_positions()[10], atol=1e-9)
+    v.close()
+
+
+def test_set_motions_follows_the_clock_and_keeps_the_time(walk):
+    v = MotionViewer(walk[:240], backend="static", window_size=(120, 90))
+    v.widget  # noqa: B018
+    v.set_frame(120)  # t = 1 s
+    slow = walk[:240].resample(30)
+    v.set_motions(slow)
+    assert v.fps == pytest.approx(30.0) and v.n_frames == slow.n_frames
+    assert v.frame == 30 and v.time == pytest.approx(1.0)
+    assert v.play.step == 1 and v.play.interval == 33
+    assert np.allclose(_sphere_centres(v)[: walk.n_joints], slow.global_positions()[30], atol=1e-9)
+    fixed = MotionViewer(walk[:60], backend="none", fps=60.0)
+    fixed.set_motions(slow)
+    assert fixed.fps == 60.0, "an fps given to the constructor is kept"
+    with pytest.raises(ValueError, match="labels"):
+        fixed.set_motions(slow, labels=["a", "b"])
+    with pytest.raises(TypeError, match=r"motions\[0\]"):
+        fixed.set_motions(["walk"])
+    v.close()
+    fixed.close()
+
+
+def test_set_motions_rebuilds_actors_when_the_skeletons_change(walk, cmu):
+    salsa = cmu("60_10")[:60]
+    v = MotionViewer(walk[:120], backend="static", window_size=(160, 120))
+    v.widget  # noqa: B018
+    plotter = v.plotter
+    v.set_frame(40)
+    v.set_motions([walk[:120], salsa], labels=["walk", "salsa"])
+    assert v.plotter is plotter
+    assert {"bones0", "joints0", "bones1", "joints1"} <= set(v.plotter.actors)
+    assert v.characters[1].actors[1].mapper.dataset is v.characters[1].joints
+    assert v.character_frames() == [40, 20]
+    assert np.allclose(_sphere_centres(v, 1)[: salsa.n_joints], salsa.global_positions()[20], atol=1e-9)
+    assert plotter.legend is not None
+    v.set_motions(salsa)  # one character of another skeleton
+    assert "bones1" not in v.plotter.actors and plotter.legend is None
+    assert np.allclose(_sphere_centres(v)[: salsa.n_joints], salsa.global_positions()[20], atol=1e-9)
+    assert v.screenshot().std() > 10
+    v.close()
+
+
+def test_set_motions_updates_the_trame_view(walk, monkeypatch):
+    pytest.importorskip("trame_pyvista")
+    v = MotionViewer(walk[:60], backend="trame", window_size=(160, 120))
+    view = v.widget.children[0]
+    updates = []
+    monkeypatch.setattr(view.viewer, "update", lambda *a, **k: updates.append(1))
+    edited = walk[:90].transformed(translation=(0.5, 0.0, 0.0))
+    v.set_motions(edited)
+    assert v.widget.children[0] is view and updates, "the embedded view was told to update"
+    assert v.slider.max == 89
+    assert np.allclose(_sphere_centres(v)[: walk.n_joints], edited.global_positions()[0], atol=1e-9)
+    v.close()
+
+
 def test_display_hooks(walk, capsys):
     v = MotionViewer(walk[:10], backend="none")
     v._ipython_display_()  # outside a kernel IPython prints the widget's text form

@@ -52,16 +52,18 @@ class Spy:
 
 
 class ViewerStub:
-    """Stands in for MotionViewer: records motions and times it was given."""
-
-    built: list[ViewerStub] = []
+    """Stands in for MotionViewer: records the motions and times it was given."""
 
     def __init__(self, motions, **options) -> None:
         self.motions = list(motions)
+        self.updates: list[list] = []
         self.times: list[float] = []
         self.widget = ipywidgets.HTML("3D")
         self.closed = False
-        ViewerStub.built.append(self)
+
+    def set_motions(self, motions) -> None:
+        self.motions = list(motions)
+        self.updates.append(self.motions)
 
     def set_time(self, t: float) -> None:
         self.times.append(float(t))
@@ -138,7 +140,9 @@ def test_drag_existing_pin_then_click_unpins(walks):
     assert spy.calls[-1] == ("remove", 0)
     assert len(pe.editor.constraints) == 0
     assert "removed PinPosition #0" in _status(pe)
-    assert np.allclose(pe.result.paths[0], walks[0].root_positions[:, [0, 2]], atol=1e-6), "no constraint: original path"
+    assert np.allclose(pe.result.paths[0], walks[0].root_positions[:, [0, 2]], atol=1e-6), (
+        "no constraint: original path"
+    )
 
 
 def test_click_on_path_pins_in_place_without_changing_it(walks):
@@ -216,17 +220,19 @@ def test_toolbar_zoom_mode_and_other_buttons_do_not_edit(walks):
 
 
 def test_viewer_gets_new_motions_on_release_and_follows_time(walks, monkeypatch):
-    ViewerStub.built.clear()
     pe = PathEditor(walks, viewer=ViewerStub([]))
     first = pe.viewer
     pe.figure.canvas.draw()
     start = np.array(pe.result.paths[0][50])
     _drag(pe, start, start + 0.6)
-    assert pe.viewer is not first and first.closed, "a new viewer replaces the old one"
-    assert pe.viewer_updates == 1
+    assert pe.viewer is first and not first.closed, "the same viewer is updated, not replaced"
+    assert pe.viewer_updates == 1 and len(first.updates) == 1, "one update per release, none per motion event"
+    assert pe._viewer_box.children[0] is first.widget
     assert pe.viewer.motions[0] is pe.result.motions[0]
     moved_root = pe.viewer.motions[0].root_positions[:, [0, 2]]
-    assert not np.allclose(moved_root, walks[0].root_positions[: len(moved_root), [0, 2]], atol=1e-3), "edited motion shown"
+    assert not np.allclose(moved_root, walks[0].root_positions[: len(moved_root), [0, 2]], atol=1e-3), (
+        "edited motion shown"
+    )
     t0 = float(pe.result.clock[0])
     pe.time.value = pe.time.min + 1.0
     assert pe.viewer.times[-1] == pytest.approx(pe.time.value - t0)
@@ -236,21 +242,35 @@ def test_viewer_gets_new_motions_on_release_and_follows_time(walks, monkeypatch)
     assert np.allclose(marker, expect), "the time marker sits on the path at the slider's time"
 
 
-def test_real_motion_viewer_is_replaced_after_a_drag(walks, monkeypatch):
+def test_real_motion_viewer_is_updated_in_place_after_a_drag(walks, monkeypatch):
     pytest.importorskip("pyvista")
     monkeypatch.setenv("MOCAPLAB_JUPYTER_BACKEND", "static")
     from mocaplab.widgets.viewer import MotionViewer
 
     pe = PathEditor([walks[0]], viewer_options={"window_size": (160, 120), "backend": "static"})
     assert isinstance(pe.viewer, MotionViewer)
-    first = pe.viewer
+    first, plotter, widget = pe.viewer, pe.viewer.plotter, pe.viewer.widget
+    meshes = (first.characters[0].bones, first.characters[0].joints)
+    image = first._view.value
     pe.figure.canvas.draw()
     start = np.array(pe.result.paths[0][50])
     _drag(pe, start, start + np.array([0.5, 0.0]))
-    assert pe.viewer is not first
+    assert pe.viewer is first and pe.viewer.plotter is plotter and pe.viewer.widget is widget
+    assert (first.characters[0].bones, first.characters[0].joints) == meshes, "the meshes were updated in place"
+    assert pe._viewer_box.children[0] is widget
     shown = pe.viewer.characters[0].positions[:, 0, [0, 2]]
-    assert np.allclose(shown, pe.result.motions[0].global_positions()[:, 0, [0, 2]])
-    assert pe._viewer_box.children[0] is pe.viewer.widget
+    edited = pe.result.motions[0].global_positions()
+    assert np.allclose(shown, edited[:, 0, [0, 2]]), "the 3D view shows the edited motion"
+    assert not np.allclose(edited[:, 0, [0, 2]], walks[0].global_positions()[:, 0, [0, 2]], atol=1e-3)
+    f = pe.viewer.character_frames()[0]
+    n = walks[0].n_joints
+    centres = (
+        np.asarray(first.characters[0].joints.points).reshape(-1, len(first._spheres.template), 3)
+        - first._spheres.template[None]
+    ).mean(axis=1)
+    assert np.allclose(centres[:n], edited[f], atol=1e-9), "the drawn spheres are the edited pose"
+    assert first._view.value != image, "the static image was re-rendered"
+    first.close()
 
 
 def test_shares_a_scene_editor_with_the_time_track(walks):
@@ -313,6 +333,8 @@ def test_bad_arguments(walks):
         PathEditor(editor, [], viewer=False)
     with pytest.raises(ValueError, match="backend"):
         PathEditor(editor, backend="qt", viewer=False)
+    with pytest.raises(TypeError, match="set_motions"):
+        PathEditor(editor, viewer=ipywidgets.HTML("not a viewer"))
     with pytest.raises(ValueError, match="labels"):
         TimeTrackEditor(editor, labels=["a", "b"])
 

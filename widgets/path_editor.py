@@ -23,9 +23,10 @@ press on a direction arrow tip, drag    ``drag(i, d)``
 ``Relative`` constraints are drawn as dashed links between the two characters.
 All the mathematics happens in the core editor; the widget only draws its
 result.  Beside the plot, a 3D :class:`~mocaplab.widgets.MotionViewer` shows the
-edited scene, synced to the time slider (its motions are replaced when the
-mouse is released, since rebuilding the 3D scene on every motion event is too
-slow for a live drag).
+edited scene, synced to the time slider; it receives the edited motions
+(:meth:`~mocaplab.widgets.MotionViewer.set_motions`, in place: same plotter,
+same widget) when the mouse is released, since redrawing the 3D scene on every
+motion event would slow a live drag.
 
 Drawing conventions
 -------------------
@@ -372,7 +373,8 @@ class PathEditor(_DragView):
     viewer : bool or MotionViewer
         ``True`` builds a 3D :class:`~mocaplab.widgets.MotionViewer` of the
         edited scene beside the plot (skipped if unavailable), ``False`` none,
-        or pass a viewer to use.
+        or pass a viewer to use (any object with ``set_motions(motions)``,
+        ``set_time(t)`` and a ``widget``).
     figsize : tuple of float
         Figure size in inches (100 dpi).
     pick_radius : float
@@ -404,8 +406,9 @@ class PathEditor(_DragView):
         Reference time shown by the markers and the 3D viewer
         (CSS class ``mocaplab-path-time``).
     viewer : MotionViewer or None
-        Replaced by a new viewer when the mouse is released after an edit (the
-        viewer has no in-place motion update); ``viewer_updates`` counts them.
+        Given the edited motions with ``set_motions`` when the mouse is
+        released after an edit (the same viewer and 3D view are kept);
+        ``viewer_updates`` counts these updates.
     widget : ipywidgets.Box
         The whole layout (CSS class ``mocaplab-path-editor``).
     """
@@ -491,7 +494,9 @@ class PathEditor(_DragView):
         self._connect(self.canvas)
         self._fit_view()
         self._redraw(final=True)
-        self._set_status("press a path to pin it; drag a pin to move it; click a pin to unpin; shift-drag for a direction")
+        self._set_status(
+            "press a path to pin it; drag a pin to move it; click a pin to unpin; shift-drag for a direction"
+        )
 
     # ------------------------------------------------------------------ public
     def refresh(self) -> None:
@@ -554,6 +559,11 @@ class PathEditor(_DragView):
         if viewer is False or viewer is None:
             return None
         if viewer is not True:
+            if not callable(getattr(viewer, "set_motions", None)):
+                raise TypeError(
+                    f"Expected `viewer` to be a bool or a viewer with a set_motions(motions) method "
+                    f"(a MotionViewer), got {type(viewer).__name__}"
+                )
             return viewer
         try:
             from .viewer import MotionViewer
@@ -562,23 +572,10 @@ class PathEditor(_DragView):
         return MotionViewer(list(self.result.motions), colors=self.colors, **self.viewer_options)
 
     def _update_viewer(self) -> None:
-        """Show the edited motions in the 3D viewer (in place if it can, else a new viewer)."""
+        """Show the edited motions in the 3D viewer, in place (same viewer, same 3D view)."""
         if self.viewer is None:
             return
-        motions = list(self.result.motions)
-        method = getattr(self.viewer, "set_motions", None)
-        if callable(method):
-            method(motions)
-        else:
-            old = self.viewer
-            options = dict(self.viewer_options)
-            if hasattr(old, "backend"):
-                options.setdefault("backend", old.backend)
-            self.viewer = type(old)(motions, colors=self.colors, **options)
-            self._viewer_box.children = [self._viewer_widget()]
-            close = getattr(old, "close", None)
-            if callable(close):
-                close()
+        self.viewer.set_motions(list(self.result.motions))
         self.viewer_updates += 1
         self._sync_viewer_time()
 
@@ -790,7 +787,9 @@ class PathEditor(_DragView):
         elif not drag.moved and not drag.created:
             c = self.editor.constraints[drag.index]
             self._remove(drag.index)
-            self._set_status(f"removed {_kind_of(c)} #{drag.index} (character {int(c.character)}, frame {_frame_of(c)})")
+            self._set_status(
+                f"removed {_kind_of(c)} #{drag.index} (character {int(c.character)}, frame {_frame_of(c)})"
+            )
         elif drag.moved:
             self._describe(drag.index, prefix="moved")
         self.result = _current_result(self.editor)

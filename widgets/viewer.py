@@ -11,6 +11,8 @@ Each character is two meshes whose topology never changes: its bones as
 tubes and its joints (and end sites) as spheres.  Moving the slider writes new
 point coordinates into those meshes **in place** (no actor is re-created),
 then re-renders.  A ground grid lies at y = 0 under the whole scene.
+:meth:`MotionViewer.set_motions` swaps in new motions (an edited scene) the
+same way: same plotter, same widget, same meshes when the skeletons match.
 
 Time
 ----
@@ -233,6 +235,17 @@ def _check_overlay_data(name: str, data: Any) -> Any:
     )
 
 
+def _as_motions(motions: Motion | Sequence[Motion]) -> list[Motion]:
+    """``motions`` as a non-empty list of Motion (a single Motion is one character)."""
+    items = [motions] if isinstance(motions, Motion) else list(motions)
+    if not items:
+        raise ValueError("Expected at least one Motion in `motions`, got none")
+    for k, m in enumerate(items):
+        if not isinstance(m, Motion):
+            raise TypeError(f"Expected `motions[{k}]` to be a Motion, got {type(m).__name__}")
+    return items
+
+
 # --------------------------------------------------------------------------
 class MotionViewer:
     """Play one or several motions in 3D with a time slider and a play button.
@@ -293,12 +306,7 @@ class MotionViewer:
         backend: str | None = None,
         frame: int = 0,
     ) -> None:
-        items = [motions] if isinstance(motions, Motion) else list(motions)
-        if not items:
-            raise ValueError("Expected at least one Motion in `motions`, got none")
-        for k, m in enumerate(items):
-            if not isinstance(m, Motion):
-                raise TypeError(f"Expected `motions[{k}]` to be a Motion, got {type(m).__name__}")
+        items = _as_motions(motions)
         backend = (backend or default_backend()).lower()
         if backend not in BACKENDS:
             raise ValueError(f"Expected `backend` (or ${ENV_VAR}) in {BACKENDS}, got {backend!r}")
@@ -307,28 +315,19 @@ class MotionViewer:
         if labels is not None and len(labels) != len(items):
             raise ValueError(f"Expected {len(items)} `labels`, got {len(labels)}")
         self.backend = backend
-        self.fps = float(fps) if fps is not None else max(m.fps for m in items)
-        if not np.isfinite(self.fps) or self.fps <= 0:
+        if fps is not None and not (np.isfinite(float(fps)) and float(fps) > 0):
             raise ValueError(f"Expected `fps` > 0, got {fps!r}")
-        self.n_frames = int(np.floor(max(m.duration for m in items) * self.fps + 1e-9)) + 1
+        self._fps_option = None if fps is None else float(fps)
+        self.fps, self.n_frames = self._clock(items)
         self.bone_radius = float(bone_radius)
         self.joint_radius = float(joint_radius)
         self.follow = bool(follow)
+        self.end_sites = bool(end_sites)
+        self._colors = tuple(colors or COLORS)
         self._sides = 8
         self._spheres = _SphereSet(self.joint_radius)
         self._small_spheres = _SphereSet(self.joint_radius * 0.6, resolution=8)
-        self.characters: list[_Character] = []
-        for k, m in enumerate(items):
-            sk = m.skeleton
-            pos = m.global_positions()
-            segs = np.stack([sk.parents[1:], np.arange(1, sk.n_joints)], axis=1)
-            if end_sites and sk.end_site_parents.size:
-                pos = np.concatenate([pos, m.end_site_positions()], axis=1)
-                ends = np.arange(sk.n_joints, sk.n_joints + len(sk.end_site_parents))
-                segs = np.concatenate([segs, np.stack([sk.end_site_parents, ends], axis=1)])
-            color = (colors or COLORS)[k % len(colors or COLORS)]
-            label = labels[k] if labels is not None else (m.name or f"character {k}")
-            self.characters.append(_Character(m, color, label, pos, segs))
+        self.characters = [self._character(k, m, None if labels is None else labels[k]) for k, m in enumerate(items)]
         self.overlays: dict[str, _Overlay] = {}
         self._frame = int(np.clip(frame, 0, self.n_frames - 1))
         self._widget: Any = None
@@ -337,6 +336,7 @@ class MotionViewer:
         self.play: Any = None
         self._label: Any = None
         self._status: Any = None
+        self._quiet = False
         self._build_scene(window_size, ground)
         self._apply_frame(self._frame)
 
@@ -349,38 +349,16 @@ class MotionViewer:
             self.plotter = pv.Plotter(off_screen=True, notebook=interactive, window_size=list(window_size))
         self.plotter.theme.allow_empty_mesh = True  # overlays may be empty on some frames
         self.plotter.set_background("white")
-        all_pts = np.concatenate([c.positions.reshape(-1, 3) for c in self.characters])
-        lo, hi = all_pts.min(axis=0), all_pts.max(axis=0)
+        lo, hi = self._scene_bounds()
         self._bounds = (lo, hi)
+        self._ground: Any = None
+        self._ground_mesh: Any = None
+        self._ground_extent: tuple[float, float, float, float] | None = None
         if ground:
-            margin = 1.0
-            x0, x1 = np.floor(lo[0] - margin), np.ceil(hi[0] + margin)
-            z0, z1 = np.floor(lo[2] - margin), np.ceil(hi[2] + margin)
-            xs = np.linspace(x0, x1, int(round((x1 - x0) / 0.5)) + 1)  # 0.5 m squares
-            zs = np.linspace(z0, z1, int(round((z1 - z0) / 0.5)) + 1)
-            gx, gz = np.meshgrid(xs, zs, indexing="ij")
-            plane = pv.StructuredGrid(gx, np.full_like(gx, -0.001), gz)
-            self._ground = self.plotter.add_mesh(
-                plane, color="#f2f2f2", show_edges=True, edge_color="#bbbbbb", lighting=False, name="ground"
-            )
+            self._update_ground(lo, hi)
         for k, c in enumerate(self.characters):
-            n_bones, n_pts = len(c.segments), c.positions.shape[1]
-            p0 = c.positions[0]
-            pts, normals = _tube_points(p0[c.segments[:, 0]], p0[c.segments[:, 1]], self.bone_radius, self._sides)
-            c.bones = _mesh(pts, _tube_faces(n_bones, self._sides), normals)
-            c.joints = _mesh(self._spheres.points(p0), self._spheres.faces(n_pts), self._spheres.normals(n_pts))
-            a1 = self.plotter.add_mesh(c.bones, color=c.color, name=f"bones{k}", smooth_shading=False)
-            a2 = self.plotter.add_mesh(c.joints, color=c.color, name=f"joints{k}", smooth_shading=False)
-            c.actors = (a1, a2)
-            for actor in c.actors:
-                actor.prop.interpolation = "gouraud"
-        if len(self.characters) > 1:
-            self.plotter.add_legend(
-                [(c.label, c.color) for c in self.characters],
-                bcolor="white",
-                face="circle",
-                size=(0.18, 0.05 * len(self.characters)),
-            )
+            self._add_character_actors(k, c)
+        self._update_legend()
         floor = min(float(lo[1]), 0.0)
         if self.follow:
             root = self.characters[0].positions[self._frame_of(0, self._frame), 0]
@@ -388,6 +366,75 @@ class MotionViewer:
             self._camera_root = root.copy()
         else:
             self._fit_camera(lo, hi, floor, float(hi[1]))
+
+    def _clock(self, items: Sequence[Motion]) -> tuple[float, int]:
+        """The slider clock's rate and frame count for the characters ``items``."""
+        rate = self._fps_option if self._fps_option is not None else max(m.fps for m in items)
+        return rate, int(np.floor(max(m.duration for m in items) * rate + 1e-9)) + 1
+
+    def _character(self, k: int, m: Motion, label: str | None) -> _Character:
+        """Character ``k``: its joint and end-site positions and bone segments."""
+        sk = m.skeleton
+        pos = m.global_positions()
+        segs = np.stack([sk.parents[1:], np.arange(1, sk.n_joints)], axis=1)
+        if self.end_sites and sk.end_site_parents.size:
+            pos = np.concatenate([pos, m.end_site_positions()], axis=1)
+            ends = np.arange(sk.n_joints, sk.n_joints + len(sk.end_site_parents))
+            segs = np.concatenate([segs, np.stack([sk.end_site_parents, ends], axis=1)])
+        color = self._colors[k % len(self._colors)]
+        return _Character(m, color, label if label is not None else (m.name or f"character {k}"), pos, segs)
+
+    def _scene_bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        all_pts = np.concatenate([c.positions.reshape(-1, 3) for c in self.characters])
+        return all_pts.min(axis=0), all_pts.max(axis=0)
+
+    def _update_ground(self, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> None:
+        """Lay (or widen) the ground grid under the box ``[lo, hi]``; the actor is kept."""
+        import pyvista as pv
+
+        if self._ground_extent is not None:
+            x0, x1, z0, z1 = self._ground_extent
+            if x0 <= lo[0] and hi[0] <= x1 and z0 <= lo[2] and hi[2] <= z1:
+                return
+        margin = 1.0
+        x0, x1 = np.floor(lo[0] - margin), np.ceil(hi[0] + margin)
+        z0, z1 = np.floor(lo[2] - margin), np.ceil(hi[2] + margin)
+        xs = np.linspace(x0, x1, int(round((x1 - x0) / 0.5)) + 1)  # 0.5 m squares
+        zs = np.linspace(z0, z1, int(round((z1 - z0) / 0.5)) + 1)
+        gx, gz = np.meshgrid(xs, zs, indexing="ij")
+        plane = pv.StructuredGrid(gx, np.full_like(gx, -0.001), gz)
+        self._ground_extent = (float(x0), float(x1), float(z0), float(z1))
+        if self._ground_mesh is None:
+            self._ground_mesh = plane
+            self._ground = self.plotter.add_mesh(
+                plane, color="#f2f2f2", show_edges=True, edge_color="#bbbbbb", lighting=False, name="ground"
+            )
+        else:
+            self._ground_mesh.copy_from(plane)
+
+    def _add_character_actors(self, k: int, c: _Character) -> None:
+        """Make character ``k``'s two meshes (at its first frame) and their actors."""
+        n_bones, n_pts = len(c.segments), c.positions.shape[1]
+        p0 = c.positions[0]
+        pts, normals = _tube_points(p0[c.segments[:, 0]], p0[c.segments[:, 1]], self.bone_radius, self._sides)
+        c.bones = _mesh(pts, _tube_faces(n_bones, self._sides), normals)
+        c.joints = _mesh(self._spheres.points(p0), self._spheres.faces(n_pts), self._spheres.normals(n_pts))
+        a1 = self.plotter.add_mesh(c.bones, color=c.color, name=f"bones{k}", smooth_shading=False, reset_camera=False)
+        a2 = self.plotter.add_mesh(c.joints, color=c.color, name=f"joints{k}", smooth_shading=False, reset_camera=False)
+        c.actors = (a1, a2)
+        for actor in c.actors:
+            actor.prop.interpolation = "gouraud"
+
+    def _update_legend(self) -> None:
+        if len(self.characters) > 1:
+            self.plotter.add_legend(  # replaces any previous legend
+                [(c.label, c.color) for c in self.characters],
+                bcolor="white",
+                face="circle",
+                size=(0.18, 0.05 * len(self.characters)),
+            )
+        elif self.plotter.legend is not None:
+            self.plotter.remove_legend(render=False)
 
     def _fit_camera(self, lo: NDArray[np.float64], hi: NDArray[np.float64], floor: float, top: float) -> None:
         """Look from the front-right and above at the box [lo, hi] (x, z) x [floor, top] (y)."""
@@ -430,6 +477,102 @@ class MotionViewer:
     def set_time(self, t: float) -> None:
         """Show the frame nearest to time ``t`` seconds (clamped to the clip)."""
         self.set_frame(int(np.clip(round(float(t) * self.fps), 0, self.n_frames - 1)))
+
+    def set_motions(
+        self,
+        motions: Motion | Sequence[Motion],
+        *,
+        labels: Sequence[str] | None = None,
+        reset_camera: bool = False,
+    ) -> None:
+        """Show new motions in this viewer, keeping its plotter, widget and camera.
+
+        Meant for edits: after a path drag, pass the edited characters and the
+        3D view (static image or trame view) just updates.
+
+        Parameters
+        ----------
+        motions : Motion or sequence of Motion
+            The new characters.
+        labels : sequence of str, optional
+            New legend names (default: keep the current ones when the number
+            of characters is unchanged, else each motion's name).
+        reset_camera : bool
+            Fit the camera to the new scene (default: leave it where the user
+            put it).
+
+        Notes
+        -----
+        When the number of characters is unchanged and every character keeps
+        its counts of joints (with end sites) and bones, the existing meshes
+        receive the new points **in place**: no actor or mesh is re-created.
+        Otherwise the characters' actors are rebuilt inside the same plotter.
+        The clock (``fps`` unless it was given to the constructor,
+        ``n_frames``, the slider's and play button's range) follows the new
+        motions; the current time is kept, clamped to the new last frame.
+        The ground grid is widened if the characters walk off it; overlays
+        are left as they are.
+        """
+        items = _as_motions(motions)
+        if labels is not None and len(labels) != len(items):
+            raise ValueError(f"Expected {len(items)} `labels`, got {len(labels)}")
+        same_count = len(items) == len(self.characters)
+        if labels is None and same_count:
+            labels = [c.label for c in self.characters]
+        new = [self._character(k, m, None if labels is None else labels[k]) for k, m in enumerate(items)]
+        in_place = same_count and all(
+            a.positions.shape[1] == b.positions.shape[1] and len(a.segments) == len(b.segments)
+            for a, b in zip(self.characters, new, strict=True)
+        )
+        if in_place:
+            for old, c in zip(self.characters, new, strict=True):
+                c.bones, c.joints, c.actors = old.bones, old.joints, old.actors  # same meshes, new points
+        else:
+            for k in range(len(self.characters)):
+                for name in (f"bones{k}", f"joints{k}"):
+                    self.plotter.remove_actor(name, render=False)
+            for k, c in enumerate(new):
+                self._add_character_actors(k, c)
+        relabel = [c.label for c in new] != [c.label for c in self.characters]
+        self.characters = new
+        if relabel or not in_place:
+            self._update_legend()
+
+        time = self.time
+        self.fps, self.n_frames = self._clock(items)
+        frame = int(np.clip(round(time * self.fps), 0, self.n_frames - 1))
+        lo, hi = self._scene_bounds()
+        self._bounds = (lo, hi)
+        if self._ground_mesh is not None:
+            self._update_ground(lo, hi)
+        if reset_camera:
+            floor = min(float(lo[1]), 0.0)
+            if self.follow:
+                root = self.characters[0].positions[self.characters[0].frame_at(frame / self.fps), 0]
+                self._fit_camera(root - [1.0, 0.0, 1.0], root + [1.0, 0.0, 1.0], floor, float(hi[1]))
+                self._camera_root = root.copy()
+            else:
+                self._fit_camera(lo, hi, floor, float(hi[1]))
+        if self.slider is not None:
+            self._sync_controls(frame)
+        self._apply_frame(frame)
+
+    def _sync_controls(self, frame: int) -> None:
+        """Fit the slider and play button to the clock without a render per change."""
+        step = max(1, int(round(self.fps / 30.0)))
+        self._quiet = True
+        try:
+            for control in (self.slider, self.play):
+                if frame > control.max:  # keep value <= max at every step
+                    control.max = self.n_frames - 1
+                    control.value = frame
+                else:
+                    control.value = frame
+                    control.max = self.n_frames - 1
+            self.play.step = step
+            self.play.interval = int(round(1000 * step / self.fps))
+        finally:
+            self._quiet = False
 
     def _apply_frame(self, frame: int) -> None:
         self._frame = frame
@@ -659,6 +802,8 @@ class MotionViewer:
         return box
 
     def _on_slider(self, change: dict[str, Any]) -> None:
+        if self._quiet:  # set_motions moves the controls, then draws once
+            return
         try:
             self._apply_frame(int(change["new"]))
             if self._status.value:

@@ -208,6 +208,25 @@ def test_step_function_and_session_agree_with_touch_up(walk30):
         s.set_adjustment(0, s2=("no_such_joint",))
 
 
+def test_ik_footplants_put_planted_ankles_back(walk30):
+    from mocaplab.physics.touchup import _ik_footplants
+
+    c = foot_contacts(walk30)
+    bent = bend(walk30, 2.0)
+    moved = touch_up(bent, contacts=c, schedule=GROUND_SCHEDULE[0], iterations=1, footplants=None).final
+    fixed = _ik_footplants(moved, c, bent)
+    sk = walk30.skeleton
+    for ankle, toe in (("LeftFoot", "LeftToeBase"), ("RightFoot", "RightToeBase")):
+        planted = c.of(ankle) | c.of(toe)
+        inner = planted & np.roll(planted, 8) & np.roll(planted, -8)  # well inside a plant (weight 1)
+        j = sk.index(ankle)
+        before = np.linalg.norm(moved.global_positions()[inner, j] - bent.global_positions()[inner, j], axis=1)
+        after = np.linalg.norm(fixed.global_positions()[inner, j] - bent.global_positions()[inner, j], axis=1)
+        assert before.max() > 1e-3 and after.max() < 1e-6
+        same = np.abs(np.sum(fixed.global_rotations()[inner, j] * bent.global_rotations()[inner, j], axis=-1))
+        assert np.allclose(same, 1.0, atol=1e-9)
+
+
 def test_options_are_validated(walk30):
     with pytest.raises(ValueError, match="iterations"):
         touch_up(walk30, iterations=-1)

@@ -748,18 +748,20 @@ def _ik_footplants(motion: Motion, contacts: Contacts, reference: Motion) -> Mot
 def _ik_posed(posed: _Posed, contacts: Contacts, reference: Motion) -> _Posed:
     """:func:`_ik_footplants` on a motion with known kinematics, updating them for the legs only.
 
-    The legs are independent chains, so one forward-kinematics pass serves
-    every foot, and only the legs' transforms change.
+    All legs are solved in one batched call of the analytic two-bone kernel
+    (:func:`mocaplab.ik.two_bone_deltas`, the kernel of
+    :func:`~mocaplab.ik.two_bone_ik`, with the same defaults: the knee keeps
+    its swivel plane, the ankle gets the wanted global orientation), and
+    only the legs' transforms are recomputed.
     """
-    from ..ik import limb_joints, two_bone_ik
+    from ..ik import limb_joints, two_bone_deltas
 
     motion, grot, gpos = posed
     mask = np.asarray(contacts.mask, dtype=bool)
     ramp = max(1, int(round(FOOT_BLEND * motion.fps)))
     sk = motion.skeleton
     ref_pos, ref_rot = reference.global_positions(), reference.global_rotations()
-    rot = motion.rotations
-    uppers = []
+    limbs, targets, wants = [], [], []
     for ankle, cols in _feet(sk, contacts):
         planted = mask[:, cols].any(axis=1)
         if not planted.any():
@@ -767,14 +769,23 @@ def _ik_posed(posed: _Posed, contacts: Contacts, reference: Motion) -> _Posed:
         dist, (nearest,) = distance_transform_edt(~planted, return_indices=True)
         w = np.where(dist <= ramp, 0.5 * (1.0 + np.cos(np.pi * dist / (ramp + 1))), 0.0)
         err = (ref_pos[:, ankle] - gpos[:, ankle])[nearest]
-        target = gpos[:, ankle] + w[:, None] * err
-        want = quat.slerp(grot[:, ankle], ref_rot[nearest, ankle], w)
-        rot = two_bone_ik(rot, motion.root_positions, sk, ankle, target, end_rotation=want, fk=(grot, gpos))
-        uppers.append(limb_joints(sk, ankle)[0])
-    if not uppers:
+        targets.append(gpos[:, ankle] + w[:, None] * err)
+        wants.append(quat.slerp(grot[:, ankle], ref_rot[nearest, ankle], w))
+        limbs.append(limb_joints(sk, ankle))
+    if not limbs:
         return posed
+    up, mid, end = (np.array(j) for j in zip(*limbs, strict=True))
+    q_up, q_mid = two_bone_deltas(gpos[:, up], gpos[:, mid], gpos[:, end], np.stack(targets, axis=1))
+    rot = np.array(motion.rotations, copy=True)
+    parents = sk.parents
+    g_pu, g_pm, g_pe = grot[:, parents[up]], grot[:, parents[mid]], grot[:, parents[end]]
+    # a world rotation q on joint j is the local L' = inv(G_p) q G_p L
+    rot[:, up] = quat.mul(quat.inv(g_pu), quat.mul(q_up, quat.mul(g_pu, rot[:, up])))
+    rot[:, mid] = quat.mul(quat.inv(g_pm), quat.mul(q_mid, quat.mul(g_pm, rot[:, mid])))
+    # the ankle's parent turned with the limb: new global q_up q_mid G_pe
+    rot[:, end] = quat.mul(quat.inv(quat.mul(q_up, quat.mul(q_mid, g_pe))), np.stack(wants, axis=1))
     new = motion.replace(rotations=rot)
-    return _Posed(new, *_refresh_fk(new, grot, gpos, uppers))
+    return _Posed(new, *_refresh_fk(new, grot, gpos, sorted(set(up.tolist()))))
 
 
 def _refresh_fk(motion: Motion, grot: Array, gpos: Array, tops: Sequence[int]) -> tuple[Array, Array]:
@@ -817,7 +828,28 @@ def _footplant_fn(
     if footplants == "refine":
         return lambda p: _posed(refine(p.motion, contacts=contacts, reference=reference))
     goals = foot_goals(reference, contacts, reference=reference, blend=PLANT_BLEND)
-    return lambda p: _posed(solve_goals(p.motion, goals, adjust_root=False))
+    legs = _leg_tops(reference.skeleton, contacts)
+
+    def plant(p: _Posed) -> _Posed:
+        new = solve_goals(p.motion, goals, adjust_root=False)
+        # the IK layer turns leg joints only: recompute the legs' transforms
+        other = np.ones(new.n_joints, dtype=bool)
+        for t in legs:
+            other &= ~_subtree(new.skeleton, t)
+        if np.array_equal(new.rotations[:, other], p.motion.rotations[:, other]) and np.array_equal(
+            new.root_positions, p.motion.root_positions
+        ):
+            return _Posed(new, *_refresh_fk(new, p.grot, p.gpos, legs))
+        return _posed(new)
+
+    return plant
+
+
+def _leg_tops(skeleton: Skeleton, contacts: Contacts) -> list[int]:
+    """Upper joints (hips) of the limbs that end at the contact joints' ankles."""
+    from ..ik import limb_joints
+
+    return sorted({limb_joints(skeleton, ankle)[0] for ankle, _ in _feet(skeleton, contacts)})
 
 
 # ======================================================================

@@ -1,0 +1,83 @@
+"""Staggered poses (Coleman et al. 2008): extraction and re-evaluation speed.
+
+Targets (issue 7): extracting CMU 49_03 (1504 frames, 31 joints) in under
+2 s, and a dense re-evaluation after an edit in under 50 ms so sliders feel
+live.  Prints medians of repeats (wall clock and process CPU time: the
+machine may be shared) and the ratio to each target.
+
+Run: ``python benchmarks/bench_staggered.py`` (needs ``MOCAPLAB_DATA_DIR``).
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import time
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from mocaplab import data, quat
+from mocaplab.staggered import StaggeredTimingWarning, extract
+
+EXTRACT_TARGET = 2.0
+EVAL_TARGET = 0.050
+
+
+def timed(fn: Callable[[], object], repeats: int) -> tuple[float, float, object]:
+    walls, cpus = [], []
+    out = None
+    for _ in range(repeats):
+        w, c = time.perf_counter(), time.process_time()
+        out = fn()
+        walls.append(time.perf_counter() - w)
+        cpus.append(time.process_time() - c)
+    return statistics.median(walls), statistics.median(cpus), out
+
+
+def report(label: str, wall: float, cpu: float, target: float) -> None:
+    print(f"{label:58s} {wall * 1e3:9.1f} ms wall {cpu * 1e3:9.1f} ms cpu   {wall / target:5.2f} x target")
+
+
+def main() -> None:
+    if "MOCAPLAB_DATA_DIR" not in os.environ:
+        default = Path(__file__).resolve().parents[2] / "shared" / "mocap"
+        if default.is_dir():
+            os.environ["MOCAPLAB_DATA_DIR"] = str(default)
+    warnings.simplefilter("ignore", StaggeredTimingWarning)
+    clip = data.cmu("49_03")
+    print(f"clip 49_03: {clip.n_frames} frames, {clip.n_joints} joints, {clip.fps:g} fps")
+    extract(clip, optimize=False)  # warm caches (imports, FK)
+    print(f"\nextraction (target {EXTRACT_TARGET:.1f} s)")
+    wall, cpu, sm = timed(lambda: extract(clip), 3)
+    report("extract (default: tangent start + Nelder-Mead polish)", wall, cpu, EXTRACT_TARGET)
+    wall0, cpu0, _ = timed(lambda: extract(clip, optimize=False), 3)
+    report("extract, tangent start only (optimize=False)", wall0, cpu0, EXTRACT_TARGET)
+    out = sm.evaluate()  # type: ignore[union-attr]
+    err_r = float(quat.angle(quat.mul(quat.inv(out.rotations), clip.rotations)).max())
+    err_p = float(np.abs(out.root_positions - clip.root_positions).max())
+    print(f"  {sm}\n  reconstruction: max {err_r:.1e} rad, {err_p:.1e} m")
+
+    print(f"\ndense re-evaluation after an edit (target {EVAL_TARGET * 1e3:.0f} ms)")
+    sm.evaluate()  # type: ignore[union-attr]
+    cases = {
+        "succession s=0.01, l=2 on the whole body + evaluate": lambda: sm.succession(0.01, 2.0).evaluate(),
+        "succession s=0.03, l=2 below LeftArm + evaluate": lambda: sm.succession(0.03, 2.0, joint="LeftArm").evaluate(),
+        "random tau=0.03 s on every joint + evaluate": lambda: sm.randomize(0.03, seed=1).evaluate(),
+        "exaggerate arms of one pose (w_r=0.5) + evaluate": lambda: sm.exaggerate(
+            0.5, poses=[10], joints=["LeftArm", "RightArm"]
+        ).evaluate(),
+        "exaggerate arms of every pose (w_r=0.5) + evaluate": lambda: sm.exaggerate(
+            0.5, joints=["LeftArm", "LeftForeArm", "RightArm", "RightForeArm"]
+        ).evaluate(),
+        "non-staggered playback (refinements zeroed), evaluate": lambda: sm.evaluate(staggered=False),
+    }
+    for label, fn in cases.items():
+        wall, cpu, _ = timed(fn, 7)
+        report(label, wall, cpu, EVAL_TARGET)
+
+
+if __name__ == "__main__":
+    main()

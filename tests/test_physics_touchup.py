@@ -206,6 +206,10 @@ def test_step_function_and_session_agree_with_touch_up(walk30):
     assert s.schedule[2].rho == 0.6 and s.index == 2
     with pytest.raises(KeyError):
         s.set_adjustment(0, s2=("no_such_joint",))
+    s.finish_pass()
+    assert s.index == 3
+    s.finish_pass()
+    assert s.index == 6 and s.current.iteration == 2
 
 
 def test_ik_footplants_put_planted_ankles_back(walk30):

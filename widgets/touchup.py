@@ -282,9 +282,7 @@ class TouchUpStepper:
 
     def forward_iteration(self) -> None:
         """Run the rest of the schedule's current pass, or a whole pass."""
-        n = len(self.session.schedule)
-        k = self.session.current.index % n
-        self.session.run(n - k if k else n)
+        self.session.finish_pass()
         self._refresh()
 
     def _edit(self, row: _Row) -> None:

@@ -1147,6 +1147,12 @@ class TouchUpSession:
             self.forward()
         return self.current
 
+    def finish_pass(self) -> TouchUpState:
+        """Go forward to the end of the current pass over the schedule (a whole pass at its start)."""
+        n = len(self.schedule)
+        k = self.current.index % n
+        return self.run(n - k if k else n)
+
     def set_schedule(self, schedule: Sequence[Adjustment]) -> None:
         """Replace the schedule from the current state on."""
         self._states = self._states[: self._index + 1]

@@ -30,13 +30,14 @@ Applying a transformation (:func:`apply_transformation`) rebuilds the motion
 from its node sequence: each run of consecutive graph frames is placed on
 the ground by the 2D rigid motion (heading + translation) that puts the
 graph frame before the run (``s - 1``, similar to the frame before the seam)
-on the pose before the seam, so the root path continues smoothly.  Each
-seam is then blended (displacement-map style): the jump ``d`` between the
-frame after the seam and the natural successor of the frame before it
-(joint rotations as rotation vectors, root height, root ground position) is
-spread as ``+d w / 2`` before and ``-d w / 2`` after the seam, ``w`` a raised
-cosine over ``blend`` seconds on each side (rotations by slerp-style
-``exp(c d) q``), so there is no pop.  The motion path and the time track
+on the pose before the seam, so the root path and heading continue without
+a jump.  Each seam is then blended (displacement-map style): the jump ``d``
+between the frame after the seam and the natural successor of the frame
+before it (every joint rotation, root included, as a rotation vector, and
+the root height) is spread as ``+d w / 2`` before and ``-d w / 2`` after the
+seam, ``w`` a raised cosine over ``blend`` seconds on each side (rotations
+by slerp-style ``exp(c d) q``), so there is no pop.  (A frame that ends its
+clip has no successor to compare with; its seam is not blended.)  The motion path and the time track
 (uniform, one frame step per frame) follow from the new motion; constraints
 follow their frames (see :class:`DiscreteSession`).
 
@@ -101,22 +102,22 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 import weakref
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, Literal
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from .. import quat
 from ..motion import Motion
-from .constraints import SPATIAL, TEMPORAL, EndEffectorConstraint, Relative, Sync
+from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint, Relative, Sync
+from .energy import deformation_energy
 from .graph import MotionGraph, SimilarityWeights, build_graph
 from .laplacian import Layout, spatial_rows
-from .paths import MotionPath, laplacian_coordinates
+from .paths import MotionPath
 from .timewarp import temporal_rows
 
 __all__ = [
@@ -173,6 +174,9 @@ class Transformation:
         The energy without it, at the same update (NaN if not evaluated).
     update : int
         Index of the constraint update at which it was applied (-1 if not).
+    full_energy, full_baseline : float
+        The same two energies from the full-resolution solve that verified
+        it (NaN if not verified; see ``DiscreteOptions.verify``).
     """
 
     character: int
@@ -184,6 +188,8 @@ class Transformation:
     energy: float = math.nan
     baseline: float = math.nan
     update: int = -1
+    full_energy: float = math.nan
+    full_baseline: float = math.nan
 
     @property
     def removed_duration(self) -> float:
@@ -373,6 +379,14 @@ class DiscreteOptions:
         A transformation is applied only if it lowers the energy by more than this.
     max_initial : int
         Greedy steps on the first solve (``edit``); later updates apply at most one.
+    verify : int
+        The best candidates (by subsampled energy) are applied and solved at
+        full resolution one by one, up to this many; the first whose
+        full-resolution equation-10 energy is lower than the current one by
+        more than ``min_gain`` is kept.  The 1/25 subsampling can misjudge
+        strongly curved paths; this guards against applying a transformation
+        that the full solve then undoes.  0: trust the subsampled energy
+        (the paper's procedure).
     """
 
     graphs: Mapping[int, MotionGraph] | None = None
@@ -383,10 +397,11 @@ class DiscreteOptions:
     ct: float = 1.0
     subsample: int = 25
     blend: float = 0.2
-    min_gain: float = 0.02
+    min_gain: float = 0.1
     max_initial: int = 8
+    verify: int = 3
     threshold: float = 0.1
-    window: float = 0.25
+    window: float = 0.5
     min_gap: float = 0.3
     weights: SimilarityWeights | None = None
 
@@ -442,11 +457,15 @@ class _GraphData:
         self.last[g.offsets[1:] - 1] = True
         step = np.linalg.norm(np.diff(self.pos, axis=0), axis=1)
         step[self.last[:-1]] = 0.0
-        self.arc = np.concatenate([[0.0], np.cumsum(step)])  # along each clip (reset ignored: differences within a clip)
+        # arc length along the clips (only differences within one clip are used)
+        self.arc = np.concatenate([[0.0], np.cumsum(step)])
         src, dst, cost = g.transitions()
         n = g.n_frames
         self.T = sp.csr_matrix((cost + 1e-300, (src, dst)), shape=(n, n))
         self.Tt = self.T.T.tocsr()
+        self.costs = {(int(a), int(b)): float(c) for a, b, c in zip(src, dst, cost, strict=True)}
+        self.n_out = np.diff(self.T.indptr)
+        self.n_in = np.diff(self.Tt.indptr)
 
     @classmethod
     def of(cls, g: MotionGraph) -> _GraphData:
@@ -473,8 +492,7 @@ class _GraphData:
         """Cost of going from node ``a`` to node ``b`` (0 natural, None if not allowed)."""
         if self.natural(a, b):
             return 0.0
-        v = self.T[a, b]
-        return float(v) if v != 0 else None
+        return self.costs.get((a, b))
 
 
 def _runs(nodes: IntArray, gd: _GraphData) -> IntArray:
@@ -540,17 +558,16 @@ def _assemble(
         w = _blend_weights(n)
         dr = np.zeros((F,) + rot.shape[1:-1] + (3,))
         dy = np.zeros(F)
-        dp = np.zeros((F, 2))
         for a in starts:
             prev = int(nodes[a - 1])
-            exp_node = prev + 1 if not gd.last[prev] else prev
+            if gd.last[prev]:
+                continue  # no natural successor to compare with: the similar frame is the best guess
+            exp_node = prev + 1
             act = int(nodes[a])
             d_local = quat.log(quat.mul(gd.rot[act], quat.inv(gd.rot[exp_node])))
             exp_root = quat.mul(quat.from_yaw(theta[a - 1]), gd.rot[exp_node, 0])
             d_local[0] = quat.log(quat.mul(rot[a, 0], quat.inv(exp_root)))
             d_h = gd.root[act, 1] - gd.root[exp_node, 1]
-            exp_pos = _rot2(theta[a - 1], gd.pos[exp_node]) + trans[a - 1]
-            d_p = root[a, [0, 2]] - exp_pos
             before = a - 1 - np.arange(n)
             after = a + np.arange(n)
             okb = before >= 0
@@ -561,12 +578,9 @@ def _assemble(
             dr[after[oka]] += ca[:, None, None] * d_local
             dy[before[okb]] += cb * d_h
             dy[after[oka]] += ca * d_h
-            dp[before[okb]] += cb[:, None] * d_p
-            dp[after[oka]] += ca[:, None] * d_p
         touched = np.flatnonzero(np.any(dr != 0, axis=(1, 2)) | (dy != 0))
         rot[touched] = quat.normalize(quat.mul(quat.exp(dr[touched]), rot[touched]))
         root[:, 1] += dy
-        root[:, [0, 2]] += dp
     return Motion(skeleton, rot, root, fps, translations=tr, name=name)
 
 
@@ -724,8 +738,8 @@ def enumerate_transformations(
     if F > 1:
         seam_after[:-1] = (np.diff(nodes) != 1) | gd.last[nodes[:-1]]
     # outgoing seams x -> node n (x = a - 1), incoming seams node u -> y (y = b)
-    has_out = np.array([gd.T.indptr[n + 1] > gd.T.indptr[n] for n in nodes]) if F else np.zeros(0, bool)
-    has_in = np.array([gd.Tt.indptr[n + 1] > gd.Tt.indptr[n] for n in nodes]) if F else np.zeros(0, bool)
+    has_out = gd.n_out[nodes] > 0
+    has_in = gd.n_in[nodes] > 0
 
     # ---- deletions: seam x -> y with src[y] a successor of src[x]
     repeated = np.array([n for n, g in where.items() if len(g) > 1], dtype=np.int64)
@@ -761,7 +775,7 @@ def enumerate_transformations(
         for s in S:
             for u in U:
                 L = u - s + 1
-                if not lmin <= L <= lmax or gd.clip[s] != gd.clip[u] or gd.last[s : u].any():
+                if not lmin <= L <= lmax or gd.clip[s] != gd.clip[u] or gd.last[s:u].any():
                     continue
                 c1 = gd.seam_cost(prev, s)
                 c2 = gd.seam_cost(u, nxt)
@@ -840,8 +854,12 @@ def _protected(c: Any) -> dict[int, set[int]]:
         return res
     frames = getattr(c, "frames", None)
     if frames is None:
-        for k, f in c.frame_refs():
-            put(k, f)
+        put(c.character, c.frame)
+        if hasattr(c, "end_frame"):
+            put(c.character, c.end_frame)
+        other = getattr(c, "other", None)
+        if other is not None:
+            put(other, c.other_frame)
         return res
     put(c.character, frames[0])
     put(c.character, frames[1])
@@ -880,13 +898,26 @@ def pruning_violations(
     time ``t`` is considered; ``times``/``positions`` are its edited ones
     (for locality zones and regions).
     """
+    return _violations(
+        t, protected_frames(constraints, t.character), min_duration, max_duration, locality, times, positions
+    )
+
+
+def _violations(
+    t: Transformation,
+    prot: set[int],
+    min_duration: float,
+    max_duration: float,
+    locality: Locality | None,
+    times: Array | None,
+    positions: Array | None,
+) -> tuple[str, ...]:
     out = []
     eps = 1e-9
     for n in (t.removed[1] - t.removed[0], t.inserted[1] - t.inserted[0]):
         if n and not (min_duration - eps <= n / t.fps <= max_duration + eps):
             out.append("duration")
             break
-    prot = protected_frames(constraints, t.character)
     a, b = t.removed
     if any(a <= f < b for f in prot):
         out.append("constraints")
@@ -934,15 +965,19 @@ def prune(
     frame times and ground positions.
     """
     kept = []
+    prot: dict[int, set[int]] = {}
+    for c in constraints:
+        for k, fs in _protected(c).items():
+            prot.setdefault(k, set()).update(fs)
     for t in candidates:
-        v = pruning_violations(
+        v = _violations(
             t,
-            constraints=constraints,
-            min_duration=min_duration,
-            max_duration=max_duration,
-            locality=locality,
-            times=None if times is None else times.get(t.character),
-            positions=None if positions is None else positions.get(t.character),
+            prot.get(t.character, set()),
+            min_duration,
+            max_duration,
+            locality,
+            None if times is None else times.get(t.character),
+            None if positions is None else positions.get(t.character),
         )
         if not v:
             kept.append(t)
@@ -961,8 +996,9 @@ def prune(
 # subsampled evaluation (Algorithm 1, lines 4-8)
 # ======================================================================
 _PENALTY = 1e4  # weight of hard constraints and rigid rows in the evaluation
-_EPS = 1e-7  # regulariser of the free modes
-_DENSE = 600  # dense solves up to this many unknowns
+_EPS = 1e-8  # regulariser of the free modes
+_DENSE = 64  # per-character blocks up to this many unknowns are dense (small LAPACK calls)
+_BAND = {2: 5, 1: 1}  # bandwidth (in unknowns) of the path rows for 2D (space) and 1D (time)
 
 
 class _Tangents:
@@ -982,51 +1018,56 @@ class _Tangents:
 
 @dataclasses.dataclass
 class _Rows:
-    """Constraint rows in (character, frame) form: entry arrays and per-row data."""
+    """Constraint rows as fixed-width entry arrays ``(R, W)`` (padding has value 0)."""
 
-    row: IntArray
     char: IntArray
     frame: IntArray
     coord: IntArray
-    val: Array
-    rhs: Array
-    w: Array  # sqrt of the weight (penalty for hard rows)
-    hard: NDArray[np.bool_]
-    chars: list[frozenset[int]]
+    val: Array  # weighted by sqrt(weight) (or sqrt(penalty) for hard rows)
+    rhs: Array  # (R,), weighted too
+    soft: NDArray[np.bool_]  # (R,)
+    intra: NDArray[np.bool_]  # (R,) every entry on one character
+
+    @property
+    def n(self) -> int:
+        return len(self.rhs)
 
 
 def _compile(
     constraints: Sequence[Any], kinds: tuple[type, ...], make: Any, layout: Layout, dim: int, penalty: float
 ) -> _Rows:
     off = layout.offsets
-    row, col, val, rhs, w, hard, chars = [], [], [], [], [], [], []
-    r = 0
+    cols_l: list[IntArray] = []
+    vals_l: list[Array] = []
+    rhs, soft = [], []
     for c in constraints:
         if not isinstance(c, kinds):
             continue
         rows = make(c)
+        w = math.sqrt(penalty) if c.hard else math.sqrt(c.weight)
         for cc, vv, bb in zip(rows.cols, rows.vals, rows.rhs, strict=True):
-            row.append(np.full(len(cc), r))
-            col.append(np.asarray(cc, dtype=np.int64))
-            val.append(np.asarray(vv, dtype=float))
-            rhs.append(float(bb))
-            w.append(math.sqrt(penalty) if c.hard else math.sqrt(c.weight))
-            hard.append(bool(c.hard))
-            chars.append(frozenset(c.characters))
-            r += 1
-    cols = np.concatenate(col) if col else np.zeros(0, np.int64)
+            cols_l.append(np.asarray(cc, dtype=np.int64))
+            vals_l.append(np.asarray(vv, dtype=float) * w)
+            rhs.append(float(bb) * w)
+            soft.append(not c.hard)
+    R = len(rhs)
+    W = max([len(c) for c in cols_l], default=1)
+    cols = np.zeros((R, W), dtype=np.int64)
+    vals = np.zeros((R, W))
+    for r, (cc, vv) in enumerate(zip(cols_l, vals_l, strict=True)):
+        cols[r, : len(cc)] = cc
+        cols[r, len(cc) :] = cc[0]
+        vals[r, : len(vv)] = vv
     g = cols // dim
-    ch = np.searchsorted(off, g, side="right") - 1
+    ch = (np.searchsorted(off, g, side="right") - 1).astype(np.int64)
     return _Rows(
-        np.concatenate(row).astype(np.int64) if row else np.zeros(0, np.int64),
-        ch.astype(np.int64),
+        ch,
         (g - off[ch]).astype(np.int64),
         (cols % dim).astype(np.int64),
-        np.concatenate(val) if val else np.zeros(0),
+        vals,
         np.asarray(rhs, dtype=float),
-        np.asarray(w, dtype=float),
-        np.asarray(hard, dtype=bool),
-        chars,
+        np.asarray(soft, dtype=bool),
+        np.all(ch == ch[:, :1], axis=1) if R else np.zeros(0, bool),
     )
 
 
@@ -1042,12 +1083,6 @@ class _Part:
     n_frames: int  # full frame count
     dt: float
     start: float
-    lookup: IntArray  # full frame -> kept index (nearest kept for others), (n_frames,)
-
-
-def _lookup(frames: IntArray, n: int) -> IntArray:
-    idx = np.searchsorted(frames, np.arange(n))
-    return np.clip(idx, 0, len(frames) - 1).astype(np.int64)
 
 
 def _rigid(frames: IntArray, segments: Sequence[tuple[int, int]]) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
@@ -1060,47 +1095,295 @@ def _rigid(frames: IntArray, segments: Sequence[tuple[int, int]]) -> tuple[NDArr
     return pt, st
 
 
-def _make_part(
-    frames: IntArray,
-    positions: Array,
-    cumarc: Array,
-    segments: Sequence[tuple[int, int]],
-    n_frames: int,
-    dt: float,
-    start: float,
-) -> _Part:
-    pt, st = _rigid(frames, segments)
-    return _Part(frames, positions, np.diff(cumarc), pt, st, n_frames, dt, start, _lookup(frames, n_frames))
+def _bsearch(frames: IntArray, nvalid: IntArray, queries: IntArray) -> IntArray:
+    """Per-row ``searchsorted(frames[i], queries[i])`` clipped to the valid entries; shapes (c, n), (c,), (c, ...)."""
+    c, n = frames.shape
+    big = int(frames.max(initial=0)) + 2
+    shape = (c,) + (1,) * (queries.ndim - 1)
+    off = np.arange(c, dtype=np.int64) * big
+    idx = np.searchsorted((frames + off[:, None]).ravel(), queries + off.reshape(shape))
+    idx = idx - (np.arange(c, dtype=np.int64) * n).reshape(shape)
+    return np.clip(idx, 0, (nvalid - 1).reshape(shape))
 
 
-def _lsq(blocks: list[tuple[IntArray, IntArray, Array]], rhs: Array, n: int, x0: Array) -> tuple[Array, Any]:
-    """Least squares ``min |M x - rhs|^2 + eps |x - x0|^2``; returns x and M.
+def _gather(x: Array, cols: IntArray) -> Array:
+    """``x[i, cols[i]]`` for a batch: x (c, n), cols (c or 1, ...)."""
+    c = x.shape[0]
+    flat = np.broadcast_to(cols.reshape(cols.shape[0], -1), (c, int(np.prod(cols.shape[1:]))))
+    return np.take_along_axis(x, flat, axis=1).reshape((c,) + cols.shape[1:])
 
-    Subsampled systems are small: dense normal equations (Cholesky) up to a
-    few hundred unknowns, a sparse LU beyond.
+
+def _normal(c: int, n: int, cols: IntArray, vals: Array) -> Array:
+    """Batched normal matrices ``sum_rows r r^T``: cols/vals (c, R, W) -> (c, n, n)."""
+    ci = np.arange(c, dtype=np.int64)[:, None, None, None]
+    c1 = cols[:, :, :, None]
+    c2 = cols[:, :, None, :]
+    v = vals[:, :, :, None] * vals[:, :, None, :]
+    idx = (ci * n + c1) * n + c2
+    return np.bincount(idx.ravel(), v.ravel(), minlength=c * n * n).reshape(c, n, n)
+
+
+def _rhs(n: int, cols: IntArray, vals: Array, rhs: Array) -> Array:
+    """Batched ``M^T rhs``: cols/vals (c, R, W), rhs (c, R) -> (c, n)."""
+    c = cols.shape[0]
+    ci = np.arange(c, dtype=np.int64)[:, None, None]
+    return np.bincount((ci * n + cols).ravel(), (vals * rhs[:, :, None]).ravel(), minlength=c * n).reshape(c, n)
+
+
+def _res(cols: IntArray, vals: Array, rhs: Array, x: Array) -> Array:
+    """Batched residuals ``M x - rhs``: (c, R)."""
+    return np.sum(vals * _gather(x, cols), axis=-1) - rhs
+
+
+def _pad(*groups: tuple[IntArray, Array]) -> tuple[IntArray, Array]:
+    """Concatenate row groups (c, R_g, W_g) along rows, padding widths (value 0)."""
+    W = max(g[0].shape[2] for g in groups)
+    cs, vs = [], []
+    for cc, vv in groups:
+        c, R, w = cc.shape
+        if w < W:
+            cc = np.concatenate([cc, np.repeat(cc[:, :, :1], W - w, axis=2)], axis=2)
+            vv = np.concatenate([vv, np.zeros((vv.shape[0], R, W - w))], axis=2)
+        cs.append(cc)
+        vs.append(np.broadcast_to(vv, (c, R, W)))
+    return np.concatenate(cs, axis=1), np.concatenate(vs, axis=1)
+
+
+class _Batch:
+    """One character's three subsampled systems (shape, scale, time) for a batch of paths.
+
+    ``parts`` (candidates, or the untransformed path) are padded to a common
+    number of kept frames; padded unknowns are decoupled (identity rows).
+    Each system is factorised per path; the constraint rows linking the
+    character to others are kept apart (``U``) for the Woodbury identity.
     """
-    r = np.concatenate([b[0] for b in blocks])
-    c = np.concatenate([b[1] for b in blocks])
-    v = np.concatenate([b[2] for b in blocks])
-    m = len(rhs)
-    if n <= _DENSE:
-        M = np.bincount(r * n + c, weights=v, minlength=m * n).reshape(m, n)
-        N = M.T @ M
-        N.flat[:: n + 1] += _EPS
-        try:
-            x = sla.cho_solve(sla.cho_factor(N, check_finite=False), M.T @ rhs + _EPS * x0, check_finite=False)
-        except np.linalg.LinAlgError:  # pragma: no cover - numerically indefinite
-            x = np.linalg.lstsq(N, M.T @ rhs + _EPS * x0, rcond=None)[0]
-        return x, M
-    Ms = sp.csr_matrix((v, (r, c)), shape=(m, n))
-    MT = Ms.T.tocsr()
-    Ns = (MT @ Ms + _EPS * sp.identity(n, format="csr")).tocsc()
-    x = spla.splu(Ns, permc_spec="MMD_AT_PLUS_A").solve(MT @ rhs + _EPS * x0)
-    return x, Ms
+
+    def __init__(
+        self,
+        parts: Sequence[_Part],
+        k: int,
+        fmaps: Sequence[IntArray | None],
+        space: _Rows,
+        time: _Rows,
+        cross_s: IntArray,
+        cross_t: IntArray,
+        pen: float,
+    ) -> None:
+        c = len(parts)
+        self.c = c
+        nv = np.array([len(p.frames) for p in parts], dtype=np.int64)
+        n = int(nv.max())
+        self.n, self.nv = n, nv
+        idx = np.arange(n)
+        valid = idx[None, :] < nv[:, None]
+        self.valid = valid
+        fr = np.full((c, n), 0, dtype=np.int64)
+        X = np.zeros((c, n, 2))
+        arc = np.zeros((c, max(n - 1, 0)))
+        rpt = np.zeros((c, n), bool)
+        rst = np.zeros((c, max(n - 1, 0)), bool)
+        big = max(int(p.frames[-1]) for p in parts) + 1
+        for i, p in enumerate(parts):
+            m = nv[i]
+            fr[i, :m] = p.frames
+            fr[i, m:] = big
+            X[i, :m] = p.X
+            X[i, m:] = p.X[-1]
+            arc[i, : m - 1] = p.arc
+            rpt[i, :m] = p.rigid_pt
+            rst[i, : m - 1] = p.rigid_step
+        self.frames, self.X, self.arc = fr, X, arc
+        self.n_frames = np.array([p.n_frames for p in parts], dtype=float)
+        self.dt = parts[0].dt
+        self.start = parts[0].start
+        sq = math.sqrt(pen)
+        vstep = valid[:, 1:]
+        span = np.where(vstep, np.diff(fr, axis=1), 1).astype(float)
+        self.span = span
+        n2 = 2 * n
+
+        # ---- constraint rows of this character: local (its own) and coupled (with others)
+        def kidx(frames: IntArray) -> IntArray:
+            q = np.stack([frames if f is None else f[np.minimum(frames, len(f) - 1)] for f in fmaps])
+            return _bsearch(fr, nv, q)
+
+        touch_s = np.any((space.char == k) & (space.val != 0), axis=1)
+        self.s_local = np.flatnonzero(touch_s & space.intra)
+        self.s_cols = 2 * kidx(space.frame[self.s_local]) + space.coord[self.s_local][None]
+        sv = np.broadcast_to(space.val[self.s_local][None], self.s_cols.shape)
+        s_rhs = np.broadcast_to(space.rhs[self.s_local][None], (c, len(self.s_local)))
+        touch_t = np.any((time.char == k) & (time.val != 0), axis=1)
+        self.t_local = np.flatnonzero(touch_t & time.intra)
+        self.t_cols = kidx(time.frame[self.t_local])
+        tvl = np.broadcast_to(time.val[self.t_local][None], self.t_cols.shape)
+        t_rhs = np.broadcast_to(time.rhs[self.t_local][None], (c, len(self.t_local)))
+        self.s_soft = space.soft[self.s_local]
+        self.t_soft = time.soft[self.t_local]
+        self.s_loc = (self.s_cols, sv, s_rhs)
+        self.t_loc = (self.t_cols, tvl, t_rhs)
+        # coupled rows: U (c, r, unknowns) on this character's entries
+        self.cross_s, self.cross_t = cross_s, cross_t
+        self.Us = self._coupled(space, cross_s, k, kidx, 2, n2, c)
+        self.Ut = self._coupled(time, cross_t, k, kidx, 1, n, c)
+        # ---- phase 1: equation-3 rows weighted mbar^-3/2 (rigid ones: penalty)
+        if n >= 3:
+            t = X[:, 2:] - X[:, :-2]
+            d = X[:, 1:-1] - X[:, :-2]
+            nn = np.sum(t * t, axis=-1)
+            ok = nn > 1e-18
+            safe = np.where(ok, nn, 1.0)
+            lx = np.where(ok, np.sum(d * t, axis=-1) / safe, 0.5)
+            ly = np.where(ok, (d[..., 0] * t[..., 1] - d[..., 1] * t[..., 0]) / safe, 0.0)
+            mbar = 0.5 * (span[:, :-1] + span[:, 1:])
+            vint = valid[:, 2:]
+            rig = rpt[:, 1:-1]
+            wr = np.where(vint, np.where(rig, sq, mbar**-1.5), 0.0)
+            g = idx[1:-1]
+            X0, X1, X2 = 2 * (g - 1), 2 * g, 2 * (g + 1)
+            one = np.ones_like(lx)
+            rx_c = np.stack([X1, X0, X2, X0, X2 + 1, X0 + 1], axis=-1)
+            rz_c = np.stack([X1 + 1, X0 + 1, X2 + 1, X0 + 1, X2, X0], axis=-1)
+            rx_v = np.stack([one, -one, -lx, lx, -ly, ly], axis=-1)
+            rz_v = np.stack([one, -one, -lx, lx, ly, -ly], axis=-1)
+            lap_c = np.broadcast_to(np.stack([rx_c, rz_c], axis=1).reshape(1, -1, 6), (c, 2 * (n - 2), 6))
+            lap_v = (np.stack([rx_v, rz_v], axis=2) * wr[:, :, None, None]).reshape(c, -1, 6)
+            self.lap_energy = np.repeat(vint & ~rig, 2, axis=1)
+        else:
+            lap_c, lap_v = np.zeros((c, 0, 6), np.int64), np.zeros((c, 0, 6))
+            self.lap_energy = np.zeros((c, 0), bool)
+        self.lap = (lap_c, lap_v)
+        pad = np.repeat(~valid, 2, axis=1)
+        c1, v1 = _pad(self.lap, self.s_loc[:2])
+        N1 = _normal(c, n2, c1, v1)
+        N1[:, np.arange(n2), np.arange(n2)] += _EPS + pad
+        self.x0 = np.where(pad, 0.0, X.reshape(c, -1))
+        b1 = _rhs(n2, self.s_cols, sv, s_rhs) + _EPS * self.x0
+        sol = np.linalg.solve(N1, np.concatenate([b1[:, :, None], np.swapaxes(self.Us, 1, 2)], axis=2))
+        self.y1, self.Z1 = sol[:, :, 0], sol[:, :, 1:]
+        # ---- phase 2: equation 7 on per-frame velocities, rows weighted 1/sqrt(mean span)
+        if n >= 3:
+            ia, ib = 1.0 / span[:, :-1], 1.0 / span[:, 1:]
+            wv = np.where(valid[:, 2:], (0.5 * (span[:, :-1] + span[:, 1:])) ** -0.5, 0.0)
+            g = idx[1:-1]
+            cols_ = [np.stack([2 * (g - 1) + q, 2 * g + q, 2 * (g + 1) + q], axis=-1) for q in (0, 1)]
+            vals_ = [np.stack([ia, -ia - ib, ib], axis=-1) * wv[..., None]] * 2
+            sec_c = np.broadcast_to(np.stack(cols_, axis=1).reshape(1, -1, 3), (c, 2 * (n - 2), 3))
+            sec_v = np.stack(vals_, axis=2).reshape(c, -1, 3)
+            self.wv = wv
+        else:
+            sec_c, sec_v = np.zeros((c, 0, 3), np.int64), np.zeros((c, 0, 3))
+            self.wv = np.zeros((c, 0))
+        self.sec = (sec_c, sec_v)
+        st = idx[:-1]
+        rc = np.stack([np.stack([2 * (st + 1) + q, 2 * st + q], axis=-1) for q in (0, 1)], axis=1).reshape(1, -1, 2)
+        wrs = np.repeat(np.where(rst, sq, 0.0), 2, axis=1)
+        self.rig_w = wrs
+        self.rig = (np.broadcast_to(rc, (c, rc.shape[1], 2)), wrs[:, :, None] * np.array([1.0, -1.0]))
+        c2, v2 = _pad(self.sec, self.rig, self.s_loc[:2])
+        N2 = _normal(c, n2, c2, v2)
+        N2[:, np.arange(n2), np.arange(n2)] += _EPS + pad
+        self.N2 = N2
+        self.pad2 = pad
+        self.L0 = np.linalg.norm(np.diff(X, axis=1), axis=-1)
+        self.Z2 = np.linalg.solve(N2, np.swapaxes(self.Us, 1, 2)) if self.Us.shape[1] else np.zeros((c, n2, 0))
+        # ---- time: t[i+1] - t[i] = m_i h, rows weighted 1/sqrt(m_i)
+        wt = np.where(vstep, 1.0 / np.sqrt(np.maximum(span, 1.0)), 0.0)
+        tc = np.broadcast_to(np.stack([idx[1:], idx[:-1]], axis=-1)[None], (c, n - 1, 2))
+        tv = np.stack([wt, -wt], axis=-1)
+        self.tim = (tc, tv, span * self.dt * wt)
+        c3, v3 = _pad((tc, tv), self.t_loc[:2])
+        Nt = _normal(c, n, c3, v3)
+        Nt[:, np.arange(n), np.arange(n)] += _EPS + ~valid
+        self.t0 = np.where(valid, self.start + fr * self.dt, 0.0)
+        bt = _rhs(n, tc, tv, self.tim[2]) + _rhs(n, self.t_cols, tvl, t_rhs) + _EPS * self.t0
+        sol = np.linalg.solve(Nt, np.concatenate([bt[:, :, None], np.swapaxes(self.Ut, 1, 2)], axis=2))
+        self.yt, self.Zt = sol[:, :, 0], sol[:, :, 1:]
+        self.last = nv - 1
+
+    @staticmethod
+    def _coupled(rows: _Rows, ids: IntArray, k: int, kidx: Any, dim: int, nunk: int, c_: int) -> Array:
+        U = np.zeros((c_, len(ids), nunk))
+        if not len(ids):
+            return U
+        mask = (rows.char[ids] == k) & (rows.val[ids] != 0)
+        pos, ent = np.nonzero(mask)
+        if not len(pos):
+            return U
+        kk = kidx(rows.frame[ids][pos, ent])  # (c, E)
+        col = dim * kk + rows.coord[ids][pos, ent][None] if dim == 2 else kk
+        ci = np.repeat(np.arange(c_), len(pos))
+        np.add.at(U, (ci, np.tile(pos, c_), col.ravel()), np.tile(rows.val[ids][pos, ent], c_))
+        return U
+
+    # ---------------------------------------------------------------- energies
+    def phase2_rhs(self, pbar: Array) -> tuple[Array, Array]:
+        """Right-hand sides of phase 2 for phase-1 results ``pbar`` (c', 2n); also the rescaled segments."""
+        cc = pbar.shape[0]
+        n = self.n
+        P = pbar.reshape(cc, n, 2)
+        seg = P[:, 1:] - P[:, :-1]
+        ln = np.linalg.norm(seg, axis=-1)
+        vb = seg * np.divide(self.L0, ln, out=np.ones_like(ln), where=ln > 1e-12)[..., None]
+        ub = vb / self.span[..., None]
+        out = _rhs(2 * n, *self._b(self.s_loc[0], cc), *self._bv(self.s_loc[1], self.s_loc[2], cc)) + _EPS * pbar
+        if n >= 3:
+            r = ((ub[:, 1:] - ub[:, :-1]) * self.wv[..., None]).reshape(cc, -1)
+            out += _rhs(2 * n, *self._b(self.sec[0], cc), *self._bv(self.sec[1], r, cc))
+        r = vb.reshape(cc, -1) * self.rig_w
+        out += _rhs(2 * n, *self._b(self.rig[0], cc), *self._bv(self.rig[1], r, cc))
+        return np.where(self.pad2, 0.0, out), ub
+
+    @staticmethod
+    def _b(cols: IntArray, cc: int) -> tuple[IntArray]:
+        return (np.broadcast_to(cols, (cc,) + cols.shape[1:]),)
+
+    @staticmethod
+    def _bv(vals: Array, rhs: Array, cc: int) -> tuple[Array, Array]:
+        return np.broadcast_to(vals, (cc,) + vals.shape[1:]), np.broadcast_to(rhs, (cc,) + rhs.shape[1:])
+
+    def soft_local(self, x: Array, which: str) -> Array:
+        cols, vals, rhs = self.s_loc if which == "s" else self.t_loc
+        soft = self.s_soft if which == "s" else self.t_soft
+        if not cols.shape[1]:
+            return np.zeros(x.shape[0])
+        r = _res(cols, vals, rhs, x)
+        return np.sum(r[:, soft] ** 2, axis=1)
+
+    def shape_energy(self, x: Array) -> Array:
+        lr = np.sum(self.lap[1] * _gather(x, self.lap[0]), axis=-1)
+        return np.sum(np.where(self.lap_energy, lr, 0.0) ** 2, axis=1) + self.soft_local(x, "s")
+
+    def scale_energy(self, x: Array, ub: Array) -> Array:
+        e = self.soft_local(x, "s")
+        if self.n >= 3:
+            r = ((ub[:, 1:] - ub[:, :-1]) * self.wv[..., None]).reshape(x.shape[0], -1)
+            e = e + np.sum(_res(self.sec[0], self.sec[1], r, x) ** 2, axis=1)
+        return e
+
+    def time_energy(self, t: Array) -> Array:
+        tc, tv, trhs = self.tim
+        return np.sum(_res(tc, tv, trhs, t) ** 2, axis=1) + self.soft_local(t, "t")
+
+    def changes(self, x2: Array, t: Array) -> tuple[Array, Array]:
+        """``|L_s(P') - L_s(P)|`` (full-path arcs scaled by the chords' change) and ``|L_t(P') - L_t(P)|``."""
+        cc = x2.shape[0]
+        c1 = np.linalg.norm(np.diff(x2.reshape(cc, self.n, 2), axis=1), axis=-1)
+        ratio = np.divide(self.arc, self.L0, out=np.ones_like(self.L0), where=self.L0 > 1e-6)
+        dl = np.abs(np.sum(np.where(self.valid[:, 1:], ratio * (c1 - self.L0), 0.0), axis=1))
+        last = np.take_along_axis(t, np.broadcast_to(self.last[:, None], (cc, 1)), axis=1)[:, 0]
+        dt = np.abs(last - t[:, 0] - (self.n_frames - 1) * self.dt)
+        return dl, dt
 
 
 class _Scene:
-    """The current scene prepared for subsampled evaluation of candidates."""
+    """The current scene prepared for subsampled evaluation of candidates.
+
+    Each character's three least-squares systems are factorised once per
+    update; constraint rows linking characters (or too long for a banded
+    block) are added by the Woodbury identity, so a candidate costs one
+    block factorisation per system for the transformed character plus small
+    dense solves.
+    """
 
     def __init__(
         self,
@@ -1121,13 +1404,15 @@ class _Scene:
         self.dts = dts
         self.starts = [float(s) for s in starts]
         wmax = max([1.0] + [float(c.weight) for c in constraints if hasattr(c, "weight") and not c.hard])
-        pen = _PENALTY * wmax
-        self.pen = pen
+        self.pen = _PENALTY * wmax
         tang = _Tangents(paths)
-        self.space = _compile(constraints, SPATIAL, lambda c: spatial_rows(c, paths, layout, tang, step), layout, 2, pen)
-        self.time = _compile(constraints, TEMPORAL, lambda c: temporal_rows(c, layout, dts, step), layout, 1, pen)
+        self.space = _compile(
+            constraints, SPATIAL, lambda c: spatial_rows(c, paths, layout, tang, step), layout, 2, self.pen
+        )
+        self.time = _compile(constraints, TEMPORAL, lambda c: temporal_rows(c, layout, dts, step), layout, 1, self.pen)
         self.segments = [list(s) for s in segments]
         self.positions = [np.asarray(p.positions, dtype=float) for p in paths]
+        self.headings = [np.unwrap(quat.yaw(t.motion.rotations[:, 0])) for t in tracks]
         self.cumarc = [
             np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))]) for P in self.positions
         ]
@@ -1141,41 +1426,43 @@ class _Scene:
             return a
 
         for rows in (self.space, self.time):
-            for cs_ in rows.chars:
-                cs_l = sorted(cs_)
-                for o in cs_l[1:]:
-                    ra, rb = find(cs_l[0]), find(o)
+            for r in np.flatnonzero(~rows.intra):
+                ks = np.unique(rows.char[r][rows.val[r] != 0])
+                for o in ks[1:]:
+                    ra, rb = find(int(ks[0])), find(int(o))
                     if ra != rb:
                         parent[rb] = ra
         self.comp = [find(k) for k in range(K)]
-        # kept frames of the unmodified characters
+        # rows linking characters (Woodbury terms), per character
+        self.cross_s = [self._cross(self.space, k) for k in range(K)]
+        self.cross_t = [self._cross(self.time, k) for k in range(K)]
+        # kept frames and systems of the unmodified characters
         r = int(opts.subsample)
         self.base_frames: list[IntArray] = []
+        self.base: list[_Batch] = []
         for k, t in enumerate(tracks):
             F = t.n_frames
             keep = [np.arange(0, F, r), [0, F - 1]]
             for rows in (self.space, self.time):
-                keep.append(rows.frame[rows.char == k])
+                keep.append(rows.frame[(rows.char == k) & (rows.val != 0)])
             for a, b in self.segments[k]:
                 keep.append([a, b - 1])
             fr = np.unique(np.clip(np.concatenate([np.asarray(x, dtype=np.int64) for x in keep]), 0, F - 1))
             self.base_frames.append(fr)
-        self.base_parts = [
-            _make_part(
-                self.base_frames[k],
-                self.positions[k][self.base_frames[k]],
-                self.cumarc[k][self.base_frames[k]],
-                self.segments[k],
-                tracks[k].n_frames,
-                dts[k],
-                self.starts[k],
-            )
-            for k in range(K)
-        ]
+            pt, st = _rigid(fr, self.segments[k])
+            part = _Part(fr, self.positions[k][fr], np.diff(self.cumarc[k][fr]), pt, st, F, dts[k], self.starts[k])
+            self.base.append(self._batch([part], k, [None]))
         self.base_energy: dict[int, float] = {}
         for root in set(self.comp):
             members = [k for k in range(K) if self.comp[k] == root]
-            self.base_energy[root] = self._energy({k: self.base_parts[k] for k in members}, {})
+            self.base_energy[root] = float(self._evaluate(members, members[0], self.base[members[0]])[0])
+
+    @staticmethod
+    def _cross(rows: _Rows, k: int) -> IntArray:
+        return np.flatnonzero(~rows.intra & np.any((rows.char == k) & (rows.val != 0), axis=1))
+
+    def _batch(self, parts: Sequence[_Part], k: int, fmaps: Sequence[IntArray | None]) -> _Batch:
+        return _Batch(parts, k, fmaps, self.space, self.time, self.cross_s[k], self.cross_t[k], self.pen)
 
     @property
     def baseline(self) -> float:
@@ -1195,32 +1482,24 @@ class _Scene:
         F2 = F - (b - a) + L
         P = self.positions[k]
         C = self.cumarc[k]
-        # ground pose of the frame before the seam, from the current motion
-        head = quat.yaw(tr.motion.rotations[a - 1, 0])
+        H = self.headings[k]
         pa = P[a - 1]
-        ins_pos = np.zeros((0, 2))
-        ins_arc = np.zeros(0)
         if L:
             ref = s - 1 if not gd.first[s] else s
-            th = head - gd.yaw[ref]
+            th = H[a - 1] - gd.yaw[ref]
             t1 = pa - _rot2(th, gd.pos[ref])
             ins_pos = _rot2(th, gd.pos[s:e]) + t1
-            g_arc = gd.arc[s:e] - gd.arc[s]
-            ins_arc = C[a - 1] + np.linalg.norm(ins_pos[0] - pa) + g_arc
+            ins_arc = C[a - 1] + np.linalg.norm(ins_pos[0] - pa) + (gd.arc[s:e] - gd.arc[s])
             last_pos, last_head, last_arc = ins_pos[-1], gd.yaw[e - 1] + th, ins_arc[-1]
         else:
-            last_pos, last_head, last_arc = pa, head, C[a - 1]
-        # suffix: rigidly moved so that its first frame follows the last new/prefix frame
+            ins_pos, ins_arc = np.zeros((0, 2)), np.zeros(0)
+            last_pos, last_head, last_arc = pa, H[a - 1], C[a - 1]
+        # suffix: moved rigidly so that the graph frame before nodes[b] sits on the last frame before it
         nb = int(tr.nodes[b])
         ref_b = nb - 1 if not gd.first[nb] else nb
-        hb = quat.yaw(tr.motion.rotations[b, 0])
-        # graph pose of ref_b placed like the current frame b is placed
-        th_old = hb - gd.yaw[nb]
+        th_old = H[b] - gd.yaw[nb]
         pos_old_ref = _rot2(th_old, gd.pos[ref_b] - gd.pos[nb]) + P[b]
-        yaw_old_ref = gd.yaw[ref_b] + th_old
-        dth = last_head - yaw_old_ref
-        suf = _rot2(dth, P[b:] - pos_old_ref) + last_pos
-        suf_arc = last_arc + np.linalg.norm(suf[0] - last_pos) + (C[b:] - C[b])
+        dth = last_head - (gd.yaw[ref_b] + th_old)
         # old -> new frame map (removed frames go to the nearest seam side)
         fmap = np.arange(F, dtype=np.int64)
         fmap[b:] += L - (b - a)
@@ -1232,10 +1511,10 @@ class _Scene:
         base = base[(base < a) | (base >= b)]
         extra = [
             fmap[base],
-            [a - 2, a - 1, a, a + 1, a + L - 2, a + L - 1, a + L, a + L + 1],
+            np.array([a - 2, a - 1, a, a + 1, a + L - 2, a + L - 1, a + L, a + L + 1]),
             a + np.arange(0, L, r),
         ]
-        frames = np.unique(np.clip(np.concatenate([np.asarray(x, dtype=np.int64) for x in extra]), 0, F2 - 1))
+        frames = np.unique(np.clip(np.concatenate(extra), 0, F2 - 1))
         X = np.empty((len(frames), 2))
         arc = np.empty(len(frames))
         pre = frames < a
@@ -1245,218 +1524,122 @@ class _Scene:
         arc[pre] = C[frames[pre]]
         X[ins] = ins_pos[frames[ins] - a]
         arc[ins] = ins_arc[frames[ins] - a]
-        X[post] = suf[frames[post] - a - L]
-        arc[post] = suf_arc[frames[post] - a - L]
+        old = frames[post] - a - L + b
+        X[post] = _rot2(dth, P[old] - pos_old_ref) + last_pos
+        first_suf = _rot2(dth, P[b] - pos_old_ref) + last_pos
+        arc[post] = last_arc + np.linalg.norm(first_suf - last_pos) + (C[old] - C[b])
         segs = []
         for sa, sb in self.segments[k]:
             for lo, hi in ((sa, min(sb, a)), (max(sa, b), sb)):
                 if hi - lo >= 3:
                     segs.append((int(fmap[lo]), int(fmap[hi - 1]) + 1))
-        part = _make_part(frames, X, arc, segs, F2, self.dts[k], self.starts[k])
+        pt, st = _rigid(frames, segs)
+        part = _Part(frames, X, np.diff(arc), pt, st, F2, self.dts[k], self.starts[k])
         return part, fmap
 
     def energy(self, t: Transformation) -> float:
         """Equation-10 energy of the scene with ``t`` applied (subsampled)."""
-        k = t.character
-        part, fmap = self.candidate_part(t)
-        root = self.comp[k]
-        parts = {j: (part if j == k else self.base_parts[j]) for j in range(self.K) if self.comp[j] == root}
-        e = self._energy(parts, {k: fmap})
-        return self.baseline - self.base_energy[root] + e
+        return float(self.energies([t])[0])
+
+    def energies(self, ts: Sequence[Transformation]) -> Array:
+        """Equation-10 energies of the scene with each of ``ts`` applied (evaluated in batches per character)."""
+        out = np.zeros(len(ts))
+        by: dict[int, list[int]] = {}
+        for i, t in enumerate(ts):
+            by.setdefault(t.character, []).append(i)
+        for k, idx in by.items():
+            built = [self.candidate_part(ts[i]) for i in idx]
+            batch = self._batch([b[0] for b in built], k, [b[1] for b in built])
+            root = self.comp[k]
+            members = [j for j in range(self.K) if self.comp[j] == root]
+            e = self._evaluate(members, k, batch)
+            out[idx] = self.baseline - self.base_energy[root] + e
+        return out
 
     # ------------------------------------------------------------- solver
-    def _energy(self, parts: dict[int, _Part], fmaps: dict[int, IntArray]) -> float:
-        chars = sorted(parts)
-        offs = {}
-        n = 0
-        for k in chars:
-            offs[k] = n
-            n += len(parts[k].frames)
+    def _evaluate(self, members: list[int], k: int, B: _Batch, *, parts: bool = False) -> Any:
+        """Equation 10 for one component, character ``k`` taking the paths of batch ``B`` (c of them).
 
-        def locate(rows: _Rows) -> tuple[NDArray[np.bool_], IntArray]:
-            sel = np.isin(rows.char, chars)
-            idx = np.zeros(len(rows.char), dtype=np.int64)
-            for k in chars:
-                m = rows.char == k
-                if not m.any():
+        Each system is ``(B + U^T U) x = b + U^T c`` with ``B`` block diagonal
+        (one block per character) and ``U`` the rows linking characters:
+        ``x = y + Z S^-1 (c - U y)`` with ``y = B^-1 b``, ``Z = B^-1 U^T`` and
+        ``S = I + U Z`` (Woodbury).  Returns the energies, shape (c,) (with
+        ``parts=True``: a dict of the terms).
+        """
+        c = B.c
+        bat = {j: (B if j == k else self.base[j]) for j in members}
+
+        def solve(
+            ys: dict[int, Array], Us: dict[int, Array], Zs: dict[int, Array], ids_j: dict[int, IntArray], rows: _Rows
+        ) -> tuple[dict[int, Array], IntArray, Array]:
+            pieces = [ids_j[j] for j in members if len(ids_j[j])]
+            if not pieces:
+                return (
+                    {j: np.broadcast_to(ys[j], (c,) + ys[j].shape[1:]) for j in members},
+                    np.zeros(0, np.int64),
+                    np.zeros((c, 0)),
+                )
+            ids = np.unique(np.concatenate(pieces))
+            r = len(ids)
+            S = np.tile(np.eye(r), (c, 1, 1))
+            Uy = np.zeros((c, r))
+            loc = {}
+            for j in members:
+                if not len(ids_j[j]):
                     continue
-                f = rows.frame[m]
-                if k in fmaps:
-                    f = fmaps[k][f]
-                idx[m] = offs[k] + parts[k].lookup[f]
-            return sel, idx
+                li = np.searchsorted(ids, ids_j[j])
+                loc[j] = li
+                Uy[:, li] += (Us[j] @ ys[j][..., None])[..., 0]
+                S[:, li[:, None], li[None, :]] += Us[j] @ Zs[j]
+            rhs = rows.rhs[ids]
+            w = np.linalg.solve(S, (rhs - Uy)[..., None])[..., 0]
+            xs = {}
+            res = np.tile(-rhs, (c, 1))
+            for j in members:
+                if j not in loc:
+                    xs[j] = np.broadcast_to(ys[j], (c,) + ys[j].shape[1:])
+                    continue
+                li = loc[j]
+                xs[j] = ys[j] + (Zs[j] @ w[:, li][..., None])[..., 0]
+                res[:, li] += (Us[j] @ xs[j][..., None])[..., 0]
+            return xs, ids, res
 
-        # ---------------- space, phase 1
-        blocks1: list[tuple[IntArray, IntArray, Array]] = []
-        rhs1: list[Array] = []
-        blocks2: list[tuple[IntArray, IntArray, Array]] = []
-        rhs2_fixed: list[Array] = []
-        nrow1 = 0
-        lap_rows = []  # (row range) for energy of phase 1
-        x0 = np.concatenate([parts[k].X for k in chars]).reshape(-1)
-        for k in chars:
-            p = parts[k]
-            m = len(p.frames)
-            if m < 3:
-                continue
-            o = offs[k]
-            lc = laplacian_coordinates(p.X)[1:-1]
-            g = o + np.arange(1, m - 1)
-            x, y = lc[:, 0], lc[:, 1]
-            wr = np.where(p.rigid_pt[1:-1], math.sqrt(self.pen), 1.0)
-            rr = np.arange(m - 2)
-            one = np.ones(m - 2)
-            rx, rz = nrow1 + 2 * rr, nrow1 + 2 * rr + 1
-            rows_ = [rx, rx, rx, rx, rx, rx, rz, rz, rz, rz, rz, rz]
-            X_, Z_ = (lambda f: 2 * f), (lambda f: 2 * f + 1)
-            cols_ = [
-                X_(g), X_(g - 1), X_(g + 1), X_(g - 1), Z_(g + 1), Z_(g - 1),
-                Z_(g), Z_(g - 1), Z_(g + 1), Z_(g - 1), X_(g + 1), X_(g - 1),
-            ]  # fmt: skip
-            vals_ = [one, -one, -x, x, -y, y, one, -one, -x, x, y, -y]
-            blocks1.append(
-                (
-                    np.concatenate(rows_),
-                    np.concatenate(cols_),
-                    np.concatenate(vals_) * np.tile(wr, 12),
-                )
-            )
-            lap_rows.append((nrow1, nrow1 + 2 * (m - 2), np.repeat(~p.rigid_pt[1:-1], 2)))
-            rhs1.append(np.zeros(2 * (m - 2)))
-            nrow1 += 2 * (m - 2)
-        ssel, sidx = locate(self.space)
-        srows_used = np.unique(self.space.row[ssel])
-        if len(srows_used):
-            rmap = np.full(len(self.space.rhs), -1, dtype=np.int64)
-            rmap[srows_used] = np.arange(len(srows_used))
-            wv = self.space.w[self.space.row[ssel]]
-            cb = (
-                nrow1 + rmap[self.space.row[ssel]],
-                2 * sidx[ssel] + self.space.coord[ssel],
-                self.space.val[ssel] * wv,
-            )
-            crhs = self.space.rhs[srows_used] * self.space.w[srows_used]
-            csoft = ~self.space.hard[srows_used]
-        else:
-            cb = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
-            crhs = np.zeros(0)
-            csoft = np.zeros(0, bool)
-        n2 = 2 * n
-        if blocks1 or len(crhs):
-            b1 = blocks1 + [cb]
-            rhs = np.concatenate(rhs1 + [crhs])
-            pbar, M1 = _lsq(b1, rhs, n2, x0)
-            res = M1 @ pbar - rhs
-        else:
-            pbar, res = x0.copy(), np.zeros(0)
-        e_shape = 0.0
-        for r0, r1, ok in lap_rows:
-            e_shape += float(np.sum(res[r0:r1][ok] ** 2))
-        cres = res[nrow1:]
-        e_shape += float(np.sum(cres[csoft] ** 2))
-        # ---------------- space, phase 2 (scale compensation)
-        PB = pbar.reshape(-1, 2)
-        nrow2 = 0
-        sec_rows = []
-        for k in chars:
-            p = parts[k]
-            m = len(p.frames)
-            if m < 2:
-                continue
-            o = offs[k]
-            seg = PB[o + 1 : o + m] - PB[o : o + m - 1]
-            ln = np.linalg.norm(seg, axis=1)
-            L0 = np.linalg.norm(np.diff(p.X, axis=0), axis=1)
-            vb = seg * np.divide(L0, ln, out=np.ones_like(ln), where=ln > 1e-12)[:, None]
-            if m >= 3:
-                g = o + np.arange(1, m - 1)
-                rr = np.arange(m - 2)
-                rows_l, cols_l, vals_l = [], [], []
-                for c in (0, 1):
-                    for df, v in ((-1, 1.0), (0, -2.0), (1, 1.0)):
-                        rows_l.append(nrow2 + 2 * rr + c)
-                        cols_l.append(2 * (g + df) + c)
-                        vals_l.append(np.full(m - 2, v))
-                blocks2.append((np.concatenate(rows_l), np.concatenate(cols_l), np.concatenate(vals_l)))
-                rhs2_fixed.append((vb[1:] - vb[:-1]).reshape(-1))
-                sec_rows.append((nrow2, nrow2 + 2 * (m - 2)))
-                nrow2 += 2 * (m - 2)
-            st = np.flatnonzero(p.rigid_step)
-            if len(st):
-                sq = math.sqrt(self.pen)
-                rr = np.arange(len(st))
-                rows_l, cols_l, vals_l = [], [], []
-                for c in (0, 1):
-                    rows_l += [nrow2 + 2 * rr + c, nrow2 + 2 * rr + c]
-                    cols_l += [2 * (o + st + 1) + c, 2 * (o + st) + c]
-                    vals_l += [np.full(len(st), sq), np.full(len(st), -sq)]
-                blocks2.append((np.concatenate(rows_l), np.concatenate(cols_l), np.concatenate(vals_l)))
-                rhs2_fixed.append((vb[st] * sq).reshape(-1))
-                nrow2 += 2 * len(st)
-        if blocks2 or len(crhs):
-            cb2 = (cb[0] - nrow1 + nrow2, cb[1], cb[2])
-            rhs = np.concatenate(rhs2_fixed + [crhs])
-            phat, M2 = _lsq(blocks2 + [cb2], rhs, n2, pbar)
-            res2 = M2 @ phat - rhs
-        else:
-            phat, res2 = pbar.copy(), np.zeros(0)
-        e_scale = sum(float(np.sum(res2[r0:r1] ** 2)) for r0, r1 in sec_rows)
-        e_scale += float(np.sum(res2[nrow2:][csoft] ** 2))
-        # ---------------- time
-        tsel, tidx = locate(self.time)
-        blocks3 = []
-        rhs3 = []
-        t0 = np.concatenate([parts[k].start + parts[k].frames * parts[k].dt for k in chars])
-        nrow3 = 0
-        for k in chars:
-            p = parts[k]
-            m = len(p.frames)
-            if m < 2:
-                continue
-            o = offs[k]
-            span = np.diff(p.frames).astype(float)
-            w = 1.0 / np.sqrt(np.maximum(span, 1.0))
-            rr = nrow3 + np.arange(m - 1)
-            blocks3.append(
-                (
-                    np.concatenate([rr, rr]),
-                    np.concatenate([o + np.arange(1, m), o + np.arange(m - 1)]),
-                    np.concatenate([w, -w]),
-                )
-            )
-            rhs3.append(span * p.dt * w)
-            nrow3 += m - 1
-        trows_used = np.unique(self.time.row[tsel])
-        if len(trows_used):
-            rmap = np.full(len(self.time.rhs), -1, dtype=np.int64)
-            rmap[trows_used] = np.arange(len(trows_used))
-            wv = self.time.w[self.time.row[tsel]]
-            blocks3.append((nrow3 + rmap[self.time.row[tsel]], tidx[tsel], self.time.val[tsel] * wv))
-            rhs3.append(self.time.rhs[trows_used] * self.time.w[trows_used])
-            tsoft = ~self.time.hard[trows_used]
-        else:
-            tsoft = np.zeros(0, bool)
-        if blocks3:
-            rhs = np.concatenate(rhs3)
-            tt, M3 = _lsq(blocks3, rhs, n, t0)
-            res3 = M3 @ tt - rhs
-        else:
-            tt, res3 = t0.copy(), np.zeros(0)
-        e_time = float(np.sum(res3[:nrow3] ** 2)) + float(np.sum(res3[nrow3:][tsoft] ** 2))
-        # ---------------- lengths and durations
-        PH = phat.reshape(-1, 2)
-        dL = dT = 0.0
-        for k in chars:
-            p = parts[k]
-            o = offs[k]
-            m = len(p.frames)
-            if m >= 2:
-                c0 = np.linalg.norm(np.diff(p.X, axis=0), axis=1)
-                c1 = np.linalg.norm(np.diff(PH[o : o + m], axis=0), axis=1)
-                ratio = np.divide(p.arc, c0, out=np.ones_like(c0), where=c0 > 1e-6)
-                dL += abs(float(np.sum(ratio * (c1 - c0))))
-                dT += abs(float(tt[o + m - 1] - tt[o]) - (p.n_frames - 1) * p.dt)
-        return e_shape + e_scale + e_time + self.opts.cs * dL + self.opts.ct * dT
+        sp_, tm_ = self.space, self.time
+        ids_s = {j: bat[j].cross_s for j in members}
+        ids_t = {j: bat[j].cross_t for j in members}
+        Us = {j: bat[j].Us for j in members}
+        Ut = {j: bat[j].Ut for j in members}
+        # phase 1 (shape)
+        x1, i1, r1 = solve({j: bat[j].y1 for j in members}, Us, {j: bat[j].Z1 for j in members}, ids_s, sp_)
+        e_shape = np.sum(r1[:, sp_.soft[i1]] ** 2, axis=1)
+        for j in members:
+            e_shape = e_shape + bat[j].shape_energy(x1[j])
+        # phase 2 (scale)
+        y2, ubs = {}, {}
+        for j in members:
+            rhs, ubs[j] = bat[j].phase2_rhs(x1[j])
+            if bat[j].c == c:
+                y2[j] = np.linalg.solve(bat[j].N2, rhs[..., None])[..., 0]
+            else:
+                y2[j] = np.linalg.solve(bat[j].N2[0], rhs.T).T
+        x2, i2, r2 = solve(y2, Us, {j: bat[j].Z2 for j in members}, ids_s, sp_)
+        e_scale = np.sum(r2[:, sp_.soft[i2]] ** 2, axis=1)
+        for j in members:
+            e_scale = e_scale + bat[j].scale_energy(x2[j], ubs[j])
+        # time
+        xt, it, rt = solve({j: bat[j].yt for j in members}, Ut, {j: bat[j].Zt for j in members}, ids_t, tm_)
+        e_time = np.sum(rt[:, tm_.soft[it]] ** 2, axis=1)
+        dL = np.zeros(c)
+        dT = np.zeros(c)
+        for j in members:
+            e_time = e_time + bat[j].time_energy(xt[j])
+            dl, dt = bat[j].changes(x2[j], xt[j])
+            dL = dL + dl
+            dT = dT + dt
+        total = e_shape + e_scale + e_time + self.opts.cs * dL + self.opts.ct * dT
+        if parts:
+            return {"shape": e_shape, "scale": e_scale, "time": e_time, "length": dL, "duration": dT, "total": total}
+        return total
 
 
 # ======================================================================
@@ -1614,11 +1797,11 @@ class DiscreteSession:
             opts["stationary"] = new
         return opts
 
-    def _solve(self, tracks: Sequence[Track], mapped: tuple[Any, ...]) -> Any:
+    def _solve(self, tracks: Sequence[Track], mapped: tuple[Any, ...], *, reuse: bool = True) -> Any:
         from .scene import SceneEditor
 
         key = tuple(id(t) for t in tracks)
-        inner = self._inner if self._inner_tracks == key else None
+        inner = self._inner if reuse and self._inner_tracks == key else None
         if inner is None:
             inner = SceneEditor([t.motion for t in tracks], mapped, **self._inner_options(tracks))
         else:
@@ -1632,10 +1815,8 @@ class DiscreteSession:
 
     # ------------------------------------------------------------ greedy
     def _best(self, tracks: list[Track], inner: Any, result: Any, mapped: tuple[Any, ...]) -> Any:
-        import time as _time
-
         o = self.options
-        t0 = _time.perf_counter()
+        t0 = time.perf_counter()
         cands: list[Transformation] = []
         for k, tr in enumerate(tracks):
             loc = o.locality_of(k)
@@ -1651,7 +1832,7 @@ class DiscreteSession:
                 min_duration=o.min_duration,
                 max_duration=o.max_duration,
             )
-        t1 = _time.perf_counter()
+        t1 = time.perf_counter()
         if not cands:
             self.timings.append({"enumerate": t1 - t0, "evaluate": 0.0, "candidates": 0})
             return None
@@ -1665,22 +1846,24 @@ class DiscreteSession:
             o,
             int(self.editor_options.get("variational_step", 10)),
         )
-        energies = [scene.energy(t) for t in cands]
-        t2 = _time.perf_counter()
+        energies = list(scene.energies(cands))
+        t2 = time.perf_counter()
         self.timings.append({"enumerate": t1 - t0, "evaluate": t2 - t1, "candidates": len(cands)})
-        i = int(np.argmin(energies))
         base = scene.baseline
-        if not energies[i] < base - o.min_gain:
+        order = [int(i) for i in np.argsort(energies, kind="stable") if energies[i] < base - o.min_gain]
+        if not order:
             return None
-        best = dataclasses.replace(cands[i], energy=float(energies[i]), baseline=float(base), update=self.updates)
+        best = [
+            dataclasses.replace(cands[i], energy=float(energies[i]), baseline=float(base), update=self.updates)
+            for i in order
+        ]
         info = {
-            "transformation": best,
             "candidates": cands,
             "energies": energies,
             "baseline": base,
             "constraints": mapped,
-            "times": result.times[best.character],
-            "positions": result.paths[best.character],
+            "times": result.times,
+            "positions": result.paths,
         }
         return best, info
 
@@ -1694,18 +1877,41 @@ class DiscreteSession:
         mapped = self.map_constraints(constraints, tracks)
         inner, key = self._solve(tracks, mapped)
         result = inner.result
+        o = self.options
         for _ in range(steps):
             found = self._best(tracks, inner, result, mapped)
             if found is None:
                 break
-            best, info = found
-            k = best.character
-            tracks[k] = apply_transformation(tracks[k], best, blend=self.options.blend)
+            ranked, info = found
+            accepted = None
+            t0 = time.perf_counter()
+            current = deformation_energy(result, cs=o.cs, ct=o.ct) if o.verify else math.nan
+            for best in ranked[: max(1, int(o.verify))]:
+                k = best.character
+                trial = list(tracks)
+                trial[k] = apply_transformation(tracks[k], best, blend=o.blend)
+                trial_mapped = self.map_constraints(constraints, trial)
+                try:
+                    t_inner, t_key = self._solve(trial, trial_mapped, reuse=False)
+                except ConstraintError:
+                    continue  # the transformed scene cannot be edited under these constraints
+                t_result = t_inner.result
+                if o.verify:
+                    full = deformation_energy(t_result, cs=o.cs, ct=o.ct)
+                    if not full < current - o.min_gain:
+                        continue
+                    best = dataclasses.replace(best, full_energy=float(full), full_baseline=float(current))
+                accepted = (best, trial, trial_mapped, t_inner, t_key, t_result)
+                break
+            self.timings[-1]["verify"] = time.perf_counter() - t0
+            if accepted is None:
+                break
+            best, tracks, mapped, inner, key, result = accepted
             applied.append(best)
+            info["transformation"] = best
+            info["times"] = info["times"][best.character]
+            info["positions"] = info["positions"][best.character]
             history.append(info)
-            mapped = self.map_constraints(constraints, tracks)
-            inner, key = self._solve(tracks, mapped)
-            result = inner.result
         self.tracks = tracks
         self.applied = applied
         self.history += history

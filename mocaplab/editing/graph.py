@@ -343,7 +343,7 @@ def build_graph(
     *,
     weights: SimilarityWeights | None = None,
     threshold: float = 0.1,
-    window: float = 0.25,
+    window: float = 0.5,
     min_gap: float = 0.3,
     chunk: int = 1024,
 ) -> MotionGraph:

@@ -88,5 +88,8 @@ def test_viewer_draws_com_zmp_and_support_polygon(bent):
     assert len(poly) >= 3 and np.allclose(poly[:, 1], 0.003)
     w.step_button.click()
     assert w.viewer_updates == 1
-    assert np.allclose(w.viewer.overlay_points("com"), w.session.current.balance.com[10][None])
+    now = w.session.current.balance.com[10]
+    assert np.allclose(w.viewer.overlay_points("com"), now[None])
+    # the drawn sphere moved with the step (not just the data behind it)
+    assert np.allclose(np.asarray(w.viewer.overlays["com"].mesh.points).mean(axis=0), now, atol=1e-6)
     w.viewer.close()

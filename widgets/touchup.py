@@ -366,7 +366,7 @@ class TouchUpStepper:
         s = self.session
         frame = getattr(self.viewer, "frame", None) if getattr(self, "viewer", None) is not None else None
         middle = s.input.motion.n_frames // 2 if frame is None else frame
-        options = {"window_size": (640, 360), "follow": True, "frame": middle} | self.viewer_options
+        options = {"window_size": (640, 360), "frame": middle} | self.viewer_options
         viewer = MotionViewer(
             [s.input.motion, s.current.motion], colors=[INPUT_COLOR, CURRENT_COLOR], labels=["input", "touched up"], **options
         )
@@ -374,15 +374,38 @@ class TouchUpStepper:
         return viewer
 
     def _add_overlays(self, viewer: Any) -> None:
-        bal = self.session.current.balance
-        n = len(bal.com)
+        """COM, its shadow, ZMP and support polygon of the *current* step, as functions of time.
+
+        The overlays read the session when the viewer asks for a time, so a
+        step only needs the viewer to redraw (no actor is re-created).
+        """
         lift = np.array([0.0, 0.003, 0.0])
-        viewer.add_points("com", bal.com[:, None, :], color="#ff7f0e", radius=0.04)
-        ground_com = bal.com * np.array([1.0, 0.0, 1.0]) + lift
-        viewer.add_points("com_ground", ground_com[:, None, :], color="#ff7f0e", radius=0.02)
-        viewer.add_points("zmp", (bal.zmp + lift)[:, None, :], color="#d62728", radius=0.03)
-        polygons: Sequence[np.ndarray] = [bal.polygon(f) + lift for f in range(n)]
-        viewer.add_polygon("support", list(polygons), color="#2ca02c", opacity=0.35)
+
+        def now(t: float) -> tuple[Any, int]:
+            bal = self.session.current.balance
+            f = int(np.clip(round(t * self.session.input.motion.fps), 0, len(bal.com) - 1))
+            return bal, f
+
+        def com(t: float) -> np.ndarray:
+            bal, f = now(t)
+            return bal.com[f][None]
+
+        def shadow(t: float) -> np.ndarray:
+            bal, f = now(t)
+            return (bal.com[f] * [1.0, 0.0, 1.0] + lift)[None]
+
+        def zmp(t: float) -> np.ndarray:
+            bal, f = now(t)
+            return (bal.zmp[f] + lift)[None]
+
+        def support(t: float) -> np.ndarray:
+            bal, f = now(t)
+            return bal.polygon(f) + lift
+
+        viewer.add_points("com", com, color="#ff7f0e", radius=0.04)
+        viewer.add_points("com_ground", shadow, color="#ff7f0e", radius=0.02)
+        viewer.add_points("zmp", zmp, color="#d62728", radius=0.03)
+        viewer.add_polygon("support", support, color="#2ca02c", opacity=0.35)
 
     def _update_viewer(self) -> None:
         if self.viewer is None:
@@ -390,8 +413,8 @@ class TouchUpStepper:
         s = self.session
         setter = getattr(self.viewer, "set_motions", None)
         if callable(setter):
+            # redraws at the current time, and the overlays read the new step
             setter([s.input.motion, s.current.motion])
-            self._add_overlays(self.viewer)
         else:
             old = self.viewer
             self.viewer = self._make_viewer()  # opens at the old viewer's frame

@@ -85,8 +85,11 @@ def test_overlay_viewers_with_static_backend(cmu, monkeypatch) -> None:
         assert labels == ["non-staggered pose", "true pose at t_k"]
         first = x.overlay_viewer
         x.pose_list.value = 2
-        assert x.overlay_viewer is not first
+        assert x.overlay_viewer is first  # updated in place
+        assert "pose 2" in x.overlay_viewer.characters[1].motion.name
         assert len(x.player_viewer.characters) == 2
+        x.toggle.value = False
+        assert x.player_viewer.characters[1].label == "edited, non-staggered"
     finally:
         x.close()
 

@@ -250,36 +250,39 @@ class StaggeredExplorer:
         self._draw_curves()
         if not self._viewer_enabled:
             return
-        from .viewer import MotionViewer
-
         ns, true = self.editor.overlay()
-        if self.overlay_viewer is not None:
-            self.overlay_viewer.close()
-        self.overlay_viewer = MotionViewer(
-            [ns, true],
-            colors=[NON_STAGGERED_COLOR, TRUE_POSE_COLOR],
-            labels=["non-staggered pose", "true pose at t_k"],
-            backend=self._viewer_backend,
-            window_size=(420, 320),
-        )
-        self.overlay_box.children = [self.overlay_viewer.widget]
+        if self.overlay_viewer is None:
+            from .viewer import MotionViewer
+
+            self.overlay_viewer = MotionViewer(
+                [ns, true],
+                colors=[NON_STAGGERED_COLOR, TRUE_POSE_COLOR],
+                labels=["non-staggered pose", "true pose at t_k"],
+                backend=self._viewer_backend,
+                window_size=(420, 320),
+            )
+            self.overlay_box.children = [self.overlay_viewer.widget]
+        else:
+            self.overlay_viewer.set_motions([ns, true])
 
     def _refresh_player(self) -> None:
         if not self._viewer_enabled:
             return
-        from .viewer import MotionViewer
-
-        if self.player_viewer is not None:
-            self.player_viewer.close()
         played = self.editor.evaluate()
-        self.player_viewer = MotionViewer(
-            [self.editor.motion, played],
-            colors=["#9ecae1", "#6a3d9a"],
-            labels=["original", "edited" if self.editor.staggered else "edited, non-staggered"],
-            backend=self._viewer_backend,
-            window_size=(420, 320),
-        )
-        self.player_box.children = [self.player_viewer.widget]
+        labels = ["original", "edited" if self.editor.staggered else "edited, non-staggered"]
+        if self.player_viewer is None:
+            from .viewer import MotionViewer
+
+            self.player_viewer = MotionViewer(
+                [self.editor.motion, played],
+                colors=["#9ecae1", "#6a3d9a"],
+                labels=labels,
+                backend=self._viewer_backend,
+                window_size=(420, 320),
+            )
+            self.player_box.children = [self.player_viewer.widget]
+        else:
+            self.player_viewer.set_motions([self.editor.motion, played], labels=labels)
 
     def _refresh_all(self, *, viewers: bool = True) -> None:
         ed = self.editor

@@ -54,6 +54,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from functools import lru_cache
+from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -85,7 +86,7 @@ GRAVITY = np.array([0.0, -9.81, 0.0])
 DEFAULT_TOTAL_MASS = 70.0
 
 #: de Leva (1996) male segment masses, percent of body mass (one side for limbs).
-DE_LEVA_MALE: Mapping[str, float] = {
+DE_LEVA_MALE: Mapping[str, float] = MappingProxyType({
     "head_neck": 6.94,
     "upper_trunk": 15.96,
     "middle_trunk": 16.33,
@@ -96,7 +97,7 @@ DE_LEVA_MALE: Mapping[str, float] = {
     "thigh": 14.16,
     "shank": 4.33,
     "foot": 1.37,
-}
+})
 
 
 @dataclasses.dataclass(frozen=True)

@@ -312,7 +312,7 @@ def _segments_of_u(u: Array, active: NDArray[np.bool_]) -> tuple[NDArray[np.int6
     return k0, k1, tn
 
 
-def _edit_offset_weight(sm: StaggeredMotion, k0: Array, k1: Array, tn: Array) -> Array:
+def _edit_offset_weight(sm: StaggeredMotion, k0: NDArray[Any], k1: NDArray[Any], tn: Array) -> Array:
     """Blend weight h in [0, 1] of the edit offset (0: Delta_k0, 1: Delta_k1).
 
     Flat (h = 0) between the extreme knot of ``k0`` and its editing knot when
@@ -397,7 +397,7 @@ def apply_knot_deltas(
     return out
 
 
-def _rotation_spline_at(sm: StaggeredMotion, k0: Array, k1: Array, j: Array, tn: Array) -> Array:
+def _rotation_spline_at(sm: StaggeredMotion, k0: NDArray[Any], k1: NDArray[Any], j: NDArray[Any], tn: Array) -> Array:
     """Rotation spline of joint(s) ``j`` on segments starting at ``k0`` at ``tn`` (all shape (n,))."""
     _, ctrl, theta = sm.control_points()
     return casteljau(ctrl[k0, j], theta[k0, j], tn)
@@ -558,9 +558,9 @@ def exaggerate(
         ref_root = np.broadcast_to(root[r], (K, 3))
         ref_rot = np.broadcast_to(rot[r], (K, J, 4))
     else:
-        r_root, r_rot = reference
-        ref_root = np.broadcast_to(np.asarray(r_root, dtype=float), (K, 3))
-        ref_rot = np.broadcast_to(quat.normalize(np.asarray(r_rot, dtype=float)), (K, J, 4))
+        given_root, given_rot = reference
+        ref_root = np.broadcast_to(np.asarray(given_root, dtype=float), (K, 3))
+        ref_rot = np.broadcast_to(quat.normalize(np.asarray(given_rot, dtype=float)), (K, J, 4))
     new_root = root + w_r * (root - ref_root)
     rel = quat.mul(quat.inv(ref_rot), rot)
     new_rot = quat.mul(rot, quat.exp(w_r * quat.log(rel)))
@@ -864,7 +864,7 @@ class ConstraintLayer:
         return motion.replace(rotations=rot)
 
 
-def _pose_u(times: Array, t: Array) -> Array:
+def _pose_u(times: Array, t: Array) -> NDArray[Any]:
     """Position of times ``t`` in pose-index units (clamped to the poses)."""
     k = np.clip(np.searchsorted(times, t, side="right") - 1, 0, times.size - 2)
     return k + np.clip((t - times[k]) / (times[k + 1] - times[k]), 0.0, 1.0)

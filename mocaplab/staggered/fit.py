@@ -419,11 +419,11 @@ def fit_representation(
         rotation_values=rotation_values,
         root_tangents=root_tangents,
         rotation_tangents=rotation_tangents,
-        sample_u=k0 + tn * (k1 - k0),
+        sample_u=np.asarray(k0 + tn * (k1 - k0), dtype=float),
         root_displacement=np.zeros((t.size, 3)),
         rotation_displacement=np.zeros((t.size, J, 3)),
         active=act,
-        priorities=priorities,
+        priorities=priorities,  # type: ignore[arg-type]  # None means NaN
         name=motion.name,
         translations=motion.translations,
     )

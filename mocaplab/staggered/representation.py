@@ -257,8 +257,8 @@ class StaggeredMotion:
     sample_u: Array
     root_displacement: Array
     rotation_displacement: Array
-    active: NDArray[np.bool_] | None = None
-    priorities: Array | None = None
+    active: NDArray[np.bool_] = None  # type: ignore[assignment]  # None: every pose controls every variable
+    priorities: Array = None  # type: ignore[assignment]  # None: NaN
     name: str = ""
     translations: Array | None = None
     constraints: Any = None
@@ -427,7 +427,7 @@ class StaggeredMotion:
             object.__setattr__(self, "_ctrl", ctrl)
         return ctrl
 
-    def displacement_values(self, u: Array) -> tuple[Array, Array]:
+    def displacement_values(self, u: NDArray[Any]) -> tuple[Array, Array]:
         """The displacement layer at positions ``u`` (shape (F, V)).
 
         Returns translations (F, 3) and rotation vectors (F, J, 3).
@@ -507,7 +507,7 @@ class StaggeredMotion:
         self.__dict__.pop("_parent_raw", None)
         return root, rot
 
-    def _inherit_raw(self, parent: StaggeredMotion, changed: NDArray[np.bool_]) -> None:
+    def _inherit_raw(self, parent: StaggeredMotion, changed: ArrayLike) -> None:
         """Let this (edited) object reuse ``parent``'s dense evaluation outside ``changed`` (V,)."""
         if "_raw_cache" in parent.__dict__:
             root, rot = parent.__dict__["_raw_cache"]
@@ -846,7 +846,7 @@ def casteljau(ctrl: Array, theta: Array, t: Array) -> Array:
     return lev[..., 0, :]
 
 
-def _interp_columns(xp: Array, f_root: Array, f_rot: Array, u: Array) -> tuple[Array, Array]:
+def _interp_columns(xp: Array, f_root: Array, f_rot: Array, u: NDArray[Any]) -> tuple[Array, Array]:
     """Per-variable linear interpolation of displacement samples.
 
     ``xp`` (N, V) increasing per column, ``u`` (F, V); returns (F, 3), (F, J, 3).

@@ -93,9 +93,16 @@ constraints and rigid stationary segments are heavily weighted rows, and
 modes no constraint determines are held by a tiny regulariser.  The length
 change is measured on the full path: each subsampled chord's change scales
 the arc length of the frames it spans.  Only the characters linked to the
-transformed one by constraints are re-solved.  After a transformation is
-chosen the full scene is solved once (the returned
-:class:`~mocaplab.editing.scene.EditResult`).
+transformed one by constraints are re-solved; the candidates of one
+character are evaluated together in one batch (padded arrays, batched
+dense solves), each character's systems coupled to the others' by the
+Woodbury identity.  After a transformation is chosen the full scene is
+solved once (the returned :class:`~mocaplab.editing.scene.EditResult`).
+Our addition (``DiscreteOptions.verify``): the few best candidates are
+re-scored on paths subsampled 1 in 5, and the chosen one is kept only if
+the full solve confirms the gain, because the 1/25 subsampling sometimes
+misjudges strongly curved paths and the transformation would be undone at
+the next update.
 """
 
 from __future__ import annotations
@@ -105,11 +112,12 @@ import math
 import time
 import weakref
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dpbsv as _lapack_pbsv
 
 from .. import quat
 from ..motion import Motion
@@ -380,13 +388,17 @@ class DiscreteOptions:
     max_initial : int
         Greedy steps on the first solve (``edit``); later updates apply at most one.
     verify : int
-        The best candidates (by subsampled energy) are applied and solved at
-        full resolution one by one, up to this many; the first whose
-        full-resolution equation-10 energy is lower than the current one by
-        more than ``min_gain`` is kept.  The 1/25 subsampling can misjudge
-        strongly curved paths; this guards against applying a transformation
-        that the full solve then undoes.  0: trust the subsampled energy
-        (the paper's procedure).
+        Our safeguard (0 turns it off: the paper's procedure).  The 1/25
+        subsampling can misjudge strongly curved paths, so the best
+        ``verify`` candidates are re-scored on paths subsampled
+        ``verify_subsample``; the best that still gains is applied and
+        solved at full resolution, and kept only if its full-resolution
+        equation-10 energy is lower than the current one by more than
+        ``min_gain`` (otherwise nothing changes at this update).  This
+        keeps a transformation from being applied and undone at the next
+        update.
+    verify_subsample : int
+        Subsampling ratio of that second scoring (1 in 5 frames).
     """
 
     graphs: Mapping[int, MotionGraph] | None = None
@@ -400,6 +412,7 @@ class DiscreteOptions:
     min_gain: float = 0.1
     max_initial: int = 8
     verify: int = 3
+    verify_subsample: int = 5
     threshold: float = 0.1
     window: float = 0.5
     min_gap: float = 0.3
@@ -414,8 +427,11 @@ class DiscreteOptions:
             v = float(getattr(self, name))
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"Expected `{name}` >= 0, got {getattr(self, name)!r}")
-        if int(self.subsample) < 1:
-            raise ValueError(f"Expected `subsample` >= 1, got {self.subsample!r}")
+        for name in ("subsample", "verify_subsample"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"Expected `{name}` >= 1, got {getattr(self, name)!r}")
+        if int(self.verify) < 0:
+            raise ValueError(f"Expected `verify` >= 0, got {self.verify!r}")
         if int(self.max_initial) < 0:
             raise ValueError(f"Expected `max_initial` >= 0, got {self.max_initial!r}")
         if not isinstance(self.locality, Locality) and not isinstance(self.locality, Mapping):
@@ -743,14 +759,12 @@ def enumerate_transformations(
 
     # ---- deletions: seam x -> y with src[y] a successor of src[x]
     repeated = np.array([n for n, g in where.items() if len(g) > 1], dtype=np.int64)
-    for x in np.flatnonzero(has_out[: F - 1] | np.isin(nodes[: F - 1] + 1, repeated)):
-        x = int(x)
+    for x in (int(v) for v in np.flatnonzero(has_out[: F - 1] | np.isin(nodes[: F - 1] + 1, repeated))):
         targets = list(gd.out(int(nodes[x])))
         if not gd.last[nodes[x]]:
             targets.append(int(nodes[x]) + 1)
         for d in targets:
-            for y in where.get(int(d), ()):
-                y = int(y)
+            for y in (int(v) for v in where.get(int(d), ())):
                 L = y - x - 1
                 if lmin <= L <= lmax and y <= F - 1:
                     c = gd.seam_cost(int(nodes[x]), int(d))
@@ -761,8 +775,7 @@ def enumerate_transformations(
     cand_a = np.flatnonzero(
         np.concatenate([[False], has_out[: F - 1]]) | has_in | np.concatenate([[False], seam_after[: F - 1]])
     )
-    for a in cand_a:
-        a = int(a)
+    for a in (int(v) for v in cand_a):
         if not 1 <= a <= F - 1:
             continue
         prev, nxt = int(nodes[a - 1]), int(nodes[a])
@@ -793,16 +806,16 @@ def enumerate_transformations(
                     add("insertion", a, a, s, u + 1, c1 + c2)
 
     # ---- replacements: seam x=a-1 -> s (s != src[a]) and u -> y=b (u != src[b-1])
-    outs = []
-    for x in np.flatnonzero(has_out[: F - 1]):
-        for s in gd.out(int(nodes[x])):
-            if int(s) != int(nodes[x + 1]):
-                outs.append((int(x), int(s)))
-    ins = []
-    for y in np.flatnonzero(has_in):
-        for u in gd.into(int(nodes[y])):
-            if y >= 1 and int(u) != int(nodes[y - 1]):
-                ins.append((int(y), int(u)))
+    outs: list[tuple[int, int]] = []
+    for xo in np.flatnonzero(has_out[: F - 1]):
+        for so in gd.out(int(nodes[xo])):
+            if int(so) != int(nodes[xo + 1]):
+                outs.append((int(xo), int(so)))
+    ins: list[tuple[int, int]] = []
+    for yi in np.flatnonzero(has_in):
+        for ui in gd.into(int(nodes[yi])):
+            if yi >= 1 and int(ui) != int(nodes[yi - 1]):
+                ins.append((int(yi), int(ui)))
     for x, s in outs:
         a = x + 1
         for y, u in ins:
@@ -852,14 +865,15 @@ def _protected(c: Any) -> dict[int, set[int]]:
         return {int(c.character): set(_effector_frames(c))}
     if not isinstance(c, SPATIAL + TEMPORAL):
         return res
-    frames = getattr(c, "frames", None)
+    cc: Any = c
+    frames = getattr(cc, "frames", None)
     if frames is None:
-        put(c.character, c.frame)
-        if hasattr(c, "end_frame"):
-            put(c.character, c.end_frame)
-        other = getattr(c, "other", None)
+        put(cc.character, cc.frame)
+        if hasattr(cc, "end_frame"):
+            put(cc.character, cc.end_frame)
+        other = getattr(cc, "other", None)
         if other is not None:
-            put(other, c.other_frame)
+            put(other, cc.other_frame)
         return res
     put(c.character, frames[0])
     put(c.character, frames[1])
@@ -997,7 +1011,6 @@ def prune(
 # ======================================================================
 _PENALTY = 1e4  # weight of hard constraints and rigid rows in the evaluation
 _EPS = 1e-8  # regulariser of the free modes
-_DENSE = 64  # per-character blocks up to this many unknowns are dense (small LAPACK calls)
 _BAND = {2: 5, 1: 1}  # bandwidth (in unknowns) of the path rows for 2D (space) and 1D (time)
 
 
@@ -1040,9 +1053,10 @@ def _compile(
     cols_l: list[IntArray] = []
     vals_l: list[Array] = []
     rhs, soft = [], []
-    for c in constraints:
-        if not isinstance(c, kinds):
+    for c_ in constraints:
+        if not isinstance(c_, kinds):
             continue
+        c: Any = c_
         rows = make(c)
         w = math.sqrt(penalty) if c.hard else math.sqrt(c.weight)
         for cc, vv, bb in zip(rows.cols, rows.vals, rows.rhs, strict=True):
@@ -1109,25 +1123,55 @@ def _bsearch(frames: IntArray, nvalid: IntArray, queries: IntArray) -> IntArray:
 def _gather(x: Array, cols: IntArray) -> Array:
     """``x[i, cols[i]]`` for a batch: x (c, n), cols (c or 1, ...)."""
     c = x.shape[0]
-    flat = np.broadcast_to(cols.reshape(cols.shape[0], -1), (c, int(np.prod(cols.shape[1:]))))
-    return np.take_along_axis(x, flat, axis=1).reshape((c,) + cols.shape[1:])
+    if cols.shape[0] == 1:  # the same columns for every path
+        return x[:, cols[0]]
+    flat = cols.reshape(c, -1)
+    return np.take_along_axis(x, flat, axis=1).reshape(cols.shape)
 
 
-def _normal(c: int, n: int, cols: IntArray, vals: Array) -> Array:
-    """Batched normal matrices ``sum_rows r r^T``: cols/vals (c, R, W) -> (c, n, n)."""
+def _band(c: int, n: int, u: int, cols: IntArray, vals: Array) -> Array:
+    """Batched normal matrices ``sum_rows r r^T`` in LAPACK upper band storage (c, u + 1, n).
+
+    Every row's columns must lie within ``u`` of each other.
+    """
     ci = np.arange(c, dtype=np.int64)[:, None, None, None]
     c1 = cols[:, :, :, None]
     c2 = cols[:, :, None, :]
     v = vals[:, :, :, None] * vals[:, :, None, :]
-    idx = (ci * n + c1) * n + c2
-    return np.bincount(idx.ravel(), v.ravel(), minlength=c * n * n).reshape(c, n, n)
+    m = np.broadcast_to(c1 <= c2, v.shape)
+    idx = (ci * (u + 1) + (u + c1 - c2)) * n + c2
+    idx = np.broadcast_to(idx, v.shape)
+    return np.bincount(idx[m], v[m], minlength=c * (u + 1) * n).astype(float).reshape(c, u + 1, n)
+
+
+def _pbsv(ab: Array, b: Array) -> Array:
+    """Solve one banded SPD system (LAPACK ``pbsv``: an unblocked banded Cholesky, fast for small bands)."""
+    _, x, info = _lapack_pbsv(ab, b)
+    if info != 0:  # pragma: no cover - the regulariser keeps the matrices definite
+        raise np.linalg.LinAlgError(f"banded Cholesky failed (info={info})")
+    return x
+
+
+def _pbsolve(ab: Array, b: Array) -> Array:
+    """Batched banded solves: ab (c, u + 1, n), b (c, n, k) -> (c, n, k)."""
+    return np.stack([_pbsv(ab[i], b[i]) for i in range(ab.shape[0])])
+
+
+def _local(cols: IntArray, vals: Array, u: int) -> NDArray[np.bool_]:
+    """Rows (of every path in the batch) whose columns fit in a band of width ``u``."""
+    if cols.shape[1] == 0:
+        return np.zeros(0, bool)
+    big = np.where(vals != 0, cols, cols[..., :1])
+    return np.all(big.max(axis=-1) - big.min(axis=-1) <= u, axis=0)
 
 
 def _rhs(n: int, cols: IntArray, vals: Array, rhs: Array) -> Array:
     """Batched ``M^T rhs``: cols/vals (c, R, W), rhs (c, R) -> (c, n)."""
-    c = cols.shape[0]
-    ci = np.arange(c, dtype=np.int64)[:, None, None]
-    return np.bincount((ci * n + cols).ravel(), (vals * rhs[:, :, None]).ravel(), minlength=c * n).reshape(c, n)
+    w = vals * rhs[:, :, None]
+    c = max(w.shape[0], cols.shape[0])
+    w = np.broadcast_to(w, (c,) + w.shape[1:])
+    idx = np.broadcast_to(np.arange(c, dtype=np.int64)[:, None, None] * n + cols, w.shape)
+    return np.bincount(idx.ravel(), w.ravel(), minlength=c * n).astype(float).reshape(c, n)
 
 
 def _res(cols: IntArray, vals: Array, rhs: Array, x: Array) -> Array:
@@ -1138,9 +1182,11 @@ def _res(cols: IntArray, vals: Array, rhs: Array, x: Array) -> Array:
 def _pad(*groups: tuple[IntArray, Array]) -> tuple[IntArray, Array]:
     """Concatenate row groups (c, R_g, W_g) along rows, padding widths (value 0)."""
     W = max(g[0].shape[2] for g in groups)
+    c = max(max(g[0].shape[0], g[1].shape[0]) for g in groups)
     cs, vs = [], []
     for cc, vv in groups:
-        c, R, w = cc.shape
+        cc = np.broadcast_to(cc, (c,) + cc.shape[1:])
+        _, R, w = cc.shape
         if w < W:
             cc = np.concatenate([cc, np.repeat(cc[:, :, :1], W - w, axis=2)], axis=2)
             vv = np.concatenate([vv, np.zeros((vv.shape[0], R, W - w))], axis=2)
@@ -1207,24 +1253,34 @@ class _Batch:
             q = np.stack([frames if f is None else f[np.minimum(frames, len(f) - 1)] for f in fmaps])
             return _bsearch(fr, nv, q)
 
+        # rows on this character alone that fit the band go into its own system; the
+        # others (and the rows linking characters) are coupled by the Woodbury identity
         touch_s = np.any((space.char == k) & (space.val != 0), axis=1)
-        self.s_local = np.flatnonzero(touch_s & space.intra)
-        self.s_cols = 2 * kidx(space.frame[self.s_local]) + space.coord[self.s_local][None]
+        intra = np.flatnonzero(touch_s & space.intra)
+        cols = 2 * kidx(space.frame[intra]) + space.coord[intra][None]
+        ok = _local(cols, space.val[intra][None], _BAND[2])
+        self.s_local = intra[ok]
+        self.s_cols = cols[:, ok]
         sv = np.broadcast_to(space.val[self.s_local][None], self.s_cols.shape)
         s_rhs = np.broadcast_to(space.rhs[self.s_local][None], (c, len(self.s_local)))
+        cross_s = np.union1d(cross_s, intra[~ok])
         touch_t = np.any((time.char == k) & (time.val != 0), axis=1)
-        self.t_local = np.flatnonzero(touch_t & time.intra)
-        self.t_cols = kidx(time.frame[self.t_local])
+        intra = np.flatnonzero(touch_t & time.intra)
+        cols = kidx(time.frame[intra])
+        ok = _local(cols, time.val[intra][None], _BAND[1])
+        self.t_local = intra[ok]
+        self.t_cols = cols[:, ok]
         tvl = np.broadcast_to(time.val[self.t_local][None], self.t_cols.shape)
         t_rhs = np.broadcast_to(time.rhs[self.t_local][None], (c, len(self.t_local)))
+        cross_t = np.union1d(cross_t, intra[~ok])
         self.s_soft = space.soft[self.s_local]
         self.t_soft = time.soft[self.t_local]
         self.s_loc = (self.s_cols, sv, s_rhs)
         self.t_loc = (self.t_cols, tvl, t_rhs)
         # coupled rows: U (c, r, unknowns) on this character's entries
-        self.cross_s, self.cross_t = cross_s, cross_t
-        self.Us = self._coupled(space, cross_s, k, kidx, 2, n2, c)
-        self.Ut = self._coupled(time, cross_t, k, kidx, 1, n, c)
+        self.cross_s, self.cross_t = cross_s.astype(np.int64), cross_t.astype(np.int64)
+        self.Us = self._coupled(space, self.cross_s, k, kidx, 2, n2, c)
+        self.Ut = self._coupled(time, self.cross_t, k, kidx, 1, n, c)
         # ---- phase 1: equation-3 rows weighted mbar^-3/2 (rigid ones: penalty)
         if n >= 3:
             t = X[:, 2:] - X[:, :-2]
@@ -1245,7 +1301,7 @@ class _Batch:
             rz_c = np.stack([X1 + 1, X0 + 1, X2 + 1, X0 + 1, X2, X0], axis=-1)
             rx_v = np.stack([one, -one, -lx, lx, -ly, ly], axis=-1)
             rz_v = np.stack([one, -one, -lx, lx, ly, -ly], axis=-1)
-            lap_c = np.broadcast_to(np.stack([rx_c, rz_c], axis=1).reshape(1, -1, 6), (c, 2 * (n - 2), 6))
+            lap_c = np.stack([rx_c, rz_c], axis=1).reshape(1, -1, 6)
             lap_v = (np.stack([rx_v, rz_v], axis=2) * wr[:, :, None, None]).reshape(c, -1, 6)
             self.lap_energy = np.repeat(vint & ~rig, 2, axis=1)
         else:
@@ -1253,12 +1309,13 @@ class _Batch:
             self.lap_energy = np.zeros((c, 0), bool)
         self.lap = (lap_c, lap_v)
         pad = np.repeat(~valid, 2, axis=1)
+        u2 = _BAND[2]
         c1, v1 = _pad(self.lap, self.s_loc[:2])
-        N1 = _normal(c, n2, c1, v1)
-        N1[:, np.arange(n2), np.arange(n2)] += _EPS + pad
+        N1 = _band(c, n2, u2, c1, v1)
+        N1[:, u2] += _EPS + pad
         self.x0 = np.where(pad, 0.0, X.reshape(c, -1))
         b1 = _rhs(n2, self.s_cols, sv, s_rhs) + _EPS * self.x0
-        sol = np.linalg.solve(N1, np.concatenate([b1[:, :, None], np.swapaxes(self.Us, 1, 2)], axis=2))
+        sol = _pbsolve(N1, np.concatenate([b1[:, :, None], np.swapaxes(self.Us, 1, 2)], axis=2))
         self.y1, self.Z1 = sol[:, :, 0], sol[:, :, 1:]
         # ---- phase 2: equation 7 on per-frame velocities, rows weighted 1/sqrt(mean span)
         if n >= 3:
@@ -1267,7 +1324,7 @@ class _Batch:
             g = idx[1:-1]
             cols_ = [np.stack([2 * (g - 1) + q, 2 * g + q, 2 * (g + 1) + q], axis=-1) for q in (0, 1)]
             vals_ = [np.stack([ia, -ia - ib, ib], axis=-1) * wv[..., None]] * 2
-            sec_c = np.broadcast_to(np.stack(cols_, axis=1).reshape(1, -1, 3), (c, 2 * (n - 2), 3))
+            sec_c = np.stack(cols_, axis=1).reshape(1, -1, 3)
             sec_v = np.stack(vals_, axis=2).reshape(c, -1, 3)
             self.wv = wv
         else:
@@ -1278,25 +1335,26 @@ class _Batch:
         rc = np.stack([np.stack([2 * (st + 1) + q, 2 * st + q], axis=-1) for q in (0, 1)], axis=1).reshape(1, -1, 2)
         wrs = np.repeat(np.where(rst, sq, 0.0), 2, axis=1)
         self.rig_w = wrs
-        self.rig = (np.broadcast_to(rc, (c, rc.shape[1], 2)), wrs[:, :, None] * np.array([1.0, -1.0]))
+        self.rig = (rc, wrs[:, :, None] * np.array([1.0, -1.0]))
         c2, v2 = _pad(self.sec, self.rig, self.s_loc[:2])
-        N2 = _normal(c, n2, c2, v2)
-        N2[:, np.arange(n2), np.arange(n2)] += _EPS + pad
+        N2 = _band(c, n2, u2, c2, v2)
+        N2[:, u2] += _EPS + pad
         self.N2 = N2
         self.pad2 = pad
         self.L0 = np.linalg.norm(np.diff(X, axis=1), axis=-1)
-        self.Z2 = np.linalg.solve(N2, np.swapaxes(self.Us, 1, 2)) if self.Us.shape[1] else np.zeros((c, n2, 0))
+        self.Z2 = _pbsolve(N2, np.swapaxes(self.Us, 1, 2)) if self.Us.shape[1] else np.zeros((c, n2, 0))
         # ---- time: t[i+1] - t[i] = m_i h, rows weighted 1/sqrt(m_i)
         wt = np.where(vstep, 1.0 / np.sqrt(np.maximum(span, 1.0)), 0.0)
-        tc = np.broadcast_to(np.stack([idx[1:], idx[:-1]], axis=-1)[None], (c, n - 1, 2))
+        tc = np.stack([idx[1:], idx[:-1]], axis=-1)[None]
         tv = np.stack([wt, -wt], axis=-1)
         self.tim = (tc, tv, span * self.dt * wt)
         c3, v3 = _pad((tc, tv), self.t_loc[:2])
-        Nt = _normal(c, n, c3, v3)
-        Nt[:, np.arange(n), np.arange(n)] += _EPS + ~valid
+        u1 = _BAND[1]
+        Nt = _band(c, n, u1, c3, v3)
+        Nt[:, u1] += _EPS + ~valid
         self.t0 = np.where(valid, self.start + fr * self.dt, 0.0)
         bt = _rhs(n, tc, tv, self.tim[2]) + _rhs(n, self.t_cols, tvl, t_rhs) + _EPS * self.t0
-        sol = np.linalg.solve(Nt, np.concatenate([bt[:, :, None], np.swapaxes(self.Ut, 1, 2)], axis=2))
+        sol = _pbsolve(Nt, np.concatenate([bt[:, :, None], np.swapaxes(self.Ut, 1, 2)], axis=2))
         self.yt, self.Zt = sol[:, :, 0], sol[:, :, 1:]
         self.last = nv - 1
 
@@ -1407,7 +1465,7 @@ class _Scene:
         self.pen = _PENALTY * wmax
         tang = _Tangents(paths)
         self.space = _compile(
-            constraints, SPATIAL, lambda c: spatial_rows(c, paths, layout, tang, step), layout, 2, self.pen
+            constraints, SPATIAL, lambda c: spatial_rows(c, paths, layout, cast(Any, tang), step), layout, 2, self.pen
         )
         self.time = _compile(constraints, TEMPORAL, lambda c: temporal_rows(c, layout, dts, step), layout, 1, self.pen)
         self.segments = [list(s) for s in segments]
@@ -1437,12 +1495,12 @@ class _Scene:
         self.cross_s = [self._cross(self.space, k) for k in range(K)]
         self.cross_t = [self._cross(self.time, k) for k in range(K)]
         # kept frames and systems of the unmodified characters
-        r = int(opts.subsample)
+        ratio = int(opts.subsample)
         self.base_frames: list[IntArray] = []
         self.base: list[_Batch] = []
         for k, t in enumerate(tracks):
             F = t.n_frames
-            keep = [np.arange(0, F, r), [0, F - 1]]
+            keep = [np.arange(0, F, ratio), [0, F - 1]]
             for rows in (self.space, self.time):
                 keep.append(rows.frame[(rows.char == k) & (rows.val != 0)])
             for a, b in self.segments[k]:
@@ -1619,9 +1677,9 @@ class _Scene:
         for j in members:
             rhs, ubs[j] = bat[j].phase2_rhs(x1[j])
             if bat[j].c == c:
-                y2[j] = np.linalg.solve(bat[j].N2, rhs[..., None])[..., 0]
+                y2[j] = _pbsolve(bat[j].N2, rhs[..., None])[..., 0]
             else:
-                y2[j] = np.linalg.solve(bat[j].N2[0], rhs.T).T
+                y2[j] = _pbsv(bat[j].N2[0], rhs.T).T
         x2, i2, r2 = solve(y2, Us, {j: bat[j].Z2 for j in members}, ids_s, sp_)
         e_scale = np.sum(r2[:, sp_.soft[i2]] ** 2, axis=1)
         for j in members:
@@ -1683,8 +1741,9 @@ def _map_constraint(c: Any, tracks: Sequence[Track], changed: Sequence[bool]) ->
     upd: dict[str, Any] = {}
     if c.frame is not None:
         upd["frame"] = tr.frame_of(c.frame)
-    if getattr(c, "frames", None) is not None:
-        upd["frames"] = (tr.frame_of(c.frames[0]), tr.frame_of(c.frames[1]))
+    frames: Any = getattr(c, "frames", None)
+    if frames is not None:
+        upd["frames"] = (tr.frame_of(frames[0]), tr.frame_of(frames[1]))
     if hasattr(c, "end_frame"):
         upd["end_frame"] = tr.frame_of(c.end_frame)
     if isinstance(c, (Relative, Sync)):
@@ -1745,8 +1804,10 @@ class DiscreteSession:
                 if not isinstance(g, MotionGraph):
                     raise TypeError(f"Expected graphs[{k}] to be a MotionGraph, got {type(g).__name__}")
             else:
-                g = built.get(id(m))
-                if g is None:
+                got = built.get(id(m))
+                if got is not None:
+                    g = got
+                else:
                     g = build_graph(
                         [m],
                         weights=options.weights,
@@ -1817,6 +1878,7 @@ class DiscreteSession:
     def _best(self, tracks: list[Track], inner: Any, result: Any, mapped: tuple[Any, ...]) -> Any:
         o = self.options
         t0 = time.perf_counter()
+        c0 = time.process_time()
         cands: list[Transformation] = []
         for k, tr in enumerate(tracks):
             loc = o.locality_of(k)
@@ -1834,21 +1896,16 @@ class DiscreteSession:
             )
         t1 = time.perf_counter()
         if not cands:
-            self.timings.append({"enumerate": t1 - t0, "evaluate": 0.0, "candidates": 0})
+            self.timings.append(
+                {"enumerate": t1 - t0, "evaluate": 0.0, "cpu": time.process_time() - c0, "candidates": 0}
+            )
             return None
-        starts = self.editor_options.get("start_times") or [0.0] * len(tracks)
-        scene = _Scene(
-            tracks,
-            inner.paths,
-            mapped,
-            inner.segments,
-            starts,
-            o,
-            int(self.editor_options.get("variational_step", 10)),
-        )
+        scene = self._scene(tracks, inner, mapped, subsample=int(o.subsample))
         energies = list(scene.energies(cands))
         t2 = time.perf_counter()
-        self.timings.append({"enumerate": t1 - t0, "evaluate": t2 - t1, "candidates": len(cands)})
+        self.timings.append(
+            {"enumerate": t1 - t0, "evaluate": t2 - t1, "cpu": time.process_time() - c0, "candidates": len(cands)}
+        )
         base = scene.baseline
         order = [int(i) for i in np.argsort(energies, kind="stable") if energies[i] < base - o.min_gain]
         if not order:
@@ -1866,6 +1923,32 @@ class DiscreteSession:
             "positions": result.paths,
         }
         return best, info
+
+    def _refine_ranking(
+        self, ranked: list[Transformation], tracks: list[Track], inner: Any, mapped: tuple[Any, ...]
+    ) -> list[Transformation]:
+        """Re-score the best ``verify`` candidates on paths subsampled ``verify_subsample``; keep those that still gain."""
+        o = self.options
+        top = ranked[: int(o.verify)]
+        if int(o.verify_subsample) == int(o.subsample):
+            return top
+        scene = self._scene(tracks, inner, mapped, subsample=int(o.verify_subsample))
+        fine = scene.energies(top)
+        base = scene.baseline
+        keep = [(float(e), i) for i, e in enumerate(fine) if e < base - o.min_gain]
+        return [top[i] for _, i in sorted(keep)]
+
+    def _scene(self, tracks: list[Track], inner: Any, mapped: tuple[Any, ...], *, subsample: int) -> _Scene:
+        starts = self.editor_options.get("start_times") or [0.0] * len(tracks)
+        return _Scene(
+            tracks,
+            inner.paths,
+            mapped,
+            inner.segments,
+            starts,
+            dataclasses.replace(self.options, subsample=subsample),
+            int(self.editor_options.get("variational_step", 10)),
+        )
 
     def update(self, constraints: Sequence[Any]) -> Any:
         """Algorithm 1 for one constraint update; returns the EditResult of the transformed scene."""
@@ -1885,8 +1968,10 @@ class DiscreteSession:
             ranked, info = found
             accepted = None
             t0 = time.perf_counter()
+            if o.verify:
+                ranked = self._refine_ranking(ranked, tracks, inner, mapped)
             current = deformation_energy(result, cs=o.cs, ct=o.ct) if o.verify else math.nan
-            for best in ranked[: max(1, int(o.verify))]:
+            for best in ranked[:1] if o.verify else ranked:
                 k = best.character
                 trial = list(tracks)
                 trial[k] = apply_transformation(tracks[k], best, blend=o.blend)

@@ -74,22 +74,21 @@ def test_errors_show_in_the_status_line(explorer) -> None:
     assert "KeyError" in x.status.value
 
 
-def test_overlay_viewers_with_static_backend(cmu, monkeypatch) -> None:
+def test_3d_view_with_static_backend(cmu, monkeypatch) -> None:
     monkeypatch.setenv("MOCAPLAB_JUPYTER_BACKEND", "static")
     from mocaplab.widgets import StaggeredExplorer
 
     x = StaggeredExplorer(cmu("16_05"), max_poses=6, backend="agg", optimize=False)
     try:
-        assert x.overlay_viewer is not None and len(x.overlay_viewer.characters) == 2
-        labels = [c.label for c in x.overlay_viewer.characters]
-        assert labels == ["non-staggered pose", "true pose at t_k"]
-        first = x.overlay_viewer
+        v = x.viewer
+        labels = [c.label for c in v.characters]
+        assert labels == ["original", "played", "non-staggered pose", "true pose at t_k"]
         x.pose_list.value = 2
-        assert x.overlay_viewer is first  # updated in place
-        assert "pose 2" in x.overlay_viewer.characters[1].motion.name
-        assert len(x.player_viewer.characters) == 2
+        assert x.viewer is v  # updated in place
+        assert "pose 2" in v.characters[3].motion.name
+        assert v.time == pytest.approx(x.editor.current.times[2], abs=1.0 / v.fps)
         x.toggle.value = False
-        assert x.player_viewer.characters[1].label == "edited, non-staggered"
+        assert v.characters[1].label == "played, non-staggered"
     finally:
         x.close()
 

@@ -14,10 +14,10 @@ timing refinements.  :class:`StaggeredExplorer` shows, for one clip:
   timing bound ``tau`` (seeded), relative **exaggeration** ``w_r`` against
   the average pose, and the **pose count** (culling by priority);
 * the **pose list** with the priorities ``w_k`` and number of refined knots;
-* a 3D overlay (:class:`~mocaplab.widgets.MotionViewer`) of the
-  non-staggered pose (orange) against the true pose at ``t_k`` (yellow) of
-  the selected pose (Figure 6), and a 3D player of the current motion over
-  the original.
+* one 3D view (:class:`~mocaplab.widgets.MotionViewer`) playing the current
+  motion (purple) over the original (pale blue), with the selected pose's
+  non-staggered pose (orange) and true pose at ``t_k`` (yellow) standing
+  where they happen (Figure 6); selecting a pose moves the clock to ``t_k``.
 
 Every control forwards its value in one line to the core editor; the widget
 only draws.  Messages (timing warnings, rejected edits) appear in a status
@@ -119,10 +119,8 @@ class StaggeredExplorer:
         self._viewer_backend = viewer_backend
         self._build_controls()
         self._build_figure(backend)
-        self.overlay_box = W.Box(layout=W.Layout(min_height="40px"))
-        self.player_box = W.Box(layout=W.Layout(min_height="40px"))
-        self.overlay_viewer: Any = None
-        self.player_viewer: Any = None
+        self.view_box = W.Box(layout=W.Layout(min_height="40px"))
+        self.viewer: Any = None
         self.status = W.HTML(value="")
         self.status.add_class("mocaplab-staggered-status")
         self.curves_info = W.HTML(value="", layout=W.Layout(display="none"))
@@ -187,7 +185,8 @@ class StaggeredExplorer:
         if value is None or self._syncing:
             return
         self.editor.select(int(value))
-        self._refresh_overlay()
+        self._draw_curves()
+        self._refresh_view()
 
     # -------------------------------------------------------------- figure
     def _build_figure(self, backend: str) -> None:
@@ -246,43 +245,36 @@ class StaggeredExplorer:
         finally:
             self._syncing = False
 
-    def _refresh_overlay(self) -> None:
-        self._draw_curves()
+    def _refresh_view(self) -> None:
+        """One 3D view: original and played motion, and the selected pose's
+        non-staggered (orange) and true (yellow) poses standing where they
+        happen (Figure 6); the clock is put at ``t_k``."""
         if not self._viewer_enabled:
             return
-        ns, true = self.editor.overlay()
-        if self.overlay_viewer is None:
+        ed = self.editor
+        ns, true = ed.overlay()
+        motions = [ed.motion, ed.evaluate(), ns, true]
+        labels = [
+            "original",
+            "played" if ed.staggered else "played, non-staggered",
+            "non-staggered pose",
+            "true pose at t_k",
+        ]
+        if self.viewer is None:
             from .viewer import MotionViewer
 
-            self.overlay_viewer = MotionViewer(
-                [ns, true],
-                colors=[NON_STAGGERED_COLOR, TRUE_POSE_COLOR],
-                labels=["non-staggered pose", "true pose at t_k"],
-                backend=self._viewer_backend,
-                window_size=(420, 320),
-            )
-            self.overlay_box.children = [self.overlay_viewer.widget]
-        else:
-            self.overlay_viewer.set_motions([ns, true])
-
-    def _refresh_player(self) -> None:
-        if not self._viewer_enabled:
-            return
-        played = self.editor.evaluate()
-        labels = ["original", "edited" if self.editor.staggered else "edited, non-staggered"]
-        if self.player_viewer is None:
-            from .viewer import MotionViewer
-
-            self.player_viewer = MotionViewer(
-                [self.editor.motion, played],
-                colors=["#9ecae1", "#6a3d9a"],
+            # a single viewer: several trame views in one output are fragile
+            self.viewer = MotionViewer(
+                motions,
+                colors=["#c6dbef", "#6a3d9a", NON_STAGGERED_COLOR, TRUE_POSE_COLOR],
                 labels=labels,
                 backend=self._viewer_backend,
-                window_size=(420, 320),
+                window_size=(640, 360),
             )
-            self.player_box.children = [self.player_viewer.widget]
+            self.view_box.children = [self.viewer.widget]
         else:
-            self.player_viewer.set_motions([self.editor.motion, played], labels=labels)
+            self.viewer.set_motions(motions, labels=labels)
+        self.viewer.set_time(float(ed.current.times[ed.selected]))
 
     def _refresh_all(self, *, viewers: bool = True) -> None:
         ed = self.editor
@@ -296,8 +288,7 @@ class StaggeredExplorer:
         self._refresh_list()
         self._draw_curves()
         if viewers:
-            self._refresh_overlay()
-            self._refresh_player()
+            self._refresh_view()
 
     # --------------------------------------------------------------- layout
     @property
@@ -317,8 +308,7 @@ class StaggeredExplorer:
                     self.pose_list,
                 ]
             )
-            views = W.HBox([self.overlay_box, self.player_box])
-            self._box = W.VBox([W.HBox([canvas, controls]), views, self.status, self.curves_info])
+            self._box = W.VBox([W.HBox([canvas, controls]), self.view_box, self.status, self.curves_info])
             self._box.add_class("mocaplab-staggered-explorer")
         return self._box
 
@@ -328,10 +318,9 @@ class StaggeredExplorer:
         display(self.widget)
 
     def close(self) -> None:
-        """Release the 3D render windows."""
-        for v in (self.overlay_viewer, self.player_viewer):
-            if v is not None:
-                v.close()
+        """Release the 3D render window."""
+        if self.viewer is not None:
+            self.viewer.close()
 
     def __repr__(self) -> str:
         ed = self.editor

@@ -731,6 +731,16 @@ def locate(
     tn = np.empty((F, n))
     full = bool(active.all())
     all_idx = np.arange(K)
+    if full and K >= 2:
+        Tc = knots[:, cols]
+        s = _search_columns(Tc, t if t.ndim == 1 else t[:, cols]) - 1
+        np.clip(s, 0, K - 2, out=s)
+        c_idx = np.arange(n)
+        a, b = Tc[s, c_idx], Tc[s + 1, c_idx]
+        tc = t[:, None] if t.ndim == 1 else t[:, cols]
+        x = (tc - a) / (b - a)
+        np.clip(x, 0.0, 1.0, out=x)
+        return s, s + 1, x
     for c, i in enumerate(cols):
         idx = all_idx if full else np.flatnonzero(active[:, i])
         T = knots[idx, i]
@@ -846,6 +856,27 @@ def casteljau(ctrl: Array, theta: Array, t: Array) -> Array:
     return lev[..., 0, :]
 
 
+def _search_columns(sorted_cols: Array, queries: NDArray[Any]) -> NDArray[np.int64]:
+    """``searchsorted(sorted_cols[:, c], queries[:, c], side="right")`` for every column at once.
+
+    ``sorted_cols`` (N, V) increasing per column; ``queries`` (F, V) or (F,).
+    The columns are laid end to end with offsets larger than their range,
+    so one search serves all of them (order is kept by the monotone
+    rounding of the offset sums; exact ties stay ties).
+    """
+    N, V = sorted_cols.shape
+    lo = min(float(sorted_cols.min()), float(np.min(queries)))
+    hi = max(float(sorted_cols.max()), float(np.max(queries)))
+    step = (hi - lo) + 1.0
+    off = (np.arange(V) * step) - lo
+    flat = (sorted_cols + off).T.ravel()
+    q = np.asarray(queries, dtype=float)
+    q = (q[:, None] if q.ndim == 1 else q) + off
+    # column-major queries are increasing runs: numpy's search reuses its last bounds
+    pos = np.searchsorted(flat, q.T.ravel(), side="right").reshape(q.shape[::-1]).T
+    return pos - np.arange(V) * N
+
+
 def _interp_columns(xp: Array, f_root: Array, f_rot: Array, u: NDArray[Any]) -> tuple[Array, Array]:
     """Per-variable linear interpolation of displacement samples.
 
@@ -854,18 +885,18 @@ def _interp_columns(xp: Array, f_root: Array, f_rot: Array, u: NDArray[Any]) -> 
     """
     N, V = xp.shape
     F = u.shape[0]
-    lo = np.empty((F, V), dtype=np.int64)
-    w = np.empty((F, V))
-    for i in range(V):
-        x = xp[:, i]
-        idx = np.clip(np.searchsorted(x, u[:, i], side="right") - 1, 0, max(N - 2, 0))
-        if N == 1:
-            lo[:, i], w[:, i] = 0, 0.0
-            continue
-        x0, x1 = x[idx], x[idx + 1]
-        span = x1 - x0
-        lo[:, i] = idx
-        w[:, i] = np.clip(np.where(span > 0, (u[:, i] - x0) / np.where(span > 0, span, 1.0), 0.0), 0.0, 1.0)
+    if N == 1:
+        lo = np.zeros((F, V), dtype=np.int64)
+        w = np.zeros((F, V))
+    else:
+        lo = _search_columns(xp, u) - 1
+        np.clip(lo, 0, N - 2, out=lo)
+        cols = np.arange(V)
+        x0 = xp[lo, cols]
+        span = xp[lo + 1, cols] - x0
+        ok = span > 0
+        w = np.where(ok, (u - x0) / np.where(ok, span, 1.0), 0.0)
+        np.clip(w, 0.0, 1.0, out=w)
     hi = np.minimum(lo + 1, N - 1)
     r0 = f_root[lo[:, 0]]
     root = r0 + w[:, :1] * (f_root[hi[:, 0]] - r0)

@@ -22,45 +22,40 @@ press on any handle, release unmoved    ``remove(i)``
 mathematics is in :class:`mocaplab.editing.SceneEditor`; this view only draws its
 result.  Handle positions (data: ``(time, track)``; pixels) are published as
 JSON in the hidden HTML widget ``handles_info`` (CSS class
-``mocaplab-time-handles``) for browser tests.
+``mocaplab-time-handles``) for browser tests.  The gesture machinery is shared
+with :class:`~mocaplab.widgets.PathEditor` (``widgets/_drag.py``).
 """
 
 from __future__ import annotations
 
-import html
-import json
 from collections.abc import Sequence
 from typing import Any
 
 import ipywidgets as W
 import numpy as np
 from matplotlib.collections import LineCollection
-from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from mocaplab import editing
 
-from .path_editor import (
+from ._drag import (
     Backend,
-    _CanvasView,
-    _core_residual,
-    _current_result,
-    _Drag,
-    _DragView,
-    _event_data,
-    _frame_of,
-    _guarded,
-    _is,
-    _kind_of,
-    _other_frame_of,
-    _plain_ticks,
+    Drag,
+    DragView,
+    Handle,
+    Marks,
     character_colors,
+    core_residual,
+    frame_of,
+    is_a,
+    kind_of,
+    other_frame_of,
 )
 
 __all__ = ["TimeTrackEditor"]
 
 
-class TimeTrackEditor(_DragView):
+class TimeTrackEditor(DragView):
     """Per-character time tracks with draggable time handles (Figure 5 of Kim et al. 2009).
 
     Parameters
@@ -93,10 +88,16 @@ class TimeTrackEditor(_DragView):
         last error (CSS class ``mocaplab-time-status``).
     widget : ipywidgets.VBox
         The layout (CSS class ``mocaplab-time-editor``).
+    handles_info : ipywidgets.HTML
+        Hidden; :meth:`handle_positions` as JSON (CSS class
+        ``mocaplab-time-handles``): kinds ``"time"`` and ``"duration"``,
+        ``data`` is ``[time, track]``.
     """
 
     status_class = "mocaplab-time-status"
     handles_class = "mocaplab-time-handles"
+    canvas_class = "mocaplab-time-canvas"
+    editor_class = "mocaplab-time-editor"
 
     def __init__(
         self,
@@ -124,22 +125,18 @@ class TimeTrackEditor(_DragView):
 
         if figsize is None:
             figsize = (8.0, 1.2 + 0.9 * n)
-        self.figure = Figure(figsize=figsize, dpi=100, layout="constrained")
-        self._view = _CanvasView(self.figure, backend)
-        self.canvas = self._view.canvas
-        if self._view.interactive:
-            self.canvas.add_class("mocaplab-time-canvas")
-        self.ax = self.figure.add_subplot()
-        self.ax.set_title(title)
+        self._build_figure(figsize, backend, title)
         self.ax.set_xlabel("reference time (s)")
-        _plain_ticks(self.ax)
         self.ax.set_yticks(range(n), self.labels)
         self.ax.set_ylim(n - 0.4, -0.7)  # track 0 on top
         self.ax.grid(True, axis="x", alpha=0.3)
         for k, (t, c) in enumerate(zip(self.original_times, self.colors, strict=True)):
             self.ax.add_collection(_ticks(t, k - 0.42, k - 0.3, color=c, alpha=0.35, lw=0.6))
             self.ax.plot([t[0], t[-1]], [k, k], color=c, lw=1.0, alpha=0.6)
-        self._tracks = [_ticks(t, k - 0.2, k + 0.2, color=c, lw=0.8) for k, (t, c) in enumerate(zip(self.original_times, self.colors, strict=True))]
+        self._tracks = [
+            _ticks(t, k - 0.2, k + 0.2, color=c, lw=0.8)
+            for k, (t, c) in enumerate(zip(self.original_times, self.colors, strict=True))
+        ]
         for coll in self._tracks:
             self.ax.add_collection(coll)
         (self._abs,) = self.ax.plot([], [], "v", ms=11, mfc="white", mec="k", mew=2.0, zorder=5)
@@ -147,43 +144,10 @@ class TimeTrackEditor(_DragView):
         (self._dur_bars,) = self.ax.plot([], [], "-", color="k", lw=2.5, alpha=0.7, zorder=4)
         (self._dur_ends,) = self.ax.plot([], [], "s", ms=9, mfc="gold", mec="k", zorder=6)
         (self._syncs,) = self.ax.plot([], [], "-", color="crimson", lw=1.5, zorder=3)
-
-        self._handles: list[tuple[int, str, NDArray[np.float64]]] = []
-        self._connect(self.canvas)
-        self.widget = W.VBox([self._view.widget, self.status, self.handles_info])
-        self.widget.add_class("mocaplab-time-editor")
-        self._fit_view()
-        self._redraw(final=True)
-        self._set_status("press a frame tick to pin its time; drag a handle to move it; click a handle to remove it")
-
-    # ------------------------------------------------------------------ public
-    def refresh(self) -> None:
-        """Redraw from the editor's current result (after editing it in code)."""
-        self._apply(_current_result(self.editor))
-        self._fit_view(grow_only=True)
-        self._redraw(final=True)
-
-    def handle_positions(self) -> list[dict[str, Any]]:
-        """Where each handle is drawn: ``{"index", "kind", "data": [time, track], "pixel", "css"}``.
-
-        ``pixel`` is in matplotlib display coordinates (figure pixels from the
-        bottom-left), ``css`` in CSS pixels from the canvas' top-left corner.
-        """
-        out = []
-        ratio = float(getattr(self.canvas, "device_pixel_ratio", 1.0) or 1.0)
-        height = self.figure.bbox.height
-        for index, kind, xy in self._handles:
-            px, py = self.ax.transData.transform(xy)
-            out.append(
-                {
-                    "index": index,
-                    "kind": kind,
-                    "data": [float(xy[0]), float(xy[1])],
-                    "pixel": [float(px), float(py)],
-                    "css": [float(px / ratio), float((height - py) / ratio)],
-                }
-            )
-        return out
+        self._open(
+            W.VBox([self._view.widget, self.status, self.handles_info]),
+            "press a frame tick to pin its time; drag a handle to move it; click a handle to remove it",
+        )
 
     # ------------------------------------------------------------------ drawing
     def _fit_view(self, *, grow_only: bool = False) -> None:
@@ -202,56 +166,35 @@ class TimeTrackEditor(_DragView):
         self.ax.set_xlim(lo, hi)
         self.figure.draw_without_rendering()  # settle the layout: handle pixels as drawn
 
-    def _redraw(self, *, final: bool = False) -> None:
+    def _draw_result(self, *, final: bool) -> None:
         for k, (coll, times) in enumerate(zip(self._tracks, self.result.times, strict=True)):
-            coll.set_segments(_segments(np.asarray(times, dtype=float), k - 0.2, k + 0.2))
-        self._collect_handles()
-        self.handles_info.value = html.escape(json.dumps(self.handle_positions()))
-        self._view.draw(final=final)
+            coll.set_segments(list(_segments(np.asarray(times, dtype=float), k - 0.2, k + 0.2)))
 
     def _collect_handles(self) -> None:
         times = [np.asarray(t, dtype=float) for t in self.result.times]
-        handles: list[tuple[int, str, NDArray[np.float64]]] = []
-        soft, hard, bars, ends, syncs = [], [], [], [], []
-        nan = np.full(2, np.nan)
+        handles: list[Handle] = []
+        marks = Marks([self._abs, self._abs_hard, self._dur_bars, self._dur_ends, self._syncs])
         for i, c in enumerate(self.editor.constraints):
-            if _is(c, "AbsoluteTime"):
+            if is_a(c, "AbsoluteTime"):
                 k = int(c.character)
                 xy = np.array([float(c.time), k - 0.25])
-                (hard if getattr(c, "hard", False) else soft).append(xy)
+                marks.point(self._abs_hard if getattr(c, "hard", False) else self._abs, xy)
                 handles.append((i, "time", xy))
-            elif _is(c, "Duration"):
+            elif is_a(c, "Duration"):
                 k, f = int(c.character), int(c.frame)
                 start = times[k][f]
                 end = np.array([start + float(c.duration), k + 0.3])
-                bars += [np.array([start, k + 0.3]), end, nan]
-                ends.append(end)
+                marks.segment(self._dur_bars, (start, k + 0.3), end)
+                marks.point(self._dur_ends, end)
                 handles.append((i, "duration", end))
-            elif _is(c, "Sync"):
-                a, fa = int(c.character), _frame_of(c)
-                b, fb = int(c.other), _other_frame_of(c)
-                syncs += [np.array([times[a][fa], a]), np.array([times[b][fb], b]), nan]
+            elif is_a(c, "Sync"):
+                a, fa = int(c.character), frame_of(c)
+                b, fb = int(c.other), other_frame_of(c)
+                marks.segment(self._syncs, (times[a][fa], a), (times[b][fb], b))
         self._handles = handles
-
-        def put(line: Any, pts: list[NDArray[np.float64]]) -> None:
-            arr = np.asarray(pts, dtype=float).reshape(-1, 2)
-            line.set_data(arr[:, 0], arr[:, 1])
-
-        put(self._abs, soft)
-        put(self._abs_hard, hard)
-        put(self._dur_bars, bars)
-        put(self._dur_ends, ends)
-        put(self._syncs, syncs)
+        marks.draw()
 
     # ------------------------------------------------------------------ picking
-    def _pick_handle(self, event: Any) -> tuple[int, str, NDArray[np.float64]] | None:
-        if not self._handles:
-            return None
-        px = self.ax.transData.transform(np.array([h[2] for h in self._handles]))
-        d = np.hypot(px[:, 0] - event.x, px[:, 1] - event.y)
-        j = int(np.argmin(d))
-        return self._handles[j] if d[j] <= self.pick_radius else None
-
     def _pick_tick(self, event: Any) -> tuple[int, int] | None:
         # the track under the mouse, then the nearest tick in time (pixels)
         k = int(round(event.ydata))
@@ -264,93 +207,45 @@ class TimeTrackEditor(_DragView):
         return (k, i) if d[i] <= self.pick_radius else None
 
     # ------------------------------------------------------------------ events
-    @_guarded
-    def _on_press(self, event: Any) -> None:
-        if event.inaxes is not self.ax or event.button != 1 or self._toolbar_busy(self.canvas):
-            return
-        self.last_error = None
-        press = (float(event.x), float(event.y))
+    def _press(self, event: Any, press: tuple[float, float]) -> None:
         handle = self._pick_handle(event)
         if handle is not None:
             index, kind, _ = handle
-            c = self.editor.constraints[index]
-            anchor = float(np.asarray(self.result.times[int(c.character)])[int(c.frame)]) if kind == "duration" else None
-            self._drag = _Drag(index, kind, press, created=False, anchor=anchor)
-            self._describe(index, prefix="picked")
+            anchor = None
+            if kind == "duration":  # the start frame's time at press time
+                c = self.editor.constraints[index]
+                anchor = float(np.asarray(self.result.times[int(c.character)])[int(c.frame)])
+            self._grab(index, kind, press, anchor)
             return
         tick = self._pick_tick(event)
         if tick is None:
             return
         k, f = tick
-        t = float(np.asarray(self.result.times[k])[f])
-        index = self._add(editing.AbsoluteTime(k, f, t))
-        self._drag = _Drag(index, "time", press, created=True)
-        self._redraw()
-        self._describe(index, prefix="pinned")
+        self._create(editing.AbsoluteTime(k, f, float(np.asarray(self.result.times[k])[f])), "time", press)
 
-    @_guarded
-    def _on_motion(self, event: Any) -> None:
-        drag = self._drag
-        if drag is None or event.x is None or event.y is None:
-            return
-        if not drag.moved and not self._moved(event):
-            return
-        drag.moved = True
-        self._move_to(event)
-
-    def _move_to(self, event: Any) -> None:
-        """Solve with the dragged handle at the time under the mouse (also outside the axes)."""
-        drag = self._drag
-        assert drag is not None  # internal invariant
-        drag.last_px = (float(event.x), float(event.y))
-        x = float(_event_data(self.ax, event)[0])
-        target = x if drag.kind == "time" else x - drag.anchor
-        self._apply(_current_result(self.editor, self.editor.drag(drag.index, target)))
-        self._redraw()
-        self._describe(drag.index, prefix="drag")
-
-    @_guarded
-    def _on_release(self, event: Any) -> None:
-        drag = self._drag
-        if drag is None:
-            return
-        try:
-            if self.last_error is None and event.x is not None and (drag.moved or self._moved(event)):
-                if drag.last_px != (float(event.x), float(event.y)):
-                    drag.moved = True
-                    self._move_to(event)  # the front end may drop motion events: end under the mouse
-        finally:
-            self._drag = None
-        if self.last_error is not None:
-            pass  # keep the error of the failed update on show
-        elif not drag.moved and not drag.created:
-            c = self.editor.constraints[drag.index]
-            self._remove(drag.index)
-            self._set_status(f"removed {_kind_of(c)} #{drag.index} (character {int(c.character)}, frame {_frame_of(c)})")
-        elif drag.moved:
-            self._describe(drag.index, prefix="moved")
-        self.result = _current_result(self.editor)
-        self._fit_view(grow_only=True)
-        self._redraw(final=True)
+    def _drag_target(self, drag: Drag, mouse: NDArray[np.float64]) -> float:
+        """The time under the mouse (an AbsoluteTime's target), minus the start's time for a Duration."""
+        x = float(mouse[0])
+        return x if drag.kind == "time" else x - drag.anchor
 
     # ------------------------------------------------------------------ status
     def _describe(self, index: int, *, prefix: str) -> None:
         c = self.editor.constraints[index]
-        k, f = int(c.character), _frame_of(c)
+        k, f = int(c.character), frame_of(c)
         t = np.asarray(self.result.times[k], dtype=float)
         steps = [np.diff(np.asarray(tt, dtype=float)) for tt in self.result.times if len(tt) > 1]
         min_step = min(float(s.min()) for s in steps) if steps else float("nan")
-        if _is(c, "AbsoluteTime"):
+        if is_a(c, "AbsoluteTime"):
             residual = abs(t[f] - float(c.time))
             text = f"{prefix} AbsoluteTime #{index} · character {k} frame {f} · t = {float(c.time):.3f} s"
-        elif _is(c, "Duration"):
+        elif is_a(c, "Duration"):
             e = int(c.end_frame)
             residual = abs(t[e] - t[f] - float(c.duration))
             text = f"{prefix} Duration #{index} · character {k} frames {f}-{e} · duration {float(c.duration):.3f} s"
         else:
             residual = float("nan")
-            text = f"{prefix} {_kind_of(c)} #{index} · character {k} frame {f}"
-        core = _core_residual(self.result, index)
+            text = f"{prefix} {kind_of(c)} #{index} · character {k} frame {f}"
+        core = core_residual(self.result, index)
         residual = residual if core is None else core
         self._set_status(f"{text} · residual {residual:.2e} s · min step {min_step:.4f} s")
 
@@ -365,4 +260,4 @@ def _segments(times: NDArray[np.float64], y0: float, y1: float) -> NDArray[np.fl
 
 
 def _ticks(times: NDArray[np.float64], y0: float, y1: float, **style: Any) -> LineCollection:
-    return LineCollection(_segments(times, y0, y1), **style)
+    return LineCollection(list(_segments(times, y0, y1)), **style)

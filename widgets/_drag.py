@@ -1,0 +1,538 @@
+"""Drag machinery shared by the editing widgets (:mod:`.path_editor`, :mod:`.time_track`).
+
+Both editors are thin views over one :class:`mocaplab.editing.SceneEditor`:
+a matplotlib figure whose handles the mouse drags, a status line and a hidden
+HTML widget publishing where the handles are drawn.  :class:`DragView` holds
+everything they share; a subclass supplies only what is specific to it:
+
+=========================  ===================================================
+subclass method             what it does
+=========================  ===================================================
+``_press(event, press)``    pick what the press is on: :meth:`DragView._grab`
+                            an existing handle, or :meth:`DragView._create` a
+                            constraint there
+``_drag_target(drag, xy)``  the editor's ``drag`` target for the mouse at
+                            data coordinates ``xy`` (None: skip this event)
+``_collect_handles()``      draw the constraints (:class:`Marks`), set
+                            ``self._handles``
+``_draw_result(final=)``    draw the current result (paths, tracks)
+``_fit_view(grow_only=)``   axis limits that show the result and the handles
+``_describe(index, ...)``   the status text of constraint ``index``
+``_edited()``               optional: after a gesture (e.g. update a 3D view)
+=========================  ===================================================
+
+The gesture itself is the same in both widgets: a press on a handle grabs it,
+a press elsewhere may create a constraint; the drag starts once the mouse has
+moved more than ``click_tolerance`` pixels and calls ``editor.drag`` on every
+motion event; the release applies its own position too (front ends may drop
+motion events); a press and release without moving on an existing handle
+removes it.  Every callback is :func:`guarded`: an exception is shown in the
+status line (CSS class ``mocaplab-error``) and kept in ``last_error`` instead
+of being lost in the kernel log.
+"""
+
+from __future__ import annotations
+
+import functools
+import html
+import io
+import json
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import ipywidgets as W
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from numpy.typing import NDArray
+
+from mocaplab import editing
+
+Backend = Literal["auto", "ipympl", "agg"]
+
+#: One draggable handle: (constraint index, kind, position in data coordinates, shape (2,)).
+Handle = tuple[int, str, NDArray[np.float64]]
+
+#: Colours of characters 0, 1, ... (matplotlib's tab10 cycle).
+_TAB10 = (
+    "#1f77b4",
+    "#ff7f0e",
+    "#2ca02c",
+    "#d62728",
+    "#9467bd",
+    "#8c564b",
+    "#e377c2",
+    "#7f7f7f",
+    "#bcbd22",
+    "#17becf",
+)
+
+
+def character_colors(n: int) -> list[str]:
+    """Colours for ``n`` characters (the tab10 cycle, repeated)."""
+    return [_TAB10[k % len(_TAB10)] for k in range(n)]
+
+
+# --------------------------------------------------------------------------- canvas
+class CanvasView:
+    """A matplotlib figure with an ipywidgets face.
+
+    With ipympl the canvas itself is a DOM widget (interactive in JupyterLab,
+    and its mouse events can also be fed by hand).  Without it, the figure is
+    drawn with Agg into an :class:`ipywidgets.Image` refreshed on request.
+    """
+
+    def __init__(self, figure: Figure, backend: Backend) -> None:
+        self.figure = figure
+        self.canvas = make_canvas(figure, backend=backend)
+        self.interactive = isinstance(self.canvas, W.DOMWidget)
+        self.widget: W.DOMWidget
+        if self.interactive:
+            self.widget = self.canvas
+        else:
+            self.widget = W.Image(format="png")
+            self.render()
+
+    def draw(self, *, final: bool = False) -> None:
+        """Redraw: ipympl draws lazily on the front end's request; Agg renders a PNG when ``final``."""
+        if self.interactive:
+            self.canvas.draw_idle()
+        elif final:
+            self.render()
+
+    def render(self) -> None:
+        buf = io.BytesIO()
+        self.figure.savefig(buf, format="png")
+        self.widget.value = buf.getvalue()
+
+
+def make_canvas(figure: Figure, *, backend: Backend = "auto") -> Any:
+    """Attach a canvas to ``figure``: an ipympl widget canvas, or Agg.
+
+    ``backend="auto"`` uses ipympl when it is installed (the canvas works with
+    or without a running front end, and independently of ``%matplotlib``),
+    else Agg.  The figure is not registered with pyplot, so it is never shown
+    twice and never needs ``plt.close``.
+    """
+    if backend not in ("auto", "ipympl", "agg"):
+        raise ValueError(f"Expected `backend` to be 'auto', 'ipympl' or 'agg', got {backend!r}")
+    if backend in ("auto", "ipympl"):
+        try:
+            from ipympl.backend_nbagg import Canvas, FigureManager
+        except ImportError:
+            if backend == "ipympl":
+                raise
+        else:
+            canvas = Canvas(figure)
+            FigureManager(canvas, id(figure) % 100_000)
+            canvas.header_visible = False
+            canvas.footer_visible = False
+            canvas.resizable = False
+            canvas.toolbar_position = "left"
+            canvas.toolbar_visible = "fade-in-fade-out"  # do not hide the tick labels
+            return canvas
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    return FigureCanvasAgg(figure)
+
+
+# --------------------------------------------------------------------------- gesture
+@dataclass
+class Drag:
+    """State of one mouse gesture."""
+
+    index: int  # constraint index in the editor
+    kind: str  # "pin", "direction", "time", "duration"
+    press_px: tuple[float, float]
+    created: bool  # the press added the constraint
+    moved: bool = False
+    anchor: Any = None  # kind-specific data fixed at press time
+    last_px: tuple[float, float] | None = None  # where the last update put the handle
+
+
+def guarded(method: Callable[..., Any]) -> Callable[..., Any]:
+    """Run a callback; show its exception in the widget's status instead of losing it."""
+
+    @functools.wraps(method)
+    def wrapper(self: DragView, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return method(self, *args, **kwargs)
+        except Exception as exc:  # noqa: BLE001 - shown to the user, kept in .last_error
+            self._show_error(exc)
+            return None
+
+    return wrapper
+
+
+class DragView:
+    """Common parts of the path and time-track editors: editor, canvas, status, gestures.
+
+    Subclasses set the CSS classes below, call :meth:`_build_figure` and
+    :meth:`_open` from their constructor and implement the methods listed in
+    the module docstring.
+    """
+
+    status_class = "mocaplab-status"
+    handles_class = "mocaplab-handles"
+    canvas_class = "mocaplab-canvas"
+    editor_class = "mocaplab-editor"
+
+    figure: Figure
+    ax: Axes
+    canvas: Any
+    widget: W.Box
+
+    def __init__(
+        self,
+        editor_or_characters: Any,
+        constraints: Sequence[Any] | None,
+        *,
+        pick_radius: float,
+        editor_options: dict[str, Any] | None = None,
+    ) -> None:
+        if not pick_radius > 0:
+            raise ValueError(f"Expected `pick_radius` > 0 pixels, got {pick_radius!r}")
+        self.editor = as_scene_editor(editor_or_characters, constraints, editor_options)
+        self.pick_radius = float(pick_radius)
+        self.click_tolerance = 3.0  # pixels a press may move and still count as a click
+        self.status = W.HTML(value="")
+        self.status.add_class(self.status_class)
+        self.handles_info = W.HTML(value="[]", layout=W.Layout(display="none"))
+        self.handles_info.add_class(self.handles_class)
+        self.last_error: BaseException | None = None
+        self._drag: Drag | None = None
+        self._handles: list[Handle] = []
+        self._listeners: list[Callable[[Any], None]] = []
+        self.result = current_result(self.editor)
+
+    # -- public
+    def on_edit(self, callback: Callable[[Any], None]) -> None:
+        """Call ``callback(result)`` after every edit made through this view."""
+        self._listeners.append(callback)
+
+    @property
+    def constraints(self) -> tuple[Any, ...]:
+        """The editor's constraints (a tuple)."""
+        return tuple(self.editor.constraints)
+
+    def handle_positions(self) -> list[dict[str, Any]]:
+        """Where each handle is drawn.
+
+        Returns
+        -------
+        list of dict
+            ``{"index": constraint index, "kind": handle kind, "data": [x, y]
+            in the axes' data coordinates, "pixel": [px, py] in figure pixels
+            from the bottom-left (matplotlib display coordinates),
+            "css": [cx, cy] in CSS pixels from the canvas' top-left corner}``.
+        """
+        out = []
+        ratio = float(getattr(self.canvas, "device_pixel_ratio", 1.0) or 1.0)
+        height = self.figure.bbox.height
+        for index, kind, xy in self._handles:
+            px, py = self.ax.transData.transform(xy)
+            out.append(
+                {
+                    "index": index,
+                    "kind": kind,
+                    "data": [float(xy[0]), float(xy[1])],
+                    "pixel": [float(px), float(py)],
+                    "css": [float(px / ratio), float((height - py) / ratio)],
+                }
+            )
+        return out
+
+    def refresh(self) -> None:
+        """Redraw from the editor's current result (after editing it in code)."""
+        self._apply(current_result(self.editor))
+        self._settle(grow_only=self._refresh_grows_view)
+
+    def _ipython_display_(self) -> None:
+        from IPython.display import display
+
+        display(self.widget)
+
+    # -- construction
+    _refresh_grows_view = True  # refresh() only widens the view (False: fit it anew)
+
+    def _build_figure(self, figsize: tuple[float, float], backend: Backend, title: str) -> None:
+        """The figure, its canvas (CSS class ``canvas_class`` when interactive) and titled axes."""
+        self.figure = Figure(figsize=figsize, dpi=100, layout="constrained")
+        self._view = CanvasView(self.figure, backend)
+        self.canvas = self._view.canvas
+        if self._view.interactive:
+            self.canvas.add_class(self.canvas_class)
+        self.ax = self.figure.add_subplot()
+        self.ax.set_title(title)
+        plain_ticks(self.ax)
+
+    def _open(self, widget: W.Box, hint: str) -> None:
+        """Finish construction: lay out ``widget``, listen to the mouse, draw, show ``hint``."""
+        self.widget = widget
+        self.widget.add_class(self.editor_class)
+        self.canvas.mpl_connect("button_press_event", self._on_press)
+        self.canvas.mpl_connect("motion_notify_event", self._on_motion)
+        self.canvas.mpl_connect("button_release_event", self._on_release)
+        self._fit_view()
+        self._redraw(final=True)
+        self._set_status(hint)
+
+    # -- editing
+    def _apply(self, result: Any) -> None:
+        self.result = result
+        self.last_error = None
+        for callback in self._listeners:
+            callback(result)
+
+    def _add(self, constraint: Any) -> int:
+        out = self.editor.add(constraint)
+        index = len(self.editor.constraints) - 1 if not isinstance(out, (int, np.integer)) else int(out)
+        self._apply(current_result(self.editor, out))
+        return index
+
+    def _remove(self, index: int) -> None:
+        out = self.editor.remove(index)
+        self._apply(current_result(self.editor, out))
+
+    def _settle(self, *, grow_only: bool = True) -> None:
+        """After a gesture or a refresh: the subclass hook, the view fitted, a final redraw."""
+        self._edited()
+        self._fit_view(grow_only=grow_only)
+        self._redraw(final=True)
+
+    # -- drawing
+    def _redraw(self, *, final: bool = False) -> None:
+        self._draw_result(final=final)
+        self._collect_handles()
+        self.handles_info.value = html.escape(json.dumps(self.handle_positions()))
+        self._view.draw(final=final)
+
+    # -- status
+    def _show_error(self, exc: BaseException) -> None:
+        self.last_error = exc
+        where = traceback.extract_tb(exc.__traceback__)[-1] if exc.__traceback__ else None
+        loc = f" ({where.name}, line {where.lineno})" if where else ""
+        self.status.value = (
+            f'<span class="mocaplab-error" style="color:#b00020">'
+            f"{html.escape(type(exc).__name__)}: {html.escape(str(exc))}{html.escape(loc)}</span>"
+        )
+
+    def _set_status(self, text: str) -> None:
+        self.status.value = f'<span class="mocaplab-ok">{html.escape(text)}</span>'
+
+    # -- picking
+    def _pick_handle(self, event: Any) -> Handle | None:
+        """The handle within ``pick_radius`` pixels of the mouse (the nearest), or None."""
+        if not self._handles:
+            return None
+        px = self.ax.transData.transform(np.array([h[2] for h in self._handles]))
+        d = np.hypot(px[:, 0] - event.x, px[:, 1] - event.y)
+        j = int(np.argmin(d))
+        return self._handles[j] if d[j] <= self.pick_radius else None
+
+    def _toolbar_busy(self) -> bool:
+        """Whether the toolbar is zooming or panning (then the mouse is not for editing)."""
+        toolbar = getattr(self.canvas, "toolbar", None)
+        return bool(toolbar is not None and str(getattr(toolbar, "mode", "")))
+
+    def _moved(self, event: Any) -> bool:
+        assert self._drag is not None  # internal invariant, not input validation
+        dx = event.x - self._drag.press_px[0]
+        dy = event.y - self._drag.press_px[1]
+        return bool(np.hypot(dx, dy) > self.click_tolerance)
+
+    # -- gesture
+    def _grab(self, index: int, kind: str, press: tuple[float, float], anchor: Any = None) -> None:
+        """Start dragging the existing handle of constraint ``index``."""
+        self._drag = Drag(index, kind, press, created=False, anchor=anchor)
+        self._describe(index, prefix="picked")
+
+    def _create(self, constraint: Any, kind: str, press: tuple[float, float], anchor: Any = None) -> None:
+        """Add ``constraint`` where the mouse pressed and start dragging its handle."""
+        index = self._add(constraint)
+        self._drag = Drag(index, kind, press, created=True, anchor=anchor)
+        self._redraw()
+        self._describe(index, prefix="pinned")
+
+    @guarded
+    def _on_press(self, event: Any) -> None:
+        if event.inaxes is not self.ax or event.button != 1 or self._toolbar_busy():
+            return
+        self.last_error = None
+        self._press(event, (float(event.x), float(event.y)))
+
+    @guarded
+    def _on_motion(self, event: Any) -> None:
+        drag = self._drag
+        if drag is None or event.x is None or event.y is None:
+            return
+        if not drag.moved and not self._moved(event):
+            return
+        drag.moved = True
+        self._move_to(event)
+
+    def _move_to(self, event: Any) -> None:
+        """Solve with the dragged handle under the mouse position of ``event`` (also outside the axes)."""
+        drag = self._drag
+        assert drag is not None  # internal invariant
+        drag.last_px = (float(event.x), float(event.y))
+        target = self._drag_target(drag, event_data(self.ax, event))
+        if target is None:
+            return
+        self._apply(current_result(self.editor, self.editor.drag(drag.index, target)))
+        self._redraw()
+        self._describe(drag.index, prefix="drag")
+
+    @guarded
+    def _on_release(self, event: Any) -> None:
+        drag = self._drag
+        if drag is None:
+            return
+        try:
+            if self.last_error is None and event.x is not None and (drag.moved or self._moved(event)):
+                if drag.last_px != (float(event.x), float(event.y)):
+                    drag.moved = True
+                    self._move_to(event)  # the front end may drop motion events: end under the mouse
+        finally:
+            self._drag = None
+        if self.last_error is not None:
+            pass  # keep the error of the failed update on show
+        elif not drag.moved and not drag.created:
+            c = self.editor.constraints[drag.index]
+            self._remove(drag.index)
+            self._set_status(f"removed {kind_of(c)} #{drag.index} (character {int(c.character)}, frame {frame_of(c)})")
+        elif drag.moved:
+            self._describe(drag.index, prefix="moved")
+        self.result = current_result(self.editor)
+        self._settle()
+
+    # -- subclasses implement
+    def _press(self, event: Any, press: tuple[float, float]) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _drag_target(self, drag: Drag, mouse: NDArray[np.float64]) -> Any:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _collect_handles(self) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _draw_result(self, *, final: bool) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _fit_view(self, *, grow_only: bool = False) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _describe(self, index: int, *, prefix: str) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _edited(self) -> None:
+        """Called after each gesture and refresh, before the view is fitted and redrawn."""
+
+
+# --------------------------------------------------------------------------- helpers
+def as_scene_editor(
+    editor_or_characters: Any, constraints: Sequence[Any] | None, options: dict[str, Any] | None
+) -> Any:
+    """Accept a SceneEditor (used as is) or characters (+ constraints, options) to build one."""
+    if hasattr(editor_or_characters, "drag") and hasattr(editor_or_characters, "constraints"):
+        if constraints is not None or options:
+            raise ValueError(
+                "Pass `constraints` and `editor_options` only with characters, not with a SceneEditor (it has its own)"
+            )
+        return editor_or_characters  # a SceneEditor, or any object with its interface (tests use spies)
+    scene_editor = getattr(editing, "SceneEditor", None)
+    if scene_editor is None:
+        raise ImportError("mocaplab.editing.SceneEditor is not available")
+    characters = list(editor_or_characters) if isinstance(editor_or_characters, Sequence) else [editor_or_characters]
+    return scene_editor(characters, list(constraints or ()), **(options or {}))
+
+
+def current_result(editor: Any, returned: Any = None) -> Any:
+    """The editor's current EditResult (what an editor call returned, or its ``result``)."""
+    if returned is not None and hasattr(returned, "paths"):
+        return returned
+    result = getattr(editor, "result", None)
+    if callable(result):
+        result = result()
+    if result is None:
+        raise AttributeError(f"{type(editor).__name__} exposes no current `result`")
+    return result
+
+
+def core_residual(result: Any, index: int) -> float | None:
+    """The editor's own residual of constraint ``index`` (``EditResult.residuals()``), if it reports one."""
+    residuals = getattr(result, "residuals", None)
+    if not callable(residuals):
+        return None
+    value = residuals().get(index)
+    return None if value is None else float(value)
+
+
+def kind_of(constraint: Any) -> str:
+    return type(constraint).__name__
+
+
+def is_a(constraint: Any, name: str) -> bool:
+    """Whether ``constraint`` is a ``mocaplab.editing.<name>`` (by class name if the editing module lacks it)."""
+    cls = getattr(editing, name, None)
+    return isinstance(constraint, cls) if cls is not None else kind_of(constraint) == name
+
+
+def frame_of(constraint: Any) -> int:
+    """The constraint's frame (the first frame of a variational constraint)."""
+    frame = getattr(constraint, "frame", None)
+    if frame is None:
+        frame = constraint.frames[0]
+    return int(frame)
+
+
+def other_frame_of(constraint: Any) -> int:
+    """The other character's frame of a Relative or Sync constraint (first of a variational one)."""
+    frame = getattr(constraint, "other_frame", None)
+    if frame is None:
+        frame = constraint.other_frames[0]
+    return int(frame)
+
+
+def event_data(ax: Any, event: Any) -> NDArray[np.float64]:
+    """Data coordinates of a mouse event, also outside the axes (where ``xdata`` is None)."""
+    if event.inaxes is ax and event.xdata is not None and event.ydata is not None:
+        return np.array([event.xdata, event.ydata], dtype=float)
+    return np.asarray(ax.transData.inverted().transform((float(event.x), float(event.y))), dtype=float)
+
+
+def plain_ticks(ax: Any) -> None:
+    """Tick labels with an ASCII minus sign (some browser fonts drop the Unicode one)."""
+    from matplotlib.ticker import FuncFormatter
+
+    plain = FuncFormatter(lambda value, _pos: f"{value:g}")
+    ax.xaxis.set_major_formatter(plain)
+    ax.yaxis.set_major_formatter(plain)
+
+
+class Marks:
+    """Points gathered per matplotlib ``Line2D`` while walking the constraints, then drawn at once.
+
+    Parameters
+    ----------
+    lines : sequence of Line2D
+        The lines to fill; :meth:`draw` empties those that received no point.
+    """
+
+    def __init__(self, lines: Sequence[Any]) -> None:
+        self._points: dict[Any, list[NDArray[np.float64]]] = {line: [] for line in lines}
+
+    def point(self, line: Any, xy: Any) -> None:
+        """Add a marker at ``xy``, shape (2,)."""
+        self._points[line].append(np.asarray(xy, dtype=float))
+
+    def segment(self, line: Any, a: Any, b: Any) -> None:
+        """Add a segment from ``a`` to ``b`` (each shape (2,)), apart from the others (a NaN break)."""
+        self._points[line] += [np.asarray(a, dtype=float), np.asarray(b, dtype=float), np.full(2, np.nan)]
+
+    def draw(self) -> None:
+        for line, points in self._points.items():
+            arr = np.asarray(points, dtype=float).reshape(-1, 2)
+            line.set_data(arr[:, 0], arr[:, 1])

@@ -168,8 +168,9 @@ def set_refinements(sm: StaggeredMotion, refinements: ArrayLike) -> StaggeredMot
     if np.array_equal(r, sm.refinements):
         return sm
     out = _replace(sm, refinements=np.where(sm.active, r, 0.0))
-    if "_ctrl" in sm.__dict__:  # values and tangents are unchanged by retiming
-        object.__setattr__(out, "_ctrl", sm.__dict__["_ctrl"])
+    for cached in ("_ctrl", "_static"):  # values, tangents and displacements are unchanged by retiming
+        if cached in sm.__dict__:
+            object.__setattr__(out, cached, sm.__dict__[cached])
     out._inherit_raw(sm, np.any(r != sm.refinements, axis=0))
     out._warn_timing()
     return out

@@ -493,7 +493,8 @@ class StaggeredMotion:
         if parent is not None and parent[0].shape[0] == t.size:
             p_root, p_rot, changed = parent
             root, rot = np.array(p_root, copy=True), np.array(p_rot, copy=True)
-            cols = np.flatnonzero(changed)
+            moving = np.concatenate([[True], ~self.static_joints()])
+            cols = np.flatnonzero(changed & moving)
             if cols.size:
                 c_root, c_rot, js = self._compose_columns(t, cols, staggered=True)
                 if c_root is not None:
@@ -517,11 +518,38 @@ class StaggeredMotion:
             object.__setattr__(self, "_parent_raw", (root, rot, prev | np.asarray(changed, dtype=bool)))
 
     def _compose(self, t: Array, *, staggered: bool = True) -> tuple[Array, Array]:
+        static = self.static_joints()
+        if static.any():
+            # joints that never move (CMU hip joints, shoulders...) are their value
+            cols = np.concatenate([[0], 1 + np.flatnonzero(~static)])
+            root, moving, js = self._compose_columns(t, cols, staggered=staggered)
+            rot = np.empty((t.size, self.n_joints, 4))
+            rot[:] = self.rotation_values[0]
+            rot[:, js] = moving
+            assert root is not None
+            return root, rot
         k0, k1, tn = self.locate(t, staggered=staggered)
         s_root, s_rot = self.spline_values(k0, k1, tn)
         u = k0 + tn * (k1 - k0)
         d_root, d_rot = self.displacement_values(u)
         return s_root + d_root, quat.mul(s_rot, quat.exp(d_rot))
+
+    def static_joints(self) -> NDArray[np.bool_]:
+        """Joints whose rotation is constant everywhere, shape (J,) (cached).
+
+        All knot values equal, tangents the identity and displacements below
+        1e-15 rad: evaluating them gives their value, so they are skipped.
+        """
+        st = self.__dict__.get("_static")
+        if st is None:
+            v = self.rotation_values
+            same = np.all(v == v[:1], axis=(0, 2))
+            ident = np.all(np.abs(self.rotation_tangents[..., :3]) < 1e-15, axis=(0, 2, 3))
+            still = np.all(np.abs(self.rotation_displacement) < 1e-15, axis=(0, 2))
+            st = same & ident & still
+            st.flags.writeable = False
+            object.__setattr__(self, "_static", st)
+        return st
 
     def _compose_columns(
         self, t: Array, cols: NDArray[np.int64], *, staggered: bool = True

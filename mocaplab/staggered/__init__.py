@@ -16,10 +16,13 @@ from __future__ import annotations
 from .edit import (
     ConstraintLayer,
     StaggeredEditor,
+    apply_knot_deltas,
+    average_pose,
     delete_pose,
     edit_pose,
     exaggerate,
     insert_pose,
+    keep_knot_order,
     randomize,
     retime,
     set_refinements,
@@ -66,4 +69,7 @@ __all__ = [
     "exaggerate",
     "insert_pose",
     "delete_pose",
+    "apply_knot_deltas",
+    "average_pose",
+    "keep_knot_order",
 ]

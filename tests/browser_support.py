@@ -391,6 +391,11 @@ class LessonPage:
                    }"""
             )
             if ready:
+                # more room for the lesson: close the file browser, as a student would on a laptop
+                self.page.evaluate(
+                    "() => { const app = window.jupyterapp;"
+                    " if (!app.shell.leftCollapsed) return app.commands.execute('application:toggle-left-area'); }"
+                )
                 return
             # a notebook without kernel metadata asks for a kernel: accept the default (Python 3)
             accept = self.page.locator(".jp-Dialog .jp-Dialog-button.jp-mod-accept")

@@ -30,6 +30,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from browser_support import (
     CHROMIUM,
@@ -65,13 +66,11 @@ sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright Pyt
 # ---------------------------------------------------------------- fixtures
 @pytest.fixture(scope="module")
 def shots_dir(pytestconfig: pytest.Config) -> Iterator[Path]:
-    """Folder for the screenshots (emptied of old PNGs first), named in the test output."""
+    """Folder for the screenshots, named in the test output (each lesson's old ones are removed when it opens)."""
     folder = Path(os.environ.get("MOCAPLAB_SCREENSHOTS", ROOT / "browser-screenshots")).resolve()
     if folder in (ROOT, LESSONS, ROOT / "tests"):
         raise ValueError(f"MOCAPLAB_SCREENSHOTS must be a folder of its own, got {folder}")
     folder.mkdir(parents=True, exist_ok=True)
-    for old in folder.glob("*.png"):
-        old.unlink()
     reporter = pytestconfig.pluginmanager.get_plugin("terminalreporter")
 
     capture = pytestconfig.pluginmanager.get_plugin("capturemanager")
@@ -134,8 +133,10 @@ def open_lesson(request: pytest.FixtureRequest) -> Iterator[Any]:
         shutil.copy2(notebook, lab.root_dir / notebook.name)  # the lesson as it is now (it may have landed late)
         browser = request.getfixturevalue("browser")
         shots = request.getfixturevalue("shots_dir")
-        context = browser.new_context(viewport={"width": 1500, "height": 1100})
+        context = browser.new_context(viewport={"width": 1800, "height": 1100})
         contexts.append(context)
+        for old in shots.glob(f"{notebook.stem}-*.png"):  # this lesson's screenshots of an earlier run
+            old.unlink()
         page = LessonPage(context, lab, notebook.name, shots)
         pages.append(page)
         page.open()
@@ -189,8 +190,9 @@ def rendered_view(lesson: LessonPage, iframe: Any, *, timeout: float = 60.0) -> 
     """Wait until the trame view in ``iframe`` shows a rendered, non-blank image.
 
     Returns the locator of the render surface (the largest visible ``img`` or
-    ``canvas`` in the iframe) and a screenshot of it. The toolbar overlaid
-    on the top of the view is left out of the blankness measure (top 20%).
+    ``canvas`` in the iframe) and its pixels (:func:`view_pixels`). The top
+    20% (where the toolbar overlays a screenshotted view) is left out of the
+    blankness measure.
     """
     iframe.wait_for(state="attached", timeout=timeout * 1000)
     iframe.scroll_into_view_if_needed()
@@ -200,7 +202,7 @@ def rendered_view(lesson: LessonPage, iframe: Any, *, timeout: float = 60.0) -> 
     while time.monotonic() < deadline:
         surface = _largest_surface(frame)
         if surface is not None:
-            png = surface.screenshot()
+            png = view_pixels(surface)
             grey = png_to_grey(png)
             std = float(grey[grey.shape[0] // 5 :].std())
             if std > MIN_VIEW_STD:
@@ -208,6 +210,19 @@ def rendered_view(lesson: LessonPage, iframe: Any, *, timeout: float = 60.0) -> 
         lesson.page.wait_for_timeout(500)
     lesson.screenshot("blank-3d-view", iframe)
     raise AssertionError(f"the 3D view did not render within {timeout:.0f} s (grey std {std:.2f})")
+
+
+def view_pixels(surface: Any) -> bytes:
+    """A screenshot of a 3D view's render surface (what the student sees)."""
+    return surface.screenshot()
+
+
+def view_change(before: bytes, after: bytes) -> float:
+    """Mean grey change of two view screenshots below the toolbar band (top 20%) overlaid on the view."""
+    a, b = png_to_grey(before), png_to_grey(after)
+    h, w = min(a.shape[0], b.shape[0]), min(a.shape[1], b.shape[1])
+    top = h // 5
+    return float(np.abs(a[top:h, :w] - b[top:h, :w]).mean())
 
 
 def _largest_surface(frame: Any) -> Any:
@@ -227,23 +242,50 @@ def _largest_surface(frame: Any) -> Any:
     return best if area > 100 * 100 else None
 
 
+def looks_rendered(png: bytes) -> bool:
+    """A finished render: varied grey levels (below the toolbar band), not a black loading frame."""
+    grey = png_to_grey(png)
+    body = grey[grey.shape[0] // 5 :]
+    return float(body.std()) > MIN_VIEW_STD and float((grey < 16).mean()) < 0.5
+
+
 def wait_view_change(
     lesson: LessonPage, surface_of: Any, before: bytes, *, timeout: float = 30.0
 ) -> tuple[bytes, float]:
-    """Poll screenshots of ``surface_of()`` until they differ from ``before``; return the last and the change."""
+    """Poll the pixels of ``surface_of()`` until they show a finished render different from ``before``.
+
+    A frame counts once it looks rendered (:func:`looks_rendered`) and the
+    next poll shows the same image (the view has settled: no loading or
+    low-resolution interactive frame). Returns the last pixels and their
+    change (0 when no settled, rendered frame was seen; the last frame is then
+    saved as ``<lesson>-NN-unrendered-view.png`` for the report).
+    """
     deadline = time.monotonic() + timeout
-    change = 0.0
-    png = before
+    png, previous = before, None
     while time.monotonic() < deadline:
         lesson.page.wait_for_timeout(400)
         try:
-            png = surface_of().screenshot()
+            png = view_pixels(surface_of())
         except Exception:  # noqa: BLE001 - the view may be rebuilding
+            previous = None
             continue
-        change = image_change(before, png)
+        settled = previous is not None and view_change(previous, png) < 0.05
+        previous = png
+        if not looks_rendered(png) or not settled:
+            continue
+        change = view_change(before, png)
         if change > MIN_CHANGE:
             return png, change
-    return png, change
+    if not looks_rendered(png):
+        lesson._n_shots += 1
+        path = lesson.shots / f"{Path(lesson.notebook).stem}-{lesson._n_shots:02d}-unrendered-view.png"
+        path.write_bytes(png)
+        grey = png_to_grey(png)
+        raise AssertionError(
+            f"the 3D view never showed a finished render within {timeout:.0f} s "
+            f"(last frame: {100 * float((grey < 16).mean()):.0f}% black, grey std {float(grey.std()):.1f}; saved {path})"
+        )
+    return png, view_change(before, png)
 
 
 def mouse_drag(page: Any, start: tuple[float, float], end: tuple[float, float], *, steps: int = 12) -> None:
@@ -291,6 +333,7 @@ def test_lesson_01_viewer_renders_and_is_interactive(open_lesson: Any) -> None:
     mouse_drag(page, (cx, cy), (cx + 0.3 * box["width"], cy - 0.1 * box["height"]))
     rotated, change = wait_view_change(lesson, lambda: _largest_surface(iframe.content_frame), first)
     lesson.screenshot("viewer-rotated", iframe)
+    print(f"3D view mean grey change after rotating: {change:.2f}")
     assert change > MIN_CHANGE, f"dragging in the 3D view did not change it (mean change {change:.3f})"
 
     # move the frame slider: the kernel moves the skeleton and updates the time label
@@ -306,6 +349,7 @@ def test_lesson_01_viewer_renders_and_is_interactive(open_lesson: Any) -> None:
     )
     moved, change = wait_view_change(lesson, lambda: _largest_surface(iframe.content_frame), rotated)
     lesson.screenshot("viewer-frame-40", iframe)
+    print(f"3D view mean grey change after moving the frame slider: {change:.2f}")
     assert change > MIN_CHANGE, f"moving the frame slider did not change the 3D view (mean change {change:.3f})"
     assert "40" in text_of(label), f"time label did not follow the slider: {text_of(label)!r}"
     assert_no_widget_errors(lesson)
@@ -321,7 +365,7 @@ for _name, _obj in list(globals().items()):
         if [h["data"] for h in _obj.handle_positions()] == _j.loads({data!r}):
             _found = _name
             break
-print(_j.dumps(_found))
+print("@@json@@" + _j.dumps(_found))
 del _j, _found
 """
 
@@ -334,21 +378,27 @@ _inv = _w.ax.transData.inverted()
 _px = [({x} * _ratio, _h - {y} * _ratio), ({x} + 1.0) * _ratio, _h - ({y} + 1.0) * _ratio]
 _a = _inv.transform(_px[0])
 _b = _inv.transform((_px[1], _px[2]))
-print(_j.dumps({{"data": [float(v) for v in _a], "per_px": [abs(float(v)) for v in (_b - _a)]}}))
+print("@@json@@" + _j.dumps({{"data": [float(v) for v in _a], "per_px": [abs(float(v)) for v in (_b - _a)]}}))
 del _j, _w, _ratio, _h, _inv, _px, _a, _b
 """
 
 _KERNEL_HANDLES = """
 import json as _j
-print(_j.dumps({name}.handle_positions()))
+print("@@json@@" + _j.dumps({name}.handle_positions()))
 del _j
 """
 
 
 def _kernel_json(lesson: LessonPage, code: str) -> Any:
-    out = lesson.kernel_eval(code).strip()
-    assert out and not out.startswith("ERROR"), f"kernel said {out!r} to:\n{code}"
-    return json.loads(out.splitlines()[-1])
+    """Run ``code`` in the kernel and decode the line it prints after the ``@@json@@`` marker.
+
+    The marker keeps the answer apart from anything a background task of the
+    kernel (a trame server, say) prints meanwhile.
+    """
+    out = lesson.kernel_eval(code)
+    found = [line[len("@@json@@") :] for line in out.splitlines() if line.startswith("@@json@@")]
+    assert found, f"kernel said {out!r} to:\n{code}"
+    return json.loads(found[-1])
 
 
 def _drag_handle(lesson: LessonPage, prefix: str, class_name: str, offset: tuple[float, float]) -> dict[str, Any]:
@@ -447,6 +497,7 @@ def test_lesson_03_drag_a_path_handle(open_lesson: Any) -> None:
     rendered_view(lesson, trame_frame(editor))
     _, change = wait_view_change(lesson, surface, view_before, timeout=45)
     lesson.screenshot("path-editor-3d-after", editor)
+    print(f"3D view mean grey change after the path edit: {change:.2f}")
     assert change > MIN_CHANGE, (
         f"the 3D view did not change after the path edit (mean change {change:.3f}; "
         f"iframe src {src_before} -> {trame_frame(editor).get_attribute('src')})"
@@ -510,18 +561,31 @@ def test_staggered_toggle_changes_curves(open_lesson: Any, number: str) -> None:
     lesson = open_lesson(number, "StaggeredExplorer")
     lesson.run_all()
     page = lesson.page
-    toggle = page.locator(".mocaplab-staggered-toggle").first
-    toggle.wait_for(timeout=60000)
     explorer = page.locator(".mocaplab-staggered-explorer").first
-    scope = explorer if explorer.count() else toggle.locator("xpath=ancestor::div[contains(@class,'widget-vbox')][1]")
-    canvas = scope.locator(".jupyter-matplotlib-canvas-div canvas").first
+    explorer.wait_for(timeout=60000)
+    toggle = explorer.locator(".mocaplab-staggered-toggle").first
+    info = explorer.locator(".mocaplab-staggered-curves").first
+    canvas = explorer.locator(".jupyter-matplotlib-canvas-div canvas").first
     canvas.scroll_into_view_if_needed()
+    lesson.wait_idle()
     before = canvas.screenshot()
-    lesson.screenshot("staggered-before", scope)
+    info_before = info.text_content()
+    pressed_before = "mod-active" in (toggle.get_attribute("class") or "")
+    lesson.screenshot("staggered-before", explorer)
     _press_toggle(toggle)
-    after, change = wait_view_change(lesson, lambda: canvas, before, timeout=60)
-    lesson.screenshot("staggered-toggled", scope)
+    page.wait_for_function(
+        "([el, before]) => el.textContent !== before", arg=[info.element_handle(), info_before], timeout=60000
+    )
+    lesson.wait_idle()
+    deadline = time.monotonic() + 30
+    change = 0.0
+    while time.monotonic() < deadline and change <= MIN_CHANGE:
+        page.wait_for_timeout(300)
+        change = image_change(before, canvas.screenshot())
+    lesson.screenshot("staggered-toggled", explorer)
+    assert ("mod-active" in (toggle.get_attribute("class") or "")) != pressed_before, "the toggle did not switch"
     assert change > MIN_CHANGE, f"toggling the refinements did not change the curves (mean change {change:.3f})"
+    assert json.loads(info.text_content() or "{}") != json.loads(info_before or "{}")
     assert_no_widget_errors(lesson)
 
 

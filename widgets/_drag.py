@@ -217,6 +217,19 @@ class DragView:
         """The editor's constraints (a tuple)."""
         return tuple(self.editor.constraints)
 
+    def _drawn_constraints(self) -> tuple[Any, ...]:
+        """Constraints with frames on the current result's (possibly transformed) clips.
+
+        After discrete editing inserts or deletes frames, ``result.constraints``
+        holds the same constraints, in the same order, re-indexed onto the
+        transformed clips; the editor's own list keeps the input clips' frames.
+        """
+        current = getattr(self.result, "constraints", None)
+        mine = tuple(self.editor.constraints)
+        if current is not None and len(current) == len(mine):
+            return tuple(current)
+        return mine
+
     def handle_positions(self) -> list[dict[str, Any]]:
         """Where each handle is drawn.
 

@@ -288,7 +288,7 @@ class PathEditor(DragView):
         handles: list[Handle] = []
         marks = Marks([self._pins, self._hard_pins, self._arrows, self._tips, self._links, self._misses])
         length = self._arrow_len()
-        for i, c in enumerate(self.editor.constraints):
+        for i, c in enumerate(self._drawn_constraints()):
             if is_a(c, "PinPosition"):
                 xy = np.asarray(c.position, dtype=float).reshape(2)
                 marks.point(self._hard_pins if getattr(c, "hard", False) else self._pins, xy)
@@ -378,13 +378,13 @@ class PathEditor(DragView):
             index, kind, _ = handle
             anchor = None
             if kind == "direction":  # the pinned point at press time
-                c = self.editor.constraints[index]
+                c = self._drawn_constraints()[index]
                 anchor = np.array(self.result.paths[int(c.character)][frame_of(c)], dtype=float)
             self._grab(index, kind, press, anchor)
             return
         target: tuple[int, int] | None
         if handle is not None:  # shift on a pin: a direction at the pinned frame
-            c = self.editor.constraints[handle[0]]
+            c = self.editor.constraints[handle[0]]  # a new constraint lives in the editor's frames
             target = (int(c.character), frame_of(c))
         else:
             target = self._pick_path(event)
@@ -416,7 +416,7 @@ class PathEditor(DragView):
 
     # ------------------------------------------------------------------ status
     def _describe(self, index: int, *, prefix: str) -> None:
-        c = self.editor.constraints[index]
+        c = self._drawn_constraints()[index]
         k, f = int(c.character), frame_of(c)
         p = np.asarray(self.result.paths[k], dtype=float)
         if is_a(c, "PinPosition"):

@@ -174,7 +174,7 @@ class TimeTrackEditor(DragView):
         times = [np.asarray(t, dtype=float) for t in self.result.times]
         handles: list[Handle] = []
         marks = Marks([self._abs, self._abs_hard, self._dur_bars, self._dur_ends, self._syncs])
-        for i, c in enumerate(self.editor.constraints):
+        for i, c in enumerate(self._drawn_constraints()):
             if is_a(c, "AbsoluteTime"):
                 k = int(c.character)
                 xy = np.array([float(c.time), k - 0.25])

@@ -127,3 +127,36 @@ def test_extract_rejects_bad_input(cmu) -> None:
         extract(np.zeros((3, 3)))  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="max_refinement"):
         extract(cmu("16_05"), max_refinement=-1.0)
+
+
+def test_random_clips_round_trip() -> None:
+    """Property: any clip (random smooth rotations, any frame rate) reconstructs exactly."""
+    hyp = pytest.importorskip("hypothesis")
+    st = pytest.importorskip("hypothesis.strategies")
+    from mocaplab.motion import Motion, Skeleton
+
+    sk = Skeleton(["root", "a", "b", "c"], [-1, 0, 1, 1], [[0, 0, 0], [0, -0.4, 0], [0, -0.4, 0], [0.2, 0, 0]])
+
+    @hyp.settings(max_examples=12, deadline=None)
+    @hyp.given(
+        n=st.integers(min_value=2, max_value=90),
+        fps=st.sampled_from([24.0, 30.0, 60.0, 120.0]),
+        seed=st.integers(min_value=0, max_value=2**31 - 1),
+        scale=st.floats(min_value=0.0, max_value=3.0),
+    )
+    def check(n: int, fps: float, seed: int, scale: float) -> None:
+        rng = np.random.default_rng(seed)
+        steps = rng.normal(scale=scale / np.sqrt(fps), size=(n, 4, 3))
+        rot = quat.exp(np.cumsum(steps, axis=0))
+        root = np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0)
+        m = Motion(sk, rot, root, fps)
+        sm = extract(m, contacts=None, maxiter=10)
+        out = sm.evaluate()
+        assert out.n_frames == n
+        assert quat.angle(quat.mul(quat.inv(out.rotations), m.rotations)).max() < 1e-6
+        assert np.abs(out.root_positions - m.root_positions).max() < 1e-6
+        assert np.abs(sm.refinements).max() <= 0.25 + 1e-12
+        T = sm.times[:, None] + sm.refinements
+        assert np.all(np.diff(T, axis=0) > 0)
+
+    check()

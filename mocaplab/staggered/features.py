@@ -232,14 +232,15 @@ def tent_filter(signal: Array, width: float, fps: float) -> Array:
     The kernel is normalised to sum 1, and renormalised near the ends of the
     clip so a constant signal stays constant.
     """
+    from scipy.ndimage import convolve1d
+
     x = np.asarray(signal, dtype=float)
     half = max(1, int(round(0.5 * width * fps)))
     k = 1.0 - np.abs(np.arange(-half, half + 1)) / (half + 1.0)
     k /= k.sum()
-    flat = x.reshape(x.shape[0], -1)
-    ones = np.convolve(np.ones(x.shape[0]), k, mode="same")
-    out = np.stack([np.convolve(flat[:, c], k, mode="same") for c in range(flat.shape[1])], axis=1)
-    return (out / ones[:, None]).reshape(x.shape)
+    out = convolve1d(x, k, axis=0, mode="constant", cval=0.0)
+    ones = convolve1d(np.ones(x.shape[0]), k, mode="constant", cval=0.0)
+    return out / ones.reshape((-1,) + (1,) * (x.ndim - 1))
 
 
 def signal_weights(trails: Trails, n_variables: int, *, root_weight: float = 1.0) -> Array:

@@ -33,7 +33,9 @@ default (``start="tangent"``):
   exceeds ``polish_tol`` (default 2 degrees), from a small simplex around
   the start, with at most ``maxiter`` iterations (default 30);
 * the objective is vectorised over a segment's samples, subsampled to at most
-  ``max_samples`` (default 16) evenly spaced interior samples.
+  ``max_samples`` (default 16) evenly spaced interior samples;
+* a Nelder-Mead result is kept only if, renormalised, it fits *all* the
+  segment's samples better than the start.
 
 ``start="linear"`` follows the paper literally: every segment starts from
 the linear (slerp) spline with scipy's default simplex and runs Nelder-Mead
@@ -45,8 +47,9 @@ Measured on CMU clips (16_15, 16_05), Nelder-Mead started from the tangent
 solution lowers the Appendix A objective by less than 1e-4 relative: the
 tangent start is already at the optimum to that precision, and segments with
 a large residual are those a cubic cannot follow (their detail goes to the
-displacement map).  From the linear start, ``maxiter=200`` costs about 100
-times more and ends slightly worse on average.
+displacement map).  From the linear start, ``maxiter=200`` costs about 150
+times more CPU on 16_15 (40 s against 0.27 s for its 930 segments) and ends
+with a larger mean RMS error (0.46 against 0.41 degrees).
 """
 
 from __future__ import annotations

@@ -273,6 +273,12 @@ def test_editor_drives_the_representation(cmu) -> None:
     assert ns_pose.n_frames == true_pose.n_frames == 1
     c = ed.curves("LeftArm")
     assert c["values"].shape == (ed.evaluate().n_frames, 3) and c["knot_times"].size == 5
+    # the editor agrees with the pure functions applied in its documented order
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StaggeredTimingWarning)
+        expected = ed.base.exaggerate(0.3).succession(0.02, 2.0).randomize(0.02, seed=3)
+    assert np.array_equal(expected.refinements, ed.current.refinements)
+    assert max_diff(expected.evaluate(), ed.evaluate())[0] < 1e-12
     # undoing every edit gives back the clip
     ed.set_succession(s=0.0)
     ed.set_random(tau=0.0)

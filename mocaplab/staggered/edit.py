@@ -878,7 +878,12 @@ class StaggeredEditor:
     Holds a clip, its :class:`~mocaplab.staggered.features.PoseAnalysis`
     (computed once), the culled base representation and the current
     timing and geometric edit parameters.  Every setter recomputes
-    :attr:`current` from :attr:`base`, so edits never accumulate drift.
+    :attr:`current` from :attr:`base`, so edits never accumulate drift:
+    ``base.exaggerate(w_r, joints=...)`` (against the average pose), then
+    ``.succession(s, l, joint=...)``, then ``.randomize(tau, seed=...)``,
+    each skipped when neutral.  A rejected edit keeps the previous
+    :attr:`current` and explains why in :attr:`message`, as do timing
+    warnings.
 
     Parameters
     ----------

@@ -388,7 +388,10 @@ def timing_refinements(
     the local maxima of ``p_i`` that lie within ``max_refinement`` seconds of
     ``t_k`` and strictly closer to ``t_k`` than to ``t_{k-1}`` and
     ``t_{k+1}``, the highest one gives ``r_{k,i}`` (a whole number of
-    frames); none gives 0.  Refined knots are therefore strictly ordered.
+    frames; peaks within 1e-3 of each other count as tied and the one
+    nearest ``t_k`` wins, since the bounded curvature saturates at 1 on
+    every reversal); none gives 0.  Refined knots are therefore strictly
+    ordered.
 
     Parameters
     ----------
@@ -420,8 +423,11 @@ def timing_refinements(
         hi = min(f + R, -((-(f + int(frames[k + 1]))) // 2) - 1)
         if hi < lo:
             continue
+        # the highest peak; near-ties (bounded curvature saturates at 1 on
+        # reversals) go to the peak nearest the pose time
+        near = 1e-3 * np.abs(np.arange(lo, hi + 1) - f)[:, None] / max(R, 1)
         win = score[lo : hi + 1]
-        best = np.argmax(win, axis=0)
+        best = np.argmax(win - near, axis=0)
         found = np.isfinite(win[best, np.arange(V)])
         out[k] = np.where(found, (lo + best - f) / fps, 0.0)
     return out

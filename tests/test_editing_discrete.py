@@ -256,8 +256,8 @@ def test_evaluation_without_subsampling_matches_the_full_solver(duo):
     # penalties and Woodbury coupling instead of Lagrange multipliers: same energies
     chars, cons = duo
     ed, _, sc = scene_of(chars, cons, subsample=1)
-    assert sc.comp[0] == sc.comp[1]  # linked by Relative and Sync
-    terms = sc._evaluate([0, 1], 0, sc.base[0], parts=True)
+    terms = sc.terms()  # entry 0: the untransformed scene
+    assert len(sc.space.rhs) and not sc.space.intra.all()  # a Relative row links the two characters
     res = ed.result
     e = res.energies
     # (the evaluation holds free modes with a tiny regulariser and hard rows with a
@@ -276,11 +276,16 @@ def test_subsampled_evaluation_approximates_and_batches(duo):
     _, tracks, full = scene_of(chars, cons, subsample=1)
     _, _, sub = scene_of(chars, cons)
     assert sub.baseline == pytest.approx(full.baseline, rel=0.1)
-    assert sum(len(b.frames[0]) for b in sub.base) < 0.3 * sum(m.n_frames for m in chars)
-    cands = [t for k in (0, 1) for t in D.enumerate_transformations(tracks[k], character=k)][:12]
+    assert sum(len(f) for f in sub.base_frames) < 0.3 * sum(m.n_frames for m in chars)
+    every = [t for k in (0, 1) for t in D.enumerate_transformations(tracks[k], character=k)]
+    cands = every[:6] + every[-6:]  # both characters
+    assert {t.character for t in cands} == {0, 1}
     batched = sub.energies(cands)
     one_by_one = [sub.energy(t) for t in cands]
-    assert np.allclose(batched, one_by_one, rtol=1e-6, atol=1e-9)
+    # one batch for all characters: a candidate's energy does not depend on the others evaluated with it
+    assert np.allclose(batched, one_by_one, rtol=1e-9, atol=1e-12)
+    assert np.allclose(sub.energies(cands[::-1]), batched[::-1], rtol=1e-9, atol=1e-12)
+    assert sub.terms(cands)["total"][0] == pytest.approx(sub.baseline, rel=1e-9)
 
 
 # --------------------------------------------------------------- Algorithm 1

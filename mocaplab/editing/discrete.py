@@ -471,6 +471,7 @@ class _GraphData:
         self.first[g.offsets[:-1]] = True
         self.last = np.zeros(g.n_frames, bool)
         self.last[g.offsets[1:] - 1] = True
+        self._last: list[bool] = self.last.tolist()
         step = np.linalg.norm(np.diff(self.pos, axis=0), axis=1)
         step[self.last[:-1]] = 0.0
         # arc length along the clips (only differences within one clip are used)
@@ -482,6 +483,7 @@ class _GraphData:
         self.costs = {(int(a), int(b)): float(c) for a, b, c in zip(src, dst, cost, strict=True)}
         self.n_out = np.diff(self.T.indptr)
         self.n_in = np.diff(self.Tt.indptr)
+        self._lists: tuple[list[list[int]], list[list[int]], list[bool], list[bool], list[int], list[int]] | None = None
 
     @classmethod
     def of(cls, g: MotionGraph) -> _GraphData:
@@ -501,8 +503,34 @@ class _GraphData:
         s, e = self.Tt.indptr[node], self.Tt.indptr[node + 1]
         return self.Tt.indices[s:e]
 
+    def lists(self) -> tuple[list[list[int]], list[list[int]], list[bool], list[bool], list[int], list[int]]:
+        """Plain-Python views for the enumeration loops (built once per graph).
+
+        ``(out, into, last, first, clip, last_cum)``: transition targets and
+        sources of each node, the clip-end / clip-start flags, the clip
+        index, and ``last_cum[i]`` = number of clip ends before node ``i``.
+        """
+        if self._lists is None:
+            n = self.graph.n_frames
+
+            def split(M: sp.csr_matrix) -> list[list[int]]:
+                ind = M.indices.tolist()
+                ptr = M.indptr.tolist()
+                return [ind[ptr[i] : ptr[i + 1]] for i in range(n)]
+
+            lc = np.concatenate([[0], np.cumsum(self.last)]).tolist()
+            self._lists = (
+                split(self.T),
+                split(self.Tt),
+                self.last.tolist(),
+                self.first.tolist(),
+                np.asarray(self.clip).tolist(),
+                lc,
+            )
+        return self._lists
+
     def natural(self, a: int, b: int) -> bool:
-        return b == a + 1 and not self.last[a]
+        return b == a + 1 and not self._last[a]
 
     def seam_cost(self, a: int, b: int) -> float | None:
         """Cost of going from node ``a`` to node ``b`` (0 natural, None if not allowed)."""
@@ -662,6 +690,18 @@ class Track:
         return int(live[i] if orig[i] - original < original - orig[i - 1] else live[i - 1])
 
 
+_HEADINGS: weakref.WeakKeyDictionary[Track, Array] = weakref.WeakKeyDictionary()
+
+
+def _headings(track: Track) -> Array:
+    """Unwrapped root yaw of each current frame, shape (F,) (cached per track)."""
+    h = _HEADINGS.get(track)
+    if h is None:
+        h = np.unwrap(quat.yaw(track.motion.rotations[:, 0]))
+        _HEADINGS[track] = h
+    return h
+
+
 def _check_transformation(track: Track, t: Transformation) -> None:
     F = track.n_frames
     a, b = t.removed
@@ -704,13 +744,12 @@ def apply_transformation(track: Track, t: Transformation, *, blend: float = 0.2)
 # ======================================================================
 # enumeration and pruning
 # ======================================================================
-def _positions_of(nodes: IntArray) -> dict[int, IntArray]:
+def _positions_of(nodes: IntArray) -> dict[int, list[int]]:
     """Current frames playing each node."""
-    if len(nodes) == 0:
-        return {}
-    order = np.argsort(nodes, kind="stable")
-    cuts = np.flatnonzero(np.diff(nodes[order])) + 1
-    return {int(nodes[g[0]]): g for g in np.split(order, cuts)}
+    out: dict[int, list[int]] = {}
+    for p, n in enumerate(nodes.tolist()):
+        out.setdefault(n, []).append(p)
+    return out
 
 
 def enumerate_transformations(
@@ -736,102 +775,104 @@ def enumerate_transformations(
         Distinct by their resulting node sequence.
     """
     gd = _GraphData.of(track.graph)
-    nodes = track.nodes
-    F = len(nodes)
+    nl = track.nodes.tolist()
+    F = len(nl)
     fps = float(track.motion.fps)
     lmin = max(1, int(math.ceil(min_duration * fps - 1e-9)))
     lmax = int(math.floor(max_duration * fps + 1e-9))
-    where = _positions_of(nodes)
+    where = _positions_of(track.nodes)
     out: dict[tuple[int, int, int, int], Transformation] = {}
+    out_l, into_l, glast, gfirst, gclip, lcum = gd.lists()
+    seam_cost = gd.seam_cost
 
     def add(kind: str, a: int, b: int, s: int, e: int, cost: float) -> None:
         key = (a, b, s, e)
         if key not in out:
             out[key] = Transformation(character, kind, (a, b), (s, e), fps, cost)
 
-    # seams currently in the sequence (after earlier transformations)
-    seam_after = np.zeros(F, bool)
-    if F > 1:
-        seam_after[:-1] = (np.diff(nodes) != 1) | gd.last[nodes[:-1]]
-    # outgoing seams x -> node n (x = a - 1), incoming seams node u -> y (y = b)
-    has_out = gd.n_out[nodes] > 0
-    has_in = gd.n_in[nodes] > 0
+    def clean(s: int, u: int) -> bool:
+        """Graph frames s..u lie in one clip, which does not end before u."""
+        return gclip[s] == gclip[u] and lcum[u] == lcum[s]
+
+    # breaks of consecutive numbering (bcum[i]: breaks among the steps before i) and seams in the sequence
+    bcum = [0] * F
+    seam_after = [False] * F
+    for i in range(F - 1):
+        brk = nl[i + 1] != nl[i] + 1
+        bcum[i + 1] = bcum[i] + brk
+        seam_after[i] = brk or glast[nl[i]]
+
+    def plays(a: int, s: int, L: int) -> bool:
+        """Current frames a .. a+L-1 play graph frames s .. s+L-1."""
+        return nl[a] == s and bcum[a + L - 1] == bcum[a]
 
     # ---- deletions: seam x -> y with src[y] a successor of src[x]
-    repeated = np.array([n for n, g in where.items() if len(g) > 1], dtype=np.int64)
-    for x in (int(v) for v in np.flatnonzero(has_out[: F - 1] | np.isin(nodes[: F - 1] + 1, repeated))):
-        targets = list(gd.out(int(nodes[x])))
-        if not gd.last[nodes[x]]:
-            targets.append(int(nodes[x]) + 1)
+    repeated = {n for n, g in where.items() if len(g) > 1}
+    for x in range(F - 1):
+        nx = nl[x]
+        if not out_l[nx] and nx + 1 not in repeated:
+            continue
+        targets = list(out_l[nx])
+        if not glast[nx]:
+            targets.append(nx + 1)
         for d in targets:
-            for y in (int(v) for v in where.get(int(d), ())):
+            for y in where.get(d, ()):
                 L = y - x - 1
-                if lmin <= L <= lmax and y <= F - 1:
-                    c = gd.seam_cost(int(nodes[x]), int(d))
+                if lmin <= L <= lmax:
+                    c = seam_cost(nx, d)
                     if c is not None:
                         add("deletion", x + 1, y, 0, 0, c)
 
     # ---- insertions (duplication included): before frame a, graph run [s, u]
-    cand_a = np.flatnonzero(
-        np.concatenate([[False], has_out[: F - 1]]) | has_in | np.concatenate([[False], seam_after[: F - 1]])
-    )
-    for a in (int(v) for v in cand_a):
-        if not 1 <= a <= F - 1:
+    for a in range(1, F):
+        prev, nxt = nl[a - 1], nl[a]
+        if not (out_l[prev] or into_l[nxt] or seam_after[a - 1]):
             continue
-        prev, nxt = int(nodes[a - 1]), int(nodes[a])
-        S = set(int(v) for v in gd.out(prev))
-        if not gd.last[prev]:
+        S = set(out_l[prev])
+        if not glast[prev]:
             S.add(prev + 1)
-        U = set(int(v) for v in gd.into(nxt))
-        if not gd.first[nxt]:
+        U = set(into_l[nxt])
+        if not gfirst[nxt]:
             U.add(nxt - 1)
         for s in S:
             for u in U:
                 L = u - s + 1
-                if not lmin <= L <= lmax or gd.clip[s] != gd.clip[u] or gd.last[s:u].any():
+                if not lmin <= L <= lmax or not clean(s, u):
                     continue
-                c1 = gd.seam_cost(prev, s)
-                c2 = gd.seam_cost(u, nxt)
+                c1 = seam_cost(prev, s)
+                c2 = seam_cost(u, nxt)
                 if c1 is None or c2 is None:
                     continue
                 if c1 == 0.0 and c2 == 0.0 and not seam_after[a - 1]:
                     continue
                 # duplication: the run equals the current frames that follow (the copy goes first)
-                if a + L <= F and np.array_equal(nodes[a : a + L], np.arange(s, u + 1)):
+                if a + L <= F and plays(a, s, L):
                     add("duplication", a, a, s, u + 1, c1 + c2)
-                elif a - L >= 1 and np.array_equal(nodes[a - L : a], np.arange(s, u + 1)):
+                elif a - L >= 1 and plays(a - L, s, L):
                     # the same sequence as duplicating before a - L: keep the canonical form
                     add("duplication", a - L, a - L, s, u + 1, c1 + c2)
                 else:
                     add("insertion", a, a, s, u + 1, c1 + c2)
 
     # ---- replacements: seam x=a-1 -> s (s != src[a]) and u -> y=b (u != src[b-1])
-    outs: list[tuple[int, int]] = []
-    for xo in np.flatnonzero(has_out[: F - 1]):
-        for so in gd.out(int(nodes[xo])):
-            if int(so) != int(nodes[xo + 1]):
-                outs.append((int(xo), int(so)))
-    ins: list[tuple[int, int]] = []
-    for yi in np.flatnonzero(has_in):
-        for ui in gd.into(int(nodes[yi])):
-            if yi >= 1 and int(ui) != int(nodes[yi - 1]):
-                ins.append((int(yi), int(ui)))
+    outs = [(x, so) for x in range(F - 1) for so in out_l[nl[x]] if so != nl[x + 1]]
+    ins = [(y, ui) for y in range(1, F) for ui in into_l[nl[y]] if ui != nl[y - 1]]
     for x, s in outs:
         a = x + 1
         for y, u in ins:
             b = y
-            if not lmin <= b - a <= lmax or b > F - 1:
+            if not lmin <= b - a <= lmax:
                 continue
             L = u - s + 1
-            if not lmin <= L <= lmax or gd.clip[s] != gd.clip[u] or gd.last[s:u].any():
+            if not lmin <= L <= lmax or not clean(s, u):
                 continue
             net = abs(L - (b - a))
             if net and net < lmin:
                 continue  # a replacement changing the duration by a sliver: too frequent (duration rule)
-            if b - a == L and np.array_equal(nodes[a:b], np.arange(s, u + 1)):
+            if b - a == L and plays(a, s, L):
                 continue
-            c1 = gd.seam_cost(int(nodes[x]), s)
-            c2 = gd.seam_cost(u, int(nodes[y]))
+            c1 = seam_cost(nl[x], s)
+            c2 = seam_cost(u, nl[y])
             if c1 is None or c2 is None:
                 continue
             add("replacement", a, b, s, u + 1, c1 + c2)
@@ -1012,6 +1053,7 @@ def prune(
 _PENALTY = 1e4  # weight of hard constraints and rigid rows in the evaluation
 _EPS = 1e-8  # regulariser of the free modes
 _BAND = {2: 5, 1: 1}  # bandwidth (in unknowns) of the path rows for 2D (space) and 1D (time)
+_SEAM = np.array([-2, -1, 0, 1], dtype=np.int64)  # frames kept around each seam
 
 
 class _Tangents:
@@ -1086,27 +1128,88 @@ def _compile(
 
 
 @dataclasses.dataclass
-class _Part:
-    """One character's subsampled path for the evaluation."""
+class _Table:
+    """Constraint rows of one domain with an all-zero padding row appended (index ``R``).
 
-    frames: IntArray  # kept frames (sorted), shape (n,)
-    X: Array  # their ground positions, (n, 2)
-    arc: Array  # arc length of the full path between successive kept frames, (n - 1,)
-    rigid_pt: NDArray[np.bool_]  # kept frame strictly inside a stationary segment, (n,)
-    rigid_step: NDArray[np.bool_]  # both ends of the step in one segment, (n - 1,)
-    n_frames: int  # full frame count
-    dt: float
-    start: float
+    ``intra_of[k]`` lists the rows on character ``k`` alone (padded with
+    ``R``); ``cross`` the rows linking characters.
+    """
+
+    char: IntArray  # (R + 1, W)
+    frame: IntArray
+    coord: IntArray
+    val: Array
+    rhs: Array  # (R + 1,)
+    soft: NDArray[np.bool_]
+    intra: NDArray[np.bool_]
+    intra_of: IntArray  # (K, R_k)
+    cross: IntArray
+    dim: int
+
+    @property
+    def band(self) -> int:
+        return _BAND[self.dim]
+
+    @classmethod
+    def of(cls, rows: _Rows, K: int, dim: int) -> _Table:
+        R = rows.n
+
+        def ext(a: NDArray[Any], v: Any) -> NDArray[Any]:
+            return np.concatenate([a, np.full((1,) + a.shape[1:], v, dtype=a.dtype)])
+
+        touch = np.any(rows.val != 0, axis=1)
+        owner = rows.char[:, 0] if R else np.zeros(0, np.int64)
+        lists = [np.flatnonzero(rows.intra & touch & (owner == k)) for k in range(K)]
+        intra_of = np.full((K, max([len(x) for x in lists], default=0)), R, dtype=np.int64)
+        for k, x in enumerate(lists):
+            intra_of[k, : len(x)] = x
+        return cls(
+            ext(rows.char, 0),
+            ext(rows.frame, 0),
+            ext(rows.coord, 0),
+            ext(rows.val, 0.0),
+            ext(rows.rhs, 0.0),
+            ext(rows.soft, False),
+            ext(rows.intra, True),
+            intra_of,
+            np.flatnonzero(~rows.intra & touch).astype(np.int64),
+            dim,
+        )
 
 
-def _rigid(frames: IntArray, segments: Sequence[tuple[int, int]]) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
-    pt = np.zeros(len(frames), bool)
-    st = np.zeros(max(len(frames) - 1, 0), bool)
-    for a, b in segments:
-        inside = (frames >= a) & (frames < b)
-        pt |= (frames > a) & (frames < b - 1)
-        st |= inside[:-1] & inside[1:]
-    return pt, st
+def _fmap(f: IntArray, a: IntArray, b: IntArray, L: IntArray) -> IntArray:
+    """Current frames ``f`` (P, ...) -> frames after replacing ``[a, b)`` by ``L`` frames (per part, (P,)).
+
+    Removed frames go to the nearest side of the seam.
+    """
+    sh = (len(a),) + (1,) * (f.ndim - 1)
+    a, b, L = a.reshape(sh), b.reshape(sh), L.reshape(sh)
+    inner = np.where(f - a < b - f, a, a + L - 1)
+    return np.where(f < a, f, np.where(f >= b, f + L - (b - a), inner))
+
+
+@dataclasses.dataclass
+class _Parts:
+    """Subsampled paths for the evaluation, padded to a common number ``n`` of kept frames.
+
+    Part ``q`` is character ``char[q]``'s path with its current frames
+    ``[a, b)`` replaced by ``L`` new frames (the untransformed path has
+    ``a = b = F`` and ``L = 0``).
+    """
+
+    char: IntArray  # (P,)
+    a: IntArray
+    b: IntArray
+    L: IntArray
+    frames: IntArray  # (P, n) kept frames (sorted), padded with a frame beyond every path
+    nv: IntArray  # (P,) number of kept frames
+    X: Array  # (P, n, 2) their ground positions (padding repeats the last)
+    arc: Array  # (P, n - 1) arc length of the full path between successive kept frames
+    rpt: NDArray[np.bool_]  # (P, n) kept frame strictly inside a stationary segment
+    rst: NDArray[np.bool_]  # (P, n - 1) both ends of the step in one segment
+    nfr: IntArray  # (P,) full frame count
+    dt: Array  # (P,)
+    start: Array  # (P,)
 
 
 def _bsearch(frames: IntArray, nvalid: IntArray, queries: IntArray) -> IntArray:
@@ -1132,16 +1235,27 @@ def _gather(x: Array, cols: IntArray) -> Array:
 def _band(c: int, n: int, u: int, cols: IntArray, vals: Array) -> Array:
     """Batched normal matrices ``sum_rows r r^T`` in LAPACK upper band storage (c, u + 1, n).
 
-    Every row's columns must lie within ``u`` of each other.
+    Rows are given as entry arrays: columns ``cols`` (c or 1, R, W) and
+    values ``vals`` (c, R, W).  Every row's columns must lie within ``u`` of
+    each other.  Columns shared by every path (``cols.shape[0] == 1``, the
+    path rows) are turned into storage positions once.
     """
-    ci = np.arange(c, dtype=np.int64)[:, None, None, None]
+    W = cols.shape[2]
+    if cols.shape[1] == 0 or W == 0:
+        return np.zeros((c, u + 1, n))
+    v = vals[:, :, :, None] * vals[:, :, None, :]
     c1 = cols[:, :, :, None]
     c2 = cols[:, :, None, :]
-    v = vals[:, :, :, None] * vals[:, :, None, :]
-    m = np.broadcast_to(c1 <= c2, v.shape)
-    idx = (ci * (u + 1) + (u + c1 - c2)) * n + c2
-    idx = np.broadcast_to(idx, v.shape)
-    return np.bincount(idx[m], v[m], minlength=c * (u + 1) * n).astype(float).reshape(c, u + 1, n)
+    pos = (u + c1 - c2) * n + c2
+    keep = c1 <= c2
+    if cols.shape[0] == 1:
+        idx = (np.arange(c, dtype=np.int64)[:, None] * ((u + 1) * n) + pos[0][keep[0]][None, :]).ravel()
+        val = v[:, keep[0]].ravel()
+    else:
+        keep = np.broadcast_to(keep, v.shape)
+        idx = (np.arange(c, dtype=np.int64)[:, None, None, None] * ((u + 1) * n) + pos)[keep]
+        val = v[keep]
+    return np.bincount(idx, val, minlength=c * (u + 1) * n).astype(float).reshape(c, u + 1, n)
 
 
 def _pbsv(ab: Array, b: Array) -> Array:
@@ -1152,17 +1266,31 @@ def _pbsv(ab: Array, b: Array) -> Array:
     return x
 
 
-def _pbsolve(ab: Array, b: Array) -> Array:
-    """Batched banded solves: ab (c, u + 1, n), b (c, n, k) -> (c, n, k)."""
-    return np.stack([_pbsv(ab[i], b[i]) for i in range(ab.shape[0])])
+def _spd_solve(ab: Array, b: Array) -> Array:
+    """Batched banded SPD solves: ab (c, u + 1, n) upper band storage, b (c, n, k) -> (c, n, k).
+
+    The ``c`` matrices are laid side by side as the blocks of one
+    block-diagonal matrix, which is banded with the same bandwidth (each
+    block's band entries reaching before its first column are zero), so
+    one LAPACK ``pbsv`` call solves them all: per-call overhead, not
+    arithmetic, is the cost at these sizes.  Each block is factorised
+    exactly as it would be alone (the zero couplings contribute exact
+    zeros), so a path's solution does not depend on the others in the batch.
+    """
+    c, u1, n = ab.shape
+    k = b.shape[2]
+    if k == 0 or c == 0:
+        return np.zeros((c, n, k))
+    big = np.asfortranarray(np.transpose(ab, (1, 0, 2)).reshape(u1, c * n))
+    return _pbsv(big, b.reshape(c * n, k)).reshape(c, n, k)
 
 
-def _local(cols: IntArray, vals: Array, u: int) -> NDArray[np.bool_]:
-    """Rows (of every path in the batch) whose columns fit in a band of width ``u``."""
-    if cols.shape[1] == 0:
-        return np.zeros(0, bool)
+def _fits(cols: IntArray, vals: Array, u: int) -> NDArray[np.bool_]:
+    """Rows (..., W) whose non-zero columns fit in a band of width ``u``."""
+    if cols.shape[-1] == 0:
+        return np.ones(cols.shape[:-1], bool)
     big = np.where(vals != 0, cols, cols[..., :1])
-    return np.all(big.max(axis=-1) - big.min(axis=-1) <= u, axis=0)
+    return big.max(axis=-1) - big.min(axis=-1) <= u
 
 
 def _rhs(n: int, cols: IntArray, vals: Array, rhs: Array) -> Array:
@@ -1179,268 +1307,58 @@ def _res(cols: IntArray, vals: Array, rhs: Array, x: Array) -> Array:
     return np.sum(vals * _gather(x, cols), axis=-1) - rhs
 
 
-def _pad(*groups: tuple[IntArray, Array]) -> tuple[IntArray, Array]:
-    """Concatenate row groups (c, R_g, W_g) along rows, padding widths (value 0)."""
-    W = max(g[0].shape[2] for g in groups)
-    c = max(max(g[0].shape[0], g[1].shape[0]) for g in groups)
-    cs, vs = [], []
-    for cc, vv in groups:
-        cc = np.broadcast_to(cc, (c,) + cc.shape[1:])
-        _, R, w = cc.shape
-        if w < W:
-            cc = np.concatenate([cc, np.repeat(cc[:, :, :1], W - w, axis=2)], axis=2)
-            vv = np.concatenate([vv, np.zeros((vv.shape[0], R, W - w))], axis=2)
-        cs.append(cc)
-        vs.append(np.broadcast_to(vv, (c, R, W)))
-    return np.concatenate(cs, axis=1), np.concatenate(vs, axis=1)
+class _Sys:
+    """The three subsampled least-squares systems of every part (see :meth:`_Scene.systems`)."""
 
-
-class _Batch:
-    """One character's three subsampled systems (shape, scale, time) for a batch of paths.
-
-    ``parts`` (candidates, or the untransformed path) are padded to a common
-    number of kept frames; padded unknowns are decoupled (identity rows).
-    Each system is factorised per path; the constraint rows linking the
-    character to others are kept apart (``U``) for the Woodbury identity.
-    """
-
-    def __init__(
-        self,
-        parts: Sequence[_Part],
-        k: int,
-        fmaps: Sequence[IntArray | None],
-        space: _Rows,
-        time: _Rows,
-        cross_s: IntArray,
-        cross_t: IntArray,
-        pen: float,
-    ) -> None:
-        c = len(parts)
-        self.c = c
-        nv = np.array([len(p.frames) for p in parts], dtype=np.int64)
-        n = int(nv.max())
-        self.n, self.nv = n, nv
-        idx = np.arange(n)
-        valid = idx[None, :] < nv[:, None]
-        self.valid = valid
-        fr = np.full((c, n), 0, dtype=np.int64)
-        X = np.zeros((c, n, 2))
-        arc = np.zeros((c, max(n - 1, 0)))
-        rpt = np.zeros((c, n), bool)
-        rst = np.zeros((c, max(n - 1, 0)), bool)
-        big = max(int(p.frames[-1]) for p in parts) + 1
-        for i, p in enumerate(parts):
-            m = nv[i]
-            fr[i, :m] = p.frames
-            fr[i, m:] = big
-            X[i, :m] = p.X
-            X[i, m:] = p.X[-1]
-            arc[i, : m - 1] = p.arc
-            rpt[i, :m] = p.rigid_pt
-            rst[i, : m - 1] = p.rigid_step
-        self.frames, self.X, self.arc = fr, X, arc
-        self.n_frames = np.array([p.n_frames for p in parts], dtype=float)
-        self.dt = parts[0].dt
-        self.start = parts[0].start
-        sq = math.sqrt(pen)
-        vstep = valid[:, 1:]
-        span = np.where(vstep, np.diff(fr, axis=1), 1).astype(float)
-        self.span = span
-        n2 = 2 * n
-
-        # ---- constraint rows of this character: local (its own) and coupled (with others)
-        def kidx(frames: IntArray) -> IntArray:
-            q = np.stack([frames if f is None else f[np.minimum(frames, len(f) - 1)] for f in fmaps])
-            return _bsearch(fr, nv, q)
-
-        # rows on this character alone that fit the band go into its own system; the
-        # others (and the rows linking characters) are coupled by the Woodbury identity
-        touch_s = np.any((space.char == k) & (space.val != 0), axis=1)
-        intra = np.flatnonzero(touch_s & space.intra)
-        cols = 2 * kidx(space.frame[intra]) + space.coord[intra][None]
-        ok = _local(cols, space.val[intra][None], _BAND[2])
-        self.s_local = intra[ok]
-        self.s_cols = cols[:, ok]
-        sv = np.broadcast_to(space.val[self.s_local][None], self.s_cols.shape)
-        s_rhs = np.broadcast_to(space.rhs[self.s_local][None], (c, len(self.s_local)))
-        cross_s = np.union1d(cross_s, intra[~ok])
-        touch_t = np.any((time.char == k) & (time.val != 0), axis=1)
-        intra = np.flatnonzero(touch_t & time.intra)
-        cols = kidx(time.frame[intra])
-        ok = _local(cols, time.val[intra][None], _BAND[1])
-        self.t_local = intra[ok]
-        self.t_cols = cols[:, ok]
-        tvl = np.broadcast_to(time.val[self.t_local][None], self.t_cols.shape)
-        t_rhs = np.broadcast_to(time.rhs[self.t_local][None], (c, len(self.t_local)))
-        cross_t = np.union1d(cross_t, intra[~ok])
-        self.s_soft = space.soft[self.s_local]
-        self.t_soft = time.soft[self.t_local]
-        self.s_loc = (self.s_cols, sv, s_rhs)
-        self.t_loc = (self.t_cols, tvl, t_rhs)
-        # coupled rows: U (c, r, unknowns) on this character's entries
-        self.cross_s, self.cross_t = cross_s.astype(np.int64), cross_t.astype(np.int64)
-        self.Us = self._coupled(space, self.cross_s, k, kidx, 2, n2, c)
-        self.Ut = self._coupled(time, self.cross_t, k, kidx, 1, n, c)
-        # ---- phase 1: equation-3 rows weighted mbar^-3/2 (rigid ones: penalty)
-        if n >= 3:
-            t = X[:, 2:] - X[:, :-2]
-            d = X[:, 1:-1] - X[:, :-2]
-            nn = np.sum(t * t, axis=-1)
-            ok = nn > 1e-18
-            safe = np.where(ok, nn, 1.0)
-            lx = np.where(ok, np.sum(d * t, axis=-1) / safe, 0.5)
-            ly = np.where(ok, (d[..., 0] * t[..., 1] - d[..., 1] * t[..., 0]) / safe, 0.0)
-            mbar = 0.5 * (span[:, :-1] + span[:, 1:])
-            vint = valid[:, 2:]
-            rig = rpt[:, 1:-1]
-            wr = np.where(vint, np.where(rig, sq, mbar**-1.5), 0.0)
-            g = idx[1:-1]
-            X0, X1, X2 = 2 * (g - 1), 2 * g, 2 * (g + 1)
-            one = np.ones_like(lx)
-            rx_c = np.stack([X1, X0, X2, X0, X2 + 1, X0 + 1], axis=-1)
-            rz_c = np.stack([X1 + 1, X0 + 1, X2 + 1, X0 + 1, X2, X0], axis=-1)
-            rx_v = np.stack([one, -one, -lx, lx, -ly, ly], axis=-1)
-            rz_v = np.stack([one, -one, -lx, lx, ly, -ly], axis=-1)
-            lap_c = np.stack([rx_c, rz_c], axis=1).reshape(1, -1, 6)
-            lap_v = (np.stack([rx_v, rz_v], axis=2) * wr[:, :, None, None]).reshape(c, -1, 6)
-            self.lap_energy = np.repeat(vint & ~rig, 2, axis=1)
-        else:
-            lap_c, lap_v = np.zeros((c, 0, 6), np.int64), np.zeros((c, 0, 6))
-            self.lap_energy = np.zeros((c, 0), bool)
-        self.lap = (lap_c, lap_v)
-        pad = np.repeat(~valid, 2, axis=1)
-        u2 = _BAND[2]
-        c1, v1 = _pad(self.lap, self.s_loc[:2])
-        N1 = _band(c, n2, u2, c1, v1)
-        N1[:, u2] += _EPS + pad
-        self.x0 = np.where(pad, 0.0, X.reshape(c, -1))
-        b1 = _rhs(n2, self.s_cols, sv, s_rhs) + _EPS * self.x0
-        sol = _pbsolve(N1, np.concatenate([b1[:, :, None], np.swapaxes(self.Us, 1, 2)], axis=2))
-        self.y1, self.Z1 = sol[:, :, 0], sol[:, :, 1:]
-        # ---- phase 2: equation 7 on per-frame velocities, rows weighted 1/sqrt(mean span)
-        if n >= 3:
-            ia, ib = 1.0 / span[:, :-1], 1.0 / span[:, 1:]
-            wv = np.where(valid[:, 2:], (0.5 * (span[:, :-1] + span[:, 1:])) ** -0.5, 0.0)
-            g = idx[1:-1]
-            cols_ = [np.stack([2 * (g - 1) + q, 2 * g + q, 2 * (g + 1) + q], axis=-1) for q in (0, 1)]
-            vals_ = [np.stack([ia, -ia - ib, ib], axis=-1) * wv[..., None]] * 2
-            sec_c = np.stack(cols_, axis=1).reshape(1, -1, 3)
-            sec_v = np.stack(vals_, axis=2).reshape(c, -1, 3)
-            self.wv = wv
-        else:
-            sec_c, sec_v = np.zeros((c, 0, 3), np.int64), np.zeros((c, 0, 3))
-            self.wv = np.zeros((c, 0))
-        self.sec = (sec_c, sec_v)
-        st = idx[:-1]
-        rc = np.stack([np.stack([2 * (st + 1) + q, 2 * st + q], axis=-1) for q in (0, 1)], axis=1).reshape(1, -1, 2)
-        wrs = np.repeat(np.where(rst, sq, 0.0), 2, axis=1)
-        self.rig_w = wrs
-        self.rig = (rc, wrs[:, :, None] * np.array([1.0, -1.0]))
-        c2, v2 = _pad(self.sec, self.rig, self.s_loc[:2])
-        N2 = _band(c, n2, u2, c2, v2)
-        N2[:, u2] += _EPS + pad
-        self.N2 = N2
-        self.pad2 = pad
-        self.L0 = np.linalg.norm(np.diff(X, axis=1), axis=-1)
-        self.Z2 = _pbsolve(N2, np.swapaxes(self.Us, 1, 2)) if self.Us.shape[1] else np.zeros((c, n2, 0))
-        # ---- time: t[i+1] - t[i] = m_i h, rows weighted 1/sqrt(m_i)
-        wt = np.where(vstep, 1.0 / np.sqrt(np.maximum(span, 1.0)), 0.0)
-        tc = np.stack([idx[1:], idx[:-1]], axis=-1)[None]
-        tv = np.stack([wt, -wt], axis=-1)
-        self.tim = (tc, tv, span * self.dt * wt)
-        c3, v3 = _pad((tc, tv), self.t_loc[:2])
-        u1 = _BAND[1]
-        Nt = _band(c, n, u1, c3, v3)
-        Nt[:, u1] += _EPS + ~valid
-        self.t0 = np.where(valid, self.start + fr * self.dt, 0.0)
-        bt = _rhs(n, tc, tv, self.tim[2]) + _rhs(n, self.t_cols, tvl, t_rhs) + _EPS * self.t0
-        sol = _pbsolve(Nt, np.concatenate([bt[:, :, None], np.swapaxes(self.Ut, 1, 2)], axis=2))
-        self.yt, self.Zt = sol[:, :, 0], sol[:, :, 1:]
-        self.last = nv - 1
-
-    @staticmethod
-    def _coupled(rows: _Rows, ids: IntArray, k: int, kidx: Any, dim: int, nunk: int, c_: int) -> Array:
-        U = np.zeros((c_, len(ids), nunk))
-        if not len(ids):
-            return U
-        mask = (rows.char[ids] == k) & (rows.val[ids] != 0)
-        pos, ent = np.nonzero(mask)
-        if not len(pos):
-            return U
-        kk = kidx(rows.frame[ids][pos, ent])  # (c, E)
-        col = dim * kk + rows.coord[ids][pos, ent][None] if dim == 2 else kk
-        ci = np.repeat(np.arange(c_), len(pos))
-        np.add.at(U, (ci, np.tile(pos, c_), col.ravel()), np.tile(rows.val[ids][pos, ent], c_))
-        return U
-
-    # ---------------------------------------------------------------- energies
-    def phase2_rhs(self, pbar: Array) -> tuple[Array, Array]:
-        """Right-hand sides of phase 2 for phase-1 results ``pbar`` (c', 2n); also the rescaled segments."""
-        cc = pbar.shape[0]
-        n = self.n
-        P = pbar.reshape(cc, n, 2)
-        seg = P[:, 1:] - P[:, :-1]
-        ln = np.linalg.norm(seg, axis=-1)
-        vb = seg * np.divide(self.L0, ln, out=np.ones_like(ln), where=ln > 1e-12)[..., None]
-        ub = vb / self.span[..., None]
-        out = _rhs(2 * n, *self._b(self.s_loc[0], cc), *self._bv(self.s_loc[1], self.s_loc[2], cc)) + _EPS * pbar
-        if n >= 3:
-            r = ((ub[:, 1:] - ub[:, :-1]) * self.wv[..., None]).reshape(cc, -1)
-            out += _rhs(2 * n, *self._b(self.sec[0], cc), *self._bv(self.sec[1], r, cc))
-        r = vb.reshape(cc, -1) * self.rig_w
-        out += _rhs(2 * n, *self._b(self.rig[0], cc), *self._bv(self.rig[1], r, cc))
-        return np.where(self.pad2, 0.0, out), ub
-
-    @staticmethod
-    def _b(cols: IntArray, cc: int) -> tuple[IntArray]:
-        return (np.broadcast_to(cols, (cc,) + cols.shape[1:]),)
-
-    @staticmethod
-    def _bv(vals: Array, rhs: Array, cc: int) -> tuple[Array, Array]:
-        return np.broadcast_to(vals, (cc,) + vals.shape[1:]), np.broadcast_to(rhs, (cc,) + rhs.shape[1:])
-
-    def soft_local(self, x: Array, which: str) -> Array:
-        cols, vals, rhs = self.s_loc if which == "s" else self.t_loc
-        soft = self.s_soft if which == "s" else self.t_soft
-        if not cols.shape[1]:
-            return np.zeros(x.shape[0])
-        r = _res(cols, vals, rhs, x)
-        return np.sum(r[:, soft] ** 2, axis=1)
-
-    def shape_energy(self, x: Array) -> Array:
-        lr = np.sum(self.lap[1] * _gather(x, self.lap[0]), axis=-1)
-        return np.sum(np.where(self.lap_energy, lr, 0.0) ** 2, axis=1) + self.soft_local(x, "s")
-
-    def scale_energy(self, x: Array, ub: Array) -> Array:
-        e = self.soft_local(x, "s")
-        if self.n >= 3:
-            r = ((ub[:, 1:] - ub[:, :-1]) * self.wv[..., None]).reshape(x.shape[0], -1)
-            e = e + np.sum(_res(self.sec[0], self.sec[1], r, x) ** 2, axis=1)
-        return e
-
-    def time_energy(self, t: Array) -> Array:
-        tc, tv, trhs = self.tim
-        return np.sum(_res(tc, tv, trhs, t) ** 2, axis=1) + self.soft_local(t, "t")
-
-    def changes(self, x2: Array, t: Array) -> tuple[Array, Array]:
-        """``|L_s(P') - L_s(P)|`` (full-path arcs scaled by the chords' change) and ``|L_t(P') - L_t(P)|``."""
-        cc = x2.shape[0]
-        c1 = np.linalg.norm(np.diff(x2.reshape(cc, self.n, 2), axis=1), axis=-1)
-        ratio = np.divide(self.arc, self.L0, out=np.ones_like(self.L0), where=self.L0 > 1e-6)
-        dl = np.abs(np.sum(np.where(self.valid[:, 1:], ratio * (c1 - self.L0), 0.0), axis=1))
-        last = np.take_along_axis(t, np.broadcast_to(self.last[:, None], (cc, 1)), axis=1)[:, 0]
-        dt = np.abs(last - t[:, 0] - (self.n_frames - 1) * self.dt)
-        return dl, dt
+    n: int
+    # constraint rows on one character that fit the band: (P, R_k, W) columns, values, (P, R_k) rhs, soft
+    s_loc: tuple[IntArray, Array, Array]
+    s_soft: NDArray[np.bool_]
+    t_loc: tuple[IntArray, Array, Array]
+    t_soft: NDArray[np.bool_]
+    # coupled rows (Woodbury): ids, U (P, g, unknowns), rows each part takes part in (P, g)
+    Gs: IntArray
+    Us: Array
+    act_s: NDArray[np.bool_]
+    Gt: IntArray
+    Ut: Array
+    act_t: NDArray[np.bool_]
+    lap: tuple[IntArray, Array]
+    lap_energy: NDArray[np.bool_]
+    sec: tuple[IntArray, Array]
+    wv: Array
+    rig: tuple[IntArray, Array]
+    rig_w: Array
+    tim: tuple[IntArray, Array, Array]
+    bs: Array  # (P, 2n) local constraint part of the spatial right-hand sides
+    y1: Array
+    Z1: Array
+    N2: Array
+    Z2: Array
+    yt: Array
+    Zt: Array
+    pad2: NDArray[np.bool_]
+    L0: Array
+    span: Array
+    arc: Array
+    vstep: NDArray[np.bool_]
+    last: IntArray
+    nfr: Array
+    dt: Array
 
 
 class _Scene:
     """The current scene prepared for subsampled evaluation of candidates.
 
-    Each character's three least-squares systems are factorised once per
-    update; constraint rows linking characters (or too long for a banded
-    block) are added by the Woodbury identity, so a candidate costs one
-    block factorisation per system for the transformed character plus small
-    dense solves.
+    Every candidate of every character is evaluated in one batch.  Each
+    candidate's transformed path and each untransformed path is a *part*;
+    the parts' three least-squares systems (shape, scale, time) are built
+    and solved together (padded to a common size), the constraint rows
+    linking characters (or too long for a part's band) are left out of
+    them and added back by the Woodbury identity, per *variant* (the scene
+    with one candidate applied; variant 0 is the untransformed scene).  So
+    the cost of an update is a fixed number of batched array operations,
+    whatever the number of candidates and characters.
     """
 
     def __init__(
@@ -1452,6 +1370,8 @@ class _Scene:
         starts: Sequence[float],
         opts: DiscreteOptions,
         step: int,
+        *,
+        tangents: Any = None,
     ) -> None:
         self.tracks = list(tracks)
         self.opts = opts
@@ -1459,45 +1379,48 @@ class _Scene:
         self.K = K
         layout = Layout(tuple(t.n_frames for t in tracks))
         dts = [t.motion.dt for t in tracks]
-        self.dts = dts
-        self.starts = [float(s) for s in starts]
+        self.dts = np.array(dts, dtype=float)
+        self.starts = np.array([float(s) for s in starts], dtype=float)
         wmax = max([1.0] + [float(c.weight) for c in constraints if hasattr(c, "weight") and not c.hard])
         self.pen = _PENALTY * wmax
-        tang = _Tangents(paths)
+        tang = tangents if tangents is not None else _Tangents(paths)
         self.space = _compile(
             constraints, SPATIAL, lambda c: spatial_rows(c, paths, layout, cast(Any, tang), step), layout, 2, self.pen
         )
         self.time = _compile(constraints, TEMPORAL, lambda c: temporal_rows(c, layout, dts, step), layout, 1, self.pen)
+        self._ts = _Table.of(self.space, K, 2)
+        self._tt = _Table.of(self.time, K, 1)
         self.segments = [list(s) for s in segments]
-        self.positions = [np.asarray(p.positions, dtype=float) for p in paths]
-        self.headings = [np.unwrap(quat.yaw(t.motion.rotations[:, 0])) for t in tracks]
-        self.cumarc = [
-            np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))]) for P in self.positions
-        ]
-        # components of characters linked by constraint rows
-        parent = list(range(K))
-
-        def find(a: int) -> int:
-            while parent[a] != a:
-                parent[a] = parent[parent[a]]
-                a = parent[a]
-            return a
-
-        for rows in (self.space, self.time):
-            for r in np.flatnonzero(~rows.intra):
-                ks = np.unique(rows.char[r][rows.val[r] != 0])
-                for o in ks[1:]:
-                    ra, rb = find(int(ks[0])), find(int(o))
-                    if ra != rb:
-                        parent[rb] = ra
-        self.comp = [find(k) for k in range(K)]
-        # rows linking characters (Woodbury terms), per character
-        self.cross_s = [self._cross(self.space, k) for k in range(K)]
-        self.cross_t = [self._cross(self.time, k) for k in range(K)]
-        # kept frames and systems of the unmodified characters
+        # per-character arrays, concatenated (character k's frame f is row poff[k] + f)
+        self.F = np.array([t.n_frames for t in tracks], dtype=np.int64)
+        self.poff = np.concatenate([[0], np.cumsum(self.F)]).astype(np.int64)
+        pos = [np.asarray(p.positions, dtype=float) for p in paths]
+        self.P = np.concatenate(pos)
+        self.H = np.concatenate([_headings(t) for t in tracks])
+        self.C = np.concatenate(
+            [np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))]) for p in pos]
+        )
+        # motion graphs, concatenated (node i of character k's graph is goff[k] + i)
+        gds: list[_GraphData] = []
+        where: dict[int, int] = {}
+        goff = []
+        total = 0
+        for t in tracks:
+            gd = _GraphData.of(t.graph)
+            if id(gd) not in where:
+                where[id(gd)] = total
+                gds.append(gd)
+                total += t.graph.n_frames
+            goff.append(where[id(gd)])
+        self.goff = np.array(goff, dtype=np.int64)
+        self.gpos = np.concatenate([g.pos for g in gds])
+        self.gyaw = np.concatenate([g.yaw for g in gds])
+        self.garc = np.concatenate([g.arc for g in gds])
+        self.gfirst = np.concatenate([g.first for g in gds])
+        self.nodes = np.concatenate([self.goff[k] + t.nodes for k, t in enumerate(tracks)])
+        # kept frames of the untransformed paths
         ratio = int(opts.subsample)
-        self.base_frames: list[IntArray] = []
-        self.base: list[_Batch] = []
+        base: list[IntArray] = []
         for k, t in enumerate(tracks):
             F = t.n_frames
             keep = [np.arange(0, F, ratio), [0, F - 1]]
@@ -1505,199 +1428,370 @@ class _Scene:
                 keep.append(rows.frame[(rows.char == k) & (rows.val != 0)])
             for a, b in self.segments[k]:
                 keep.append([a, b - 1])
-            fr = np.unique(np.clip(np.concatenate([np.asarray(x, dtype=np.int64) for x in keep]), 0, F - 1))
-            self.base_frames.append(fr)
-            pt, st = _rigid(fr, self.segments[k])
-            part = _Part(fr, self.positions[k][fr], np.diff(self.cumarc[k][fr]), pt, st, F, dts[k], self.starts[k])
-            self.base.append(self._batch([part], k, [None]))
-        self.base_energy: dict[int, float] = {}
-        for root in set(self.comp):
-            members = [k for k in range(K) if self.comp[k] == root]
-            self.base_energy[root] = float(self._evaluate(members, members[0], self.base[members[0]])[0])
-
-    @staticmethod
-    def _cross(rows: _Rows, k: int) -> IntArray:
-        return np.flatnonzero(~rows.intra & np.any((rows.char == k) & (rows.val != 0), axis=1))
-
-    def _batch(self, parts: Sequence[_Part], k: int, fmaps: Sequence[IntArray | None]) -> _Batch:
-        return _Batch(parts, k, fmaps, self.space, self.time, self.cross_s[k], self.cross_t[k], self.pen)
+            base.append(np.unique(np.clip(np.concatenate([np.asarray(x, dtype=np.int64) for x in keep]), 0, F - 1)))
+        self.base_frames = base
+        self._bn = np.array([len(f) for f in base], dtype=np.int64)
+        self._bf = np.full((K, int(self._bn.max())), -1, dtype=np.int64)
+        for k, f in enumerate(base):
+            self._bf[k, : len(f)] = f
+        S = max([len(s) for s in self.segments], default=0)
+        self._seg = np.zeros((K, S, 2), dtype=np.int64)
+        for k, segs in enumerate(self.segments):
+            if segs:
+                self._seg[k, : len(segs)] = segs
+        self._baseline: float | None = None
 
     @property
     def baseline(self) -> float:
         """Equation-10 energy of the untransformed scene (subsampled)."""
-        return float(sum(self.base_energy.values()))
-
-    # ------------------------------------------------------------ candidate
-    def candidate_part(self, t: Transformation) -> tuple[_Part, IntArray]:
-        """The subsampled transformed path of ``t``'s character and the old -> new frame map."""
-        k = t.character
-        tr = self.tracks[k]
-        gd = _GraphData.of(tr.graph)
-        a, b = t.removed
-        s, e = t.inserted
-        L = e - s
-        F = tr.n_frames
-        F2 = F - (b - a) + L
-        P = self.positions[k]
-        C = self.cumarc[k]
-        H = self.headings[k]
-        pa = P[a - 1]
-        if L:
-            ref = s - 1 if not gd.first[s] else s
-            th = H[a - 1] - gd.yaw[ref]
-            t1 = pa - _rot2(th, gd.pos[ref])
-            ins_pos = _rot2(th, gd.pos[s:e]) + t1
-            ins_arc = C[a - 1] + np.linalg.norm(ins_pos[0] - pa) + (gd.arc[s:e] - gd.arc[s])
-            last_pos, last_head, last_arc = ins_pos[-1], gd.yaw[e - 1] + th, ins_arc[-1]
-        else:
-            ins_pos, ins_arc = np.zeros((0, 2)), np.zeros(0)
-            last_pos, last_head, last_arc = pa, H[a - 1], C[a - 1]
-        # suffix: moved rigidly so that the graph frame before nodes[b] sits on the last frame before it
-        nb = int(tr.nodes[b])
-        ref_b = nb - 1 if not gd.first[nb] else nb
-        th_old = H[b] - gd.yaw[nb]
-        pos_old_ref = _rot2(th_old, gd.pos[ref_b] - gd.pos[nb]) + P[b]
-        dth = last_head - (gd.yaw[ref_b] + th_old)
-        # old -> new frame map (removed frames go to the nearest seam side)
-        fmap = np.arange(F, dtype=np.int64)
-        fmap[b:] += L - (b - a)
-        mid = np.arange(a, b)
-        fmap[a:b] = np.where(mid - a < b - mid, a, a + L - 1)
-        # kept frames
-        r = int(self.opts.subsample)
-        base = self.base_frames[k]
-        base = base[(base < a) | (base >= b)]
-        extra = [
-            fmap[base],
-            np.array([a - 2, a - 1, a, a + 1, a + L - 2, a + L - 1, a + L, a + L + 1]),
-            a + np.arange(0, L, r),
-        ]
-        frames = np.unique(np.clip(np.concatenate(extra), 0, F2 - 1))
-        X = np.empty((len(frames), 2))
-        arc = np.empty(len(frames))
-        pre = frames < a
-        ins = (frames >= a) & (frames < a + L)
-        post = frames >= a + L
-        X[pre] = P[frames[pre]]
-        arc[pre] = C[frames[pre]]
-        X[ins] = ins_pos[frames[ins] - a]
-        arc[ins] = ins_arc[frames[ins] - a]
-        old = frames[post] - a - L + b
-        X[post] = _rot2(dth, P[old] - pos_old_ref) + last_pos
-        first_suf = _rot2(dth, P[b] - pos_old_ref) + last_pos
-        arc[post] = last_arc + np.linalg.norm(first_suf - last_pos) + (C[old] - C[b])
-        segs = []
-        for sa, sb in self.segments[k]:
-            for lo, hi in ((sa, min(sb, a)), (max(sa, b), sb)):
-                if hi - lo >= 3:
-                    segs.append((int(fmap[lo]), int(fmap[hi - 1]) + 1))
-        pt, st = _rigid(frames, segs)
-        part = _Part(frames, X, np.diff(arc), pt, st, F2, self.dts[k], self.starts[k])
-        return part, fmap
+        if self._baseline is None:
+            self.energies([])
+        return cast(float, self._baseline)
 
     def energy(self, t: Transformation) -> float:
         """Equation-10 energy of the scene with ``t`` applied (subsampled)."""
         return float(self.energies([t])[0])
 
     def energies(self, ts: Sequence[Transformation]) -> Array:
-        """Equation-10 energies of the scene with each of ``ts`` applied (evaluated in batches per character)."""
-        out = np.zeros(len(ts))
-        by: dict[int, list[int]] = {}
-        for i, t in enumerate(ts):
-            by.setdefault(t.character, []).append(i)
-        for k, idx in by.items():
-            built = [self.candidate_part(ts[i]) for i in idx]
-            batch = self._batch([b[0] for b in built], k, [b[1] for b in built])
-            root = self.comp[k]
-            members = [j for j in range(self.K) if self.comp[j] == root]
-            e = self._evaluate(members, k, batch)
-            out[idx] = self.baseline - self.base_energy[root] + e
-        return out
+        """Equation-10 energies of the scene with each of ``ts`` applied, shape (len(ts),): one batch."""
+        total = self.terms(ts)["total"]
+        if self._baseline is None:
+            self._baseline = float(total[0])
+        return total[1:]
+
+    def terms(self, ts: Sequence[Transformation] = ()) -> dict[str, Array]:
+        """The terms of equation 10 (``shape, scale, time, length, duration, total``), each (1 + len(ts),).
+
+        Entry 0 is the untransformed scene, entry ``i + 1`` the scene with ``ts[i]`` applied.
+        """
+        parts = self.parts(ts)
+        return self._evaluate(self.systems(parts), parts, len(ts))
+
+    # ------------------------------------------------------------- parts
+    def parts(self, ts: Sequence[Transformation]) -> _Parts:
+        """The untransformed paths (parts ``0 .. K-1``) and one transformed path per candidate."""
+        K, C = self.K, len(ts)
+        kc = np.array([t.character for t in ts], dtype=np.int64)
+        ac = np.array([t.removed[0] for t in ts], dtype=np.int64)
+        bc = np.array([t.removed[1] for t in ts], dtype=np.int64)
+        sc = np.array([t.inserted[0] for t in ts], dtype=np.int64)
+        ec = np.array([t.inserted[1] for t in ts], dtype=np.int64)
+        Lc = ec - sc
+        char = np.concatenate([np.arange(K, dtype=np.int64), kc])
+        F = self.F[char]
+        a = np.concatenate([self.F, ac])
+        b = np.concatenate([self.F, bc])
+        L = np.concatenate([np.zeros(K, np.int64), Lc])
+        nfr = F - (b - a) + L
+        BIG = np.iinfo(np.int64).max // 4
+        # ---- kept frames
+        base = np.where(self._bf >= 0, self._bf, BIG)
+        blocks = [base]
+        if C:
+            bf = self._bf[kc]
+            ok = (bf >= 0) & ((bf < ac[:, None]) | (bf >= bc[:, None]))
+            r = int(self.opts.subsample)
+            nins = -(-int(Lc.max()) // r)
+            steps = r * np.arange(nins, dtype=np.int64)
+            allf = np.concatenate(
+                [_fmap(bf, ac, bc, Lc), ac[:, None] + _SEAM, (ac + Lc)[:, None] + _SEAM, ac[:, None] + steps], axis=1
+            )
+            okall = np.concatenate([ok, np.ones((C, 2 * len(_SEAM)), bool), steps[None, :] < Lc[:, None]], axis=1)
+            allf = np.where(okall, np.clip(allf, 0, (nfr[K:] - 1)[:, None]), BIG)
+            allf.sort(axis=1)
+            dup = np.zeros(allf.shape, bool)
+            dup[:, 1:] = allf[:, 1:] == allf[:, :-1]
+            allf[dup] = BIG
+            allf.sort(axis=1)
+            blocks.append(allf)
+        n = max(int(np.sum(blk < BIG, axis=1).max()) for blk in blocks)
+        frames = np.full((K + C, n), BIG, dtype=np.int64)
+        frames[:K, : min(n, base.shape[1])] = base[:, :n]
+        if C:
+            frames[K:, : min(n, blocks[1].shape[1])] = blocks[1][:, :n]
+        nv = np.sum(frames < BIG, axis=1)
+        frames[frames == BIG] = int(nfr.max()) + 1
+        idx = np.arange(n)
+        valid = idx[None, :] < nv[:, None]
+        # ---- ground positions and arc lengths
+        P_ = K + C
+        th = np.zeros(P_)
+        t1 = np.zeros((P_, 2))
+        sg = np.zeros(P_, np.int64)
+        ins_arc0 = np.zeros(P_)
+        dth = np.zeros(P_)
+        ref_o = np.zeros((P_, 2))
+        last_pos = np.zeros((P_, 2))
+        post_arc0 = np.zeros(P_)
+        NG = len(self.gpos)
+        if C:
+            po = self.poff[kc]
+            ka, kb = po + ac - 1, po + bc
+            pa, Ha, Ca = self.P[ka], self.H[ka], self.C[ka]
+            go = self.goff[kc]
+            s_ = np.clip(go + sc, 0, NG - 1)
+            ref = np.where(self.gfirst[s_], s_, s_ - 1)
+            th_ = Ha - self.gyaw[ref]
+            t1_ = pa - _rot2(th_, self.gpos[ref])
+            d0 = np.linalg.norm(_rot2(th_, self.gpos[s_]) + t1_ - pa, axis=1)
+            eg = np.clip(go + ec - 1, 0, NG - 1)
+            hasL = Lc > 0
+            lp = np.where(hasL[:, None], _rot2(th_, self.gpos[eg]) + t1_, pa)
+            lh = np.where(hasL, self.gyaw[eg] + th_, Ha)
+            la = np.where(hasL, Ca + d0 + self.garc[eg] - self.garc[s_], Ca)
+            nb = self.nodes[kb]
+            refb = np.where(self.gfirst[nb], nb, nb - 1)
+            th_old = self.H[kb] - self.gyaw[nb]
+            ro = _rot2(th_old, self.gpos[refb] - self.gpos[nb]) + self.P[kb]
+            dth_ = lh - (self.gyaw[refb] + th_old)
+            first_suf = _rot2(dth_, self.P[kb] - ro) + lp
+            th[K:], t1[K:], sg[K:], dth[K:], ref_o[K:], last_pos[K:] = th_, t1_, s_, dth_, ro, lp
+            ins_arc0[K:] = Ca + d0 - self.garc[s_]
+            post_arc0[K:] = la + np.linalg.norm(first_suf - lp, axis=1) - self.C[kb]
+        f = np.where(valid, frames, 0)
+        po2 = self.poff[char][:, None]
+        Fm1 = (F - 1)[:, None]
+        pre = f < a[:, None]
+        ins = ~pre & (f < (a + L)[:, None])
+        fp = po2 + np.minimum(f, Fm1)
+        gi = np.clip(sg[:, None] + f - a[:, None], 0, NG - 1)
+        old = po2 + np.clip(f - (a + L - b)[:, None], 0, Fm1)
+        X = np.where(
+            pre[..., None],
+            self.P[fp],
+            np.where(
+                ins[..., None],
+                _rot2(th[:, None], self.gpos[gi]) + t1[:, None],
+                _rot2(dth[:, None], self.P[old] - ref_o[:, None]) + last_pos[:, None],
+            ),
+        )
+        A = np.where(
+            pre, self.C[fp], np.where(ins, ins_arc0[:, None] + self.garc[gi], post_arc0[:, None] + self.C[old])
+        )
+        X = np.take_along_axis(X, np.minimum(idx[None, :], nv[:, None] - 1)[..., None], axis=1)
+        arc = np.where(valid[:, 1:], np.diff(A, axis=1), 0.0)
+        # ---- rigid (stationary) segments, cut by the transformation
+        seg = self._seg[char]
+        sa, sb = seg[..., 0], seg[..., 1]
+        lo = np.concatenate([sa, np.maximum(sa, b[:, None])], axis=1)
+        hi = np.concatenate([np.minimum(sb, a[:, None]), sb], axis=1)
+        ok = hi - lo >= np.where(np.arange(P_) < K, 1, 3)[:, None]
+        nlo = _fmap(lo, a, b, L)[..., None]
+        nhi = _fmap(hi - 1, a, b, L)[..., None] + 1
+        fr3 = frames[:, None, :]
+        inside = ok[..., None] & (fr3 >= nlo) & (fr3 < nhi)
+        rpt = np.any(ok[..., None] & (fr3 > nlo) & (fr3 < nhi - 1), axis=1)
+        rst = np.any(inside[..., :-1] & inside[..., 1:], axis=1)
+        return _Parts(char, a, b, L, frames, nv, X, arc, rpt, rst, nfr, self.dts[char], self.starts[char])
+
+    # ------------------------------------------------------------ systems
+    def _cols(self, tab: _Table, ids: IntArray, p: _Parts) -> IntArray:
+        """Unknown indices (within each part) of the entries of rows ``ids`` (P, R) -> (P, R, W)."""
+        kk = _bsearch(p.frames, p.nv, _fmap(tab.frame[ids], p.a, p.b, p.L))
+        return tab.dim * kk + tab.coord[ids] if tab.dim == 2 else kk
+
+    def _local(self, tab: _Table, p: _Parts) -> tuple[tuple[IntArray, Array, Array], NDArray[np.bool_], IntArray]:
+        """Each part's own constraint rows that fit its band; also the ids of those that do not."""
+        ids = tab.intra_of[p.char]
+        cols = self._cols(tab, ids, p)
+        val = tab.val[ids]
+        ok = _fits(cols, val, tab.band)
+        rows = (cols, np.where(ok[..., None], val, 0.0), np.where(ok, tab.rhs[ids], 0.0))
+        return rows, ok & tab.soft[ids], np.unique(ids[~ok])
+
+    def _coupled(self, tab: _Table, p: _Parts, far: IntArray, m: int) -> tuple[IntArray, Array, NDArray[np.bool_]]:
+        """Rows coupled by the Woodbury identity: ids (g,), U (P, g, m) and which rows each part holds (P, g)."""
+        G = np.union1d(tab.cross, far).astype(np.int64)
+        P_, g = len(p.char), len(G)
+        if g == 0:
+            return G, np.zeros((P_, 0, m)), np.zeros((P_, 0), bool)
+        cols = self._cols(tab, np.broadcast_to(G, (P_, g)), p)
+        val = np.broadcast_to(tab.val[G], cols.shape)
+        use = ~tab.intra[G][None, :] | ~_fits(cols, val, tab.band)
+        mask = (tab.char[G][None] == p.char[:, None, None]) & (val != 0) & use[..., None]
+        q = (np.arange(P_, dtype=np.int64)[:, None, None] * g + np.arange(g, dtype=np.int64)[None, :, None]) * m
+        U = np.bincount((q + cols)[mask], val[mask], minlength=P_ * g * m).astype(float).reshape(P_, g, m)
+        return G, U, mask.any(axis=-1)
+
+    def systems(self, p: _Parts) -> _Sys:
+        """Build and solve the parts' systems (everything that does not depend on the other characters)."""
+        S = _Sys()
+        P_, n = p.frames.shape
+        S.n = n
+        m = 2 * n
+        sq = math.sqrt(self.pen)
+        idx = np.arange(n)
+        valid = idx[None, :] < p.nv[:, None]
+        vstep = valid[:, 1:]
+        X = p.X
+        span = np.where(vstep, np.diff(p.frames, axis=1), 1).astype(float)
+        S.span, S.vstep, S.arc = span, vstep, p.arc
+        S.last, S.nfr, S.dt = p.nv - 1, p.nfr.astype(float), p.dt
+        S.s_loc, S.s_soft, far_s = self._local(self._ts, p)
+        S.t_loc, S.t_soft, far_t = self._local(self._tt, p)
+        S.Gs, S.Us, S.act_s = self._coupled(self._ts, p, far_s, m)
+        S.Gt, S.Ut, S.act_t = self._coupled(self._tt, p, far_t, n)
+        # ---- phase 1: equation-3 rows weighted mbar^-3/2 (rigid ones: penalty)
+        if n >= 3:
+            t = X[:, 2:] - X[:, :-2]
+            d = X[:, 1:-1] - X[:, :-2]
+            nn = np.sum(t * t, axis=-1)
+            ok = nn > 1e-18
+            safe = np.where(ok, nn, 1.0)
+            lx = np.where(ok, np.sum(d * t, axis=-1) / safe, 0.5)
+            ly = np.where(ok, (d[..., 0] * t[..., 1] - d[..., 1] * t[..., 0]) / safe, 0.0)
+            mbar = 0.5 * (span[:, :-1] + span[:, 1:])
+            vint = valid[:, 2:]
+            rig = p.rpt[:, 1:-1]
+            wr = np.where(vint, np.where(rig, sq, mbar**-1.5), 0.0)
+            g = idx[1:-1]
+            X0, X1, X2 = 2 * (g - 1), 2 * g, 2 * (g + 1)
+            one = np.ones_like(lx)
+            rx_c = np.stack([X1, X0, X2, X0, X2 + 1, X0 + 1], axis=-1)
+            rz_c = np.stack([X1 + 1, X0 + 1, X2 + 1, X0 + 1, X2, X0], axis=-1)
+            rx_v = np.stack([one, -one, -lx, lx, -ly, ly], axis=-1)
+            rz_v = np.stack([one, -one, -lx, lx, ly, -ly], axis=-1)
+            lap_c = np.stack([rx_c, rz_c], axis=1).reshape(1, -1, 6)
+            lap_v = (np.stack([rx_v, rz_v], axis=2) * wr[:, :, None, None]).reshape(P_, -1, 6)
+            S.lap_energy = np.repeat(vint & ~rig, 2, axis=1)
+        else:
+            lap_c, lap_v = np.zeros((1, 0, 6), np.int64), np.zeros((P_, 0, 6))
+            S.lap_energy = np.zeros((P_, 0), bool)
+        S.lap = (lap_c, lap_v)
+        pad = np.repeat(~valid, 2, axis=1)
+        u2 = _BAND[2]
+        Nc = _band(P_, m, u2, *S.s_loc[:2])  # constraint rows: in both phases
+        N1 = _band(P_, m, u2, *S.lap) + Nc
+        N1[:, u2] += _EPS + pad
+        x0 = np.where(pad, 0.0, X.reshape(P_, -1))
+        S.bs = _rhs(m, *S.s_loc)
+        sol = _spd_solve(N1, np.concatenate([(S.bs + _EPS * x0)[..., None], np.swapaxes(S.Us, 1, 2)], axis=2))
+        S.y1, S.Z1 = sol[..., 0], sol[..., 1:]
+        # ---- phase 2: equation 7 on per-frame velocities, rows weighted 1/sqrt(mean span)
+        if n >= 3:
+            ia, ib = 1.0 / span[:, :-1], 1.0 / span[:, 1:]
+            wv = np.where(valid[:, 2:], (0.5 * (span[:, :-1] + span[:, 1:])) ** -0.5, 0.0)
+            g = idx[1:-1]
+            cols_ = [np.stack([2 * (g - 1) + q, 2 * g + q, 2 * (g + 1) + q], axis=-1) for q in (0, 1)]
+            vals_ = [np.stack([ia, -ia - ib, ib], axis=-1) * wv[..., None]] * 2
+            sec_c = np.stack(cols_, axis=1).reshape(1, -1, 3)
+            sec_v = np.stack(vals_, axis=2).reshape(P_, -1, 3)
+            S.wv = wv
+        else:
+            sec_c, sec_v = np.zeros((1, 0, 3), np.int64), np.zeros((P_, 0, 3))
+            S.wv = np.zeros((P_, 0))
+        S.sec = (sec_c, sec_v)
+        st = idx[:-1]
+        rc = np.stack([np.stack([2 * (st + 1) + q, 2 * st + q], axis=-1) for q in (0, 1)], axis=1).reshape(1, -1, 2)
+        wrs = np.repeat(np.where(p.rst, sq, 0.0), 2, axis=1)
+        S.rig_w = wrs
+        S.rig = (rc, wrs[:, :, None] * np.array([1.0, -1.0]))
+        N2 = _band(P_, m, u2, *S.sec) + _band(P_, m, u2, *S.rig) + Nc
+        N2[:, u2] += _EPS + pad
+        S.N2, S.pad2 = N2, pad
+        S.L0 = np.linalg.norm(np.diff(X, axis=1), axis=-1)
+        S.Z2 = _spd_solve(N2, np.swapaxes(S.Us, 1, 2)) if S.Us.shape[1] else np.zeros((P_, m, 0))
+        # ---- time: t[i+1] - t[i] = m_i h, rows weighted 1/sqrt(m_i)
+        wt = np.where(vstep, 1.0 / np.sqrt(np.maximum(span, 1.0)), 0.0)
+        tc = np.stack([idx[1:], idx[:-1]], axis=-1)[None]
+        tv = np.stack([wt, -wt], axis=-1)
+        S.tim = (tc, tv, span * p.dt[:, None] * wt)
+        u1 = _BAND[1]
+        Nt = _band(P_, n, u1, tc, tv) + _band(P_, n, u1, *S.t_loc[:2])
+        Nt[:, u1] += _EPS + ~valid
+        t0 = np.where(valid, p.start[:, None] + p.frames * p.dt[:, None], 0.0)
+        bt = _rhs(n, *S.tim) + _rhs(n, *S.t_loc) + _EPS * t0
+        sol = _spd_solve(Nt, np.concatenate([bt[:, :, None], np.swapaxes(S.Ut, 1, 2)], axis=2))
+        S.yt, S.Zt = sol[..., 0], sol[..., 1:]
+        return S
 
     # ------------------------------------------------------------- solver
-    def _evaluate(self, members: list[int], k: int, B: _Batch, *, parts: bool = False) -> Any:
-        """Equation 10 for one component, character ``k`` taking the paths of batch ``B`` (c of them).
+    def _evaluate(self, S: _Sys, p: _Parts, C: int) -> dict[str, Array]:
+        """Equation 10 for every variant: the scene (0) and the scene with candidate ``i`` (``i + 1``).
 
-        Each system is ``(B + U^T U) x = b + U^T c`` with ``B`` block diagonal
-        (one block per character) and ``U`` the rows linking characters:
-        ``x = y + Z S^-1 (c - U y)`` with ``y = B^-1 b``, ``Z = B^-1 U^T`` and
-        ``S = I + U Z`` (Woodbury).  Returns the energies, shape (c,) (with
-        ``parts=True``: a dict of the terms).
+        Per variant ``v`` and domain, ``(B + U^T U) x = b + U^T c`` with ``B``
+        block diagonal (one block per character, taken from the variant's
+        parts) and ``U`` the coupled rows: ``x = y + Z w``, ``w = S^-1 (c - U
+        y)``, ``y = B^-1 b``, ``Z = B^-1 U^T`` and ``S = I + U Z`` (Woodbury).
         """
-        c = B.c
-        bat = {j: (B if j == k else self.base[j]) for j in members}
+        K = self.K
+        V = 1 + C
+        qidx = np.tile(np.arange(K, dtype=np.int64), (V, 1))
+        kc = p.char[K:]
+        vc = np.arange(1, V)
+        qidx[vc, kc] = K + np.arange(C)
+        pq = qidx.ravel()
+        n = S.n
+        m = 2 * n
+        VK = V * K
 
-        def solve(
-            ys: dict[int, Array], Us: dict[int, Array], Zs: dict[int, Array], ids_j: dict[int, IntArray], rows: _Rows
-        ) -> tuple[dict[int, Array], IntArray, Array]:
-            pieces = [ids_j[j] for j in members if len(ids_j[j])]
-            if not pieces:
-                return (
-                    {j: np.broadcast_to(ys[j], (c,) + ys[j].shape[1:]) for j in members},
-                    np.zeros(0, np.int64),
-                    np.zeros((c, 0)),
-                )
-            ids = np.unique(np.concatenate(pieces))
-            r = len(ids)
-            S = np.tile(np.eye(r), (c, 1, 1))
-            Uy = np.zeros((c, r))
-            loc = {}
-            for j in members:
-                if not len(ids_j[j]):
-                    continue
-                li = np.searchsorted(ids, ids_j[j])
-                loc[j] = li
-                Uy[:, li] += (Us[j] @ ys[j][..., None])[..., 0]
-                S[:, li[:, None], li[None, :]] += Us[j] @ Zs[j]
-            rhs = rows.rhs[ids]
-            w = np.linalg.solve(S, (rhs - Uy)[..., None])[..., 0]
-            xs = {}
-            res = np.tile(-rhs, (c, 1))
-            for j in members:
-                if j not in loc:
-                    xs[j] = np.broadcast_to(ys[j], (c,) + ys[j].shape[1:])
-                    continue
-                li = loc[j]
-                xs[j] = ys[j] + (Zs[j] @ w[:, li][..., None])[..., 0]
-                res[:, li] += (Us[j] @ xs[j][..., None])[..., 0]
-            return xs, ids, res
+        def couple(
+            yv: Array, Z: Array, U: Array, act: NDArray[np.bool_], G: IntArray, tab: _Table
+        ) -> tuple[Array, Array]:
+            if not len(G):
+                return yv, np.zeros(V)
+            Zq, Uq = Z[qidx], U[qidx]
+            Sm = np.eye(len(G)) + np.sum((U @ Z)[qidx], axis=1)
+            c = np.where(np.any(act[qidx], axis=1), tab.rhs[G], 0.0)
+            uy = np.sum((Uq @ yv[..., None])[..., 0], axis=1)
+            w = np.linalg.solve(Sm, (c - uy)[..., None])
+            x = yv + (Zq @ w[:, None])[..., 0]
+            r = np.sum((Uq @ x[..., None])[..., 0], axis=1) - c
+            return x, np.sum(np.where(tab.soft[G], r, 0.0) ** 2, axis=1)
 
-        sp_, tm_ = self.space, self.time
-        ids_s = {j: bat[j].cross_s for j in members}
-        ids_t = {j: bat[j].cross_t for j in members}
-        Us = {j: bat[j].Us for j in members}
-        Ut = {j: bat[j].Ut for j in members}
+        def soft(loc: tuple[IntArray, Array, Array], mask: NDArray[np.bool_], x: Array) -> Array:
+            cols, vals, rhs = loc
+            if not cols.shape[1]:
+                return np.zeros(x.shape[0])
+            r = _res(cols[pq], vals[pq], rhs[pq], x)
+            return np.sum(np.where(mask[pq], r, 0.0) ** 2, axis=1)
+
+        def per_variant(e: Array) -> Array:
+            return np.sum(e.reshape(V, K), axis=1)
+
         # phase 1 (shape)
-        x1, i1, r1 = solve({j: bat[j].y1 for j in members}, Us, {j: bat[j].Z1 for j in members}, ids_s, sp_)
-        e_shape = np.sum(r1[:, sp_.soft[i1]] ** 2, axis=1)
-        for j in members:
-            e_shape = e_shape + bat[j].shape_energy(x1[j])
-        # phase 2 (scale)
-        y2, ubs = {}, {}
-        for j in members:
-            rhs, ubs[j] = bat[j].phase2_rhs(x1[j])
-            if bat[j].c == c:
-                y2[j] = _pbsolve(bat[j].N2, rhs[..., None])[..., 0]
-            else:
-                y2[j] = _pbsv(bat[j].N2[0], rhs.T).T
-        x2, i2, r2 = solve(y2, Us, {j: bat[j].Z2 for j in members}, ids_s, sp_)
-        e_scale = np.sum(r2[:, sp_.soft[i2]] ** 2, axis=1)
-        for j in members:
-            e_scale = e_scale + bat[j].scale_energy(x2[j], ubs[j])
+        x1, e_shape = couple(S.y1[qidx], S.Z1, S.Us, S.act_s, S.Gs, self._ts)
+        x1f = x1.reshape(VK, m)
+        lr = np.sum(S.lap[1][pq] * _gather(x1f, S.lap[0]), axis=-1)
+        e = np.sum(np.where(S.lap_energy[pq], lr, 0.0) ** 2, axis=1) + soft(S.s_loc, S.s_soft, x1f)
+        e_shape = e_shape + per_variant(e)
+        # phase 2 (scale): right-hand sides from phase 1, solved per part
+        P2 = x1f.reshape(VK, n, 2)
+        seg = P2[:, 1:] - P2[:, :-1]
+        ln = np.linalg.norm(seg, axis=-1)
+        L0 = S.L0[pq]
+        vb = seg * np.divide(L0, ln, out=np.ones_like(ln), where=ln > 1e-12)[..., None]
+        ub = vb / S.span[pq][..., None]
+        rhs2 = S.bs[pq] + _EPS * x1f
+        r_sec = np.zeros((VK, 0))
+        if n >= 3:
+            r_sec = ((ub[:, 1:] - ub[:, :-1]) * S.wv[pq][..., None]).reshape(VK, -1)
+            rhs2 += _rhs(m, S.sec[0], S.sec[1][pq], r_sec)
+        rhs2 += _rhs(m, S.rig[0], S.rig[1][pq], vb.reshape(VK, -1) * S.rig_w[pq])
+        rhs2 = np.where(S.pad2[pq], 0.0, rhs2).reshape(V, K, m)
+        y2 = np.transpose(_spd_solve(S.N2[:K], np.transpose(rhs2, (1, 2, 0))), (2, 0, 1)).copy()
+        if C:
+            y2[vc, kc] = _spd_solve(S.N2[K:], rhs2[vc, kc][..., None])[..., 0]
+        x2, e_scale = couple(y2, S.Z2, S.Us, S.act_s, S.Gs, self._ts)
+        x2f = x2.reshape(VK, m)
+        e = soft(S.s_loc, S.s_soft, x2f)
+        if n >= 3:
+            e = e + np.sum(_res(S.sec[0], S.sec[1][pq], r_sec, x2f) ** 2, axis=1)
+        e_scale = e_scale + per_variant(e)
         # time
-        xt, it, rt = solve({j: bat[j].yt for j in members}, Ut, {j: bat[j].Zt for j in members}, ids_t, tm_)
-        e_time = np.sum(rt[:, tm_.soft[it]] ** 2, axis=1)
-        dL = np.zeros(c)
-        dT = np.zeros(c)
-        for j in members:
-            e_time = e_time + bat[j].time_energy(xt[j])
-            dl, dt = bat[j].changes(x2[j], xt[j])
-            dL = dL + dl
-            dT = dT + dt
+        xt, e_time = couple(S.yt[qidx], S.Zt, S.Ut, S.act_t, S.Gt, self._tt)
+        xtf = xt.reshape(VK, n)
+        tc, tv, trhs = S.tim
+        e = np.sum(_res(tc, tv[pq], trhs[pq], xtf) ** 2, axis=1) + soft(S.t_loc, S.t_soft, xtf)
+        e_time = e_time + per_variant(e)
+        # length and duration changes: full-path arcs scaled by the chords' change
+        c1 = np.linalg.norm(np.diff(x2f.reshape(VK, n, 2), axis=1), axis=-1)
+        ratio = np.divide(S.arc[pq], L0, out=np.ones_like(L0), where=L0 > 1e-6)
+        dL = per_variant(np.abs(np.sum(np.where(S.vstep[pq], ratio * (c1 - L0), 0.0), axis=1)))
+        last = xtf[np.arange(VK), S.last[pq]]
+        dT = per_variant(np.abs(last - xtf[:, 0] - (S.nfr[pq] - 1) * S.dt[pq]))
         total = e_shape + e_scale + e_time + self.opts.cs * dL + self.opts.ct * dT
-        if parts:
-            return {"shape": e_shape, "scale": e_scale, "time": e_time, "length": dL, "duration": dT, "total": total}
-        return total
+        return {"shape": e_shape, "scale": e_scale, "time": e_time, "length": dL, "duration": dT, "total": total}
 
 
 # ======================================================================
@@ -1948,6 +2042,7 @@ class DiscreteSession:
             starts,
             dataclasses.replace(self.options, subsample=subsample),
             int(self.editor_options.get("variational_step", 10)),
+            tangents=getattr(getattr(inner, "_space", None), "tangent_rows", None),
         )
 
     def update(self, constraints: Sequence[Any]) -> Any:

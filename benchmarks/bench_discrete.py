@@ -9,7 +9,12 @@
    constraint update.  Printed beside the paper's 45.8 ms (target: < 20 ms),
    with the full-resolution Laplacian editing time of the same updates
    (paper: 58.9 ms).
-2. Motion-graph construction for 10,000 frames (CMU walks at 120 fps, tiled
+   All candidates of all characters are evaluated in one batch
+   (``mocaplab.editing.discrete``); the per-update figure is CPU time
+   (``time.process_time``: the machine is shared), wall-clock beside it.
+2. Building the ``SceneEditor`` of that scene (factorisations, hard-row
+   rank checks), CPU and wall-clock.
+3. Motion-graph construction for 10,000 frames (CMU walks at 120 fps, tiled
    with time-scaled copies), chunked: peak memory stays ``O(chunk * N)``.
 
 Run: ``python benchmarks/bench_discrete.py [--steps 40] [--graph-frames 10000]``.
@@ -94,6 +99,7 @@ def bench_updates(steps: int) -> None:
             verify.append(tm["verify"])
     med = statistics.median(disc) * 1e3
     med_cpu = statistics.median(disc_cpu) * 1e3
+    p90_cpu = float(np.percentile(disc_cpu, 90)) * 1e3
     print(f"scene: {len(chars)} characters, {n} frames at 30 fps, {len(cons)} path constraints")
     print(
         f"candidates per update after pruning: median {statistics.median(ncand):.0f} "
@@ -104,11 +110,13 @@ def bench_updates(steps: int) -> None:
         print(f"  update {t.update}: {t}")
     print(
         f"enumerate + prune + evaluate all candidates, per update: CPU time median {med_cpu:.1f} ms "
-        f"(wall-clock {med:.1f} ms, of which enumerate + prune {statistics.median(enum) * 1e3:.1f} ms)"
+        f"(90th percentile {p90_cpu:.1f} ms); wall-clock median {med:.1f} ms "
+        f"(of which enumerate + prune {statistics.median(enum) * 1e3:.1f} ms)"
     )
     print(
-        f"  paper (2009 hardware): {PAPER_DISCRETE_MS} ms -> ratio {PAPER_DISCRETE_MS / med_cpu:.2f}x (CPU); "
-        f"target < 20 ms: {'met' if med_cpu < 20 else 'NOT met'}"
+        f"  paper (2009 hardware): {PAPER_DISCRETE_MS} ms -> ratio paper / ours {PAPER_DISCRETE_MS / med_cpu:.2f}x (CPU), "
+        f"{PAPER_DISCRETE_MS / med:.2f}x (wall); target < 20 ms: {'met' if med_cpu < 20 else 'NOT met'} (CPU), "
+        f"{'met' if med < 20 else 'NOT met'} (wall)"
     )
     if verify:
         print(
@@ -121,6 +129,24 @@ def bench_updates(steps: int) -> None:
         f"full-resolution Laplacian editing per update (drag, no discrete): median {lm:.1f} ms; paper {PAPER_LAPLACIAN_MS} ms"
     )
     print(f"machine load average during the run: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+
+
+def bench_build(repeats: int) -> None:
+    chars, cons = high_five_scene()
+    SceneEditor(chars, cons)  # warm caches (imports, clip features)
+    cpu, wall = [], []
+    for _ in range(repeats):
+        gc.collect()
+        t0 = time.perf_counter()
+        c0 = time.process_time()
+        SceneEditor(chars, cons)
+        cpu.append(time.process_time() - c0)
+        wall.append(time.perf_counter() - t0)
+    print(
+        f"SceneEditor construction for that scene (factorisations + hard-row rank checks): "
+        f"CPU median {statistics.median(cpu) * 1e3:.1f} ms, wall-clock {statistics.median(wall) * 1e3:.1f} ms "
+        f"({repeats} repeats)"
+    )
 
 
 def bench_graph(n_frames: int) -> None:
@@ -159,6 +185,7 @@ def main() -> None:
     ap.add_argument("--graph-frames", type=int, default=10_000)
     args = ap.parse_args()
     bench_updates(args.steps)
+    bench_build(10)
     bench_graph(args.graph_frames)
 
 

@@ -149,3 +149,38 @@ def test_editor_keeps_state_after_error(walks):
     ref = edit(walks, [PinPosition(0, 0, p[0], hard=True), PinPosition(0, 50, p[50] + [0.3, 0.0])])
     np.testing.assert_allclose(again.paths[0], ref.paths[0], atol=1e-9)
     assert before.paths[0] is not again.paths[0]
+
+
+def test_rank_screen_agrees_with_the_exact_rank():
+    # the sparse Cholesky screen only clears full-row-rank hard rows; anything else goes to the SVD search
+    import scipy.sparse as sp
+
+    from mocaplab.editing.laplacian import full_row_rank_screen
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        m, n = rng.integers(2, 40), rng.integers(40, 80)
+        H = sp.random(m, n, density=0.15, random_state=rng, format="csr") + sp.eye(m, n, format="csr")
+        dense = H.toarray()
+        assert full_row_rank_screen(H) == (np.linalg.matrix_rank(dense) == m)
+        # a row that is a combination of two others, a repeated row, an empty row, too many rows
+        i, j = rng.choice(m, 2, replace=False)
+        for bad in (
+            np.vstack([dense, 2.0 * dense[i] - 0.5 * dense[j]]),
+            np.vstack([dense, dense[i]]),
+            np.vstack([dense, np.zeros(n)]),
+            np.vstack([dense, rng.standard_normal((n, n))]),
+        ):
+            assert not full_row_rank_screen(sp.csr_matrix(bad))
+
+
+def test_hard_pins_over_constraining_a_rigid_segment_are_named(walks):
+    # a stationary segment moves as a similarity in phase 1 (4 modes): two hard pins fix it, a third is redundant
+    w = walks[0]
+    P = w.root_positions[:, [0, 2]]
+    cons = [PinPosition(0, 12, P[12], hard=True)] + [PinPosition(0, f, P[f], hard=True) for f in (15, 25, 35)]
+    with pytest.raises(ConstraintError, match="rigid stationary segment") as info:
+        edit([w], cons, stationary=[[(10, 40)]], scale_compensation=False)
+    assert info.value.indices == (0, 1, 2)  # a minimal dependent set, with the segment
+    ok = edit([w], cons[:2], stationary=[[(10, 40)]], scale_compensation=False)
+    assert ok.hard_residual_space < 1e-6

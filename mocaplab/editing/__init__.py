@@ -67,7 +67,7 @@ Editing (:mod:`mocaplab.editing.scene`)
     (phase-1 result), ``.tangents[k]``, ``.heading_change[k] (F_k,)``,
     ``.flips[k] (F_k,) bool`` (repaired tangent flips), ``.stationary[k]``,
     ``.edited_motions[k]`` (edited, not time-warped), ``.residuals() -> {index: max |r|}``,
-    ``.constraints``, ``.transformations`` (section 5 discrete edits; empty),
+    ``.constraints``, ``.transformations`` (section 5 discrete edits, see below),
     ``.end_effectors[k]``, ``.refined()`` (full-body refined motions on the
     clock), ``.original_paths``, ``.report() -> dict`` and attributes
     ``hard_residual_space, hard_residual_time, soft_residual_space,
@@ -75,20 +75,50 @@ Editing (:mod:`mocaplab.editing.scene`)
     ``min_time_step_ratio``, ``.energies -> Energies(shape, scale, time)``.
     Options: ``scale_compensation=True, stationary="auto", min_step=0.25,
     max_step=4.0`` (ratios of the frame time), ``flip_threshold=pi/2,
-    variational_step=10, clock_fps=None, start_times=None, discrete=False,
-    refine=False``.  Modes no constraint determines (a character's
-    placement, its time shift) keep their undeformed values exactly.
+    variational_step=10, clock_fps=None, start_times=None, discrete=False``
+    (``True`` or a ``DiscreteOptions``: section 5, below), ``refine=False``.
+    Modes no constraint determines (a character's placement, its time
+    shift) keep their undeformed values exactly.
 
 Energy (:mod:`mocaplab.editing.energy`)
     ``deformation_energy(result, *, cs=1.0, ct=1.0, reference=None) -> float`` (eq. 10).
 
-Section 5 plugs in through ``discrete=True``: after each continuous solve the
-editor calls ``mocaplab.editing.graph.discrete_update(editor, result) ->
-EditResult`` (which may score candidates with ``editor.evaluate`` and fill
-``result.transformations``).
+Discrete editing (section 5; :mod:`mocaplab.editing.graph`, :mod:`mocaplab.editing.discrete`)
+    ``build_graph(clips, *, weights=None, threshold=0.1, window=0.5, min_gap=0.3,
+    chunk=1024) -> MotionGraph`` (frame similarity of joint angles, root height and
+    orientation, joint and root velocities; local minima below ``threshold`` kept,
+    stored sparsely, built in row chunks), ``MotionGraph`` with ``.clips``,
+    ``.offsets``, ``.pairs (M, 2)``, ``.costs (M,)``, ``.n_frames``,
+    ``.transitions() -> (src, dst, cost)``, ``.clip_index(motion)``.
+    ``SceneEditor(..., discrete=True)`` or ``edit(..., discrete=True)`` (or
+    ``discrete=DiscreteOptions(...)``) runs the greedy Algorithm 1 after every
+    constraint update: at most one transformation per update, the best of all
+    pruned candidates by the equation-10 energy on subsampled paths.
+    ``DiscreteOptions(*, graphs=None, locality=Locality(), min_duration=0.3,
+    max_duration=2.0, cs=1.0, ct=1.0, subsample=25, blend=0.2, min_gain=0.1,
+    max_initial=8, verify=3, verify_subsample=5, threshold=0.1, window=0.5,
+    min_gap=0.3, weights=None)``;
+    ``Locality(characters=None, types=TYPES, time_zones=None, regions=None)`` with
+    regions ``Box(lo, hi)`` and ``Disk(center, radius)`` (ground ``(x, z)``);
+    ``Transformation(character, kind, removed=(a, b), inserted=(s, e), fps, ...)``
+    with ``kind`` in ``"deletion", "insertion", "duplication", "replacement"``,
+    ``.frames``, ``.span``, ``.removed_duration``, ``.inserted_duration``,
+    ``.length_change``, ``.energy``, ``.baseline``, ``.update``.
+    With discrete editing on, ``EditResult.transformations`` lists every
+    transformation applied so far (character, type, frame ranges), and
+    ``EditResult.characters`` are the transformed clips (constraints follow
+    their frames).  Lower-level pieces (``enumerate_transformations``,
+    ``prune``, ``apply_transformation``, ``Track``, ``session(editor)``) stay
+    in :mod:`mocaplab.editing.discrete`.
+
+The discrete names are imported on first use (``mocaplab.editing.DiscreteOptions``
+loads :mod:`~mocaplab.editing.discrete`), so ``import mocaplab.editing`` does not
+pay for them.
 """
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
 
 from .constraints import (
     AbsoluteTime,
@@ -105,21 +135,58 @@ from .energy import Energies, deformation_energy
 from .paths import MotionPath, stationary_segments
 from .scene import EditResult, SceneEditor, edit
 
+if TYPE_CHECKING:
+    from .discrete import Box, DiscreteOptions, Disk, Locality, Transformation
+    from .graph import MotionGraph, build_graph
+
+_LAZY = {
+    "Box": "discrete",
+    "DiscreteOptions": "discrete",
+    "Disk": "discrete",
+    "Locality": "discrete",
+    "Transformation": "discrete",
+    "MotionGraph": "graph",
+    "build_graph": "graph",
+}
+
 __all__ = [
     "AbsoluteTime",
+    "Box",
     "Constraint",
     "ConstraintError",
+    "DiscreteOptions",
+    "Disk",
     "Duration",
     "EditResult",
     "EndEffectorConstraint",
     "Energies",
+    "Locality",
+    "MotionGraph",
     "MotionPath",
     "PinDirection",
     "PinPosition",
     "Relative",
     "SceneEditor",
     "Sync",
+    "Transformation",
+    "build_graph",
     "deformation_energy",
     "edit",
     "stationary_segments",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    # the section-5 names load their modules on first use (import mocaplab.editing stays light)
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'mocaplab.editing' has no attribute {name!r}")
+    from importlib import import_module
+
+    value = getattr(import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

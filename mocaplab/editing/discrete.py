@@ -92,12 +92,18 @@ non-uniform steps (time steps span several frames and are weighted by
 constraints and rigid stationary segments are heavily weighted rows, and
 modes no constraint determines are held by a tiny regulariser.  The length
 change is measured on the full path: each subsampled chord's change scales
-the arc length of the frames it spans.  Only the characters linked to the
-transformed one by constraints are re-solved; the candidates of one
-character are evaluated together in one batch (padded arrays, batched
-dense solves), each character's systems coupled to the others' by the
-Woodbury identity.  After a transformation is chosen the full scene is
-solved once (the returned :class:`~mocaplab.editing.scene.EditResult`).
+the arc length of the frames it spans.  All candidates of all characters
+are evaluated in one batch: every transformed path and every untransformed
+one is a padded "part" whose three banded systems (shape, scale, time) are
+solved together (one LAPACK call per system for the whole batch: the
+parts are the blocks of one block-diagonal banded matrix), and each
+candidate's scene couples its parts through the constraint rows linking
+characters by the Woodbury identity.  So an update costs a fixed number of
+array operations, whatever the number of candidates (per-call overhead,
+not arithmetic, dominates at these sizes).  A candidate's energy does not
+depend on which others are evaluated with it.  After a transformation is
+chosen the full scene is solved once (the returned
+:class:`~mocaplab.editing.scene.EditResult`).
 Our addition (``DiscreteOptions.verify``): the few best candidates are
 re-scored on paths subsampled 1 in 5, and the chosen one is kept only if
 the full solve confirms the gain, because the 1/25 subsampling sometimes

@@ -559,7 +559,8 @@ class EditResult:
     end_effectors : sequence of tuple
         End-effector constraints per character (for full-body refinement).
     transformations : tuple
-        Discrete transformations applied (section 5; empty here).
+        Discrete transformations applied (section 5; empty unless the
+        editor runs with ``discrete`` on).
     """
 
     def __init__(self, editor: SceneEditor, constraints: tuple[Any, ...]) -> None:

@@ -7,7 +7,7 @@ import pytest
 
 from mocaplab import quat
 from mocaplab.contacts import foot_contacts
-from mocaplab.editing import AbsoluteTime, PinDirection, PinPosition, Relative, SceneEditor, Sync, edit
+from mocaplab.editing import AbsoluteTime, Duration, PinDirection, PinPosition, Relative, SceneEditor, Sync, edit
 from mocaplab.editing import discrete as D
 from mocaplab.editing.energy import durations, path_lengths
 from mocaplab.editing.graph import build_graph, joint_weights
@@ -286,6 +286,24 @@ def test_subsampled_evaluation_approximates_and_batches(duo):
     assert np.allclose(batched, one_by_one, rtol=1e-9, atol=1e-12)
     assert np.allclose(sub.energies(cands[::-1]), batched[::-1], rtol=1e-9, atol=1e-12)
     assert sub.terms(cands)["total"][0] == pytest.approx(sub.baseline, rel=1e-9)
+
+
+def test_rows_too_long_for_a_band_are_coupled(duo):
+    # a Duration row spans 90 frames: it cannot sit in a path's banded block, so the
+    # evaluation couples it like a row between characters (same energies as the full solver)
+    chars, cons = duo
+    cons = cons + [Duration(0, 10, 100, 90 / FPS + 0.4, weight=2.0), Duration(1, 5, 60, 55 / FPS - 0.2, hard=True)]
+    ed, tracks, full = scene_of(chars, cons, subsample=1)
+    terms = full.terms()
+    e = ed.result.energies
+    assert terms["time"][0] == pytest.approx(e.time, rel=0.02, abs=1e-9)
+    assert terms["shape"][0] == pytest.approx(e.shape, rel=0.05)
+    _, _, sub = scene_of(chars, cons)
+    cands = [t for k in (0, 1) for t in D.prune(D.enumerate_transformations(tracks[k], character=k), constraints=cons)]
+    assert {t.character for t in cands} == {0, 1}
+    batched = sub.energies(cands)
+    assert np.all(np.isfinite(batched))
+    assert np.allclose(batched, [sub.energy(t) for t in cands], rtol=1e-9, atol=1e-12)
 
 
 # --------------------------------------------------------------- Algorithm 1

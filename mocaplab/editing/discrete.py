@@ -1602,6 +1602,8 @@ class _Scene:
         cols = self._cols(tab, ids, p)
         val = tab.val[ids]
         ok = _fits(cols, val, tab.band)
+        # rows that do not fit are emptied here (zero values, one column) and coupled instead
+        cols = np.where(ok[..., None], cols, cols[..., :1])
         rows = (cols, np.where(ok[..., None], val, 0.0), np.where(ok, tab.rhs[ids], 0.0))
         return rows, ok & tab.soft[ids], np.unique(ids[~ok])
 

@@ -44,7 +44,7 @@ def pytest_runtest_teardown(item: pytest.Item) -> None:
 def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:  # type: ignore[no-untyped-def]
     if not _lesson_times:
         return
-    terminalreporter.section("lesson run times (budget %.0f s each)" % LESSON_BUDGET_S)
+    terminalreporter.section(f"lesson run times (budget {LESSON_BUDGET_S:.0f} s each)")
     over = []
     for path, seconds in sorted(_lesson_times.items()):
         flag = "  OVER BUDGET" if seconds > LESSON_BUDGET_S else ""

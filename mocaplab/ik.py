@@ -99,8 +99,30 @@ def _joint(skeleton: Skeleton, j: JointRef, arg: str = "joint") -> int:
 
 
 def _unit(v: Array, *, eps: float = _TINY) -> tuple[Array, Array]:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.maximum(n, eps), n[..., 0]
+    n = _norm(v)
+    return v / np.maximum(n, eps)[..., None], n
+
+
+# Small vector helpers over the last axis: the arrays of the IK kernels are
+# small (a few legs on a few hundred frames), so numpy's per-call overhead
+# dominates and these lean forms (no axis bookkeeping) are noticeably faster
+# than np.cross / np.linalg.norm / np.sum(..., axis=-1).
+def _dot(a: Array, b: Array) -> Array:
+    return np.einsum("...i,...i->...", a, b)
+
+
+def _norm(v: Array) -> Array:
+    return np.sqrt(np.einsum("...i,...i->...", v, v))
+
+
+def _cross(a: Array, b: Array) -> Array:
+    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
+    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = ay * bz - az * by
+    out[..., 1] = az * bx - ax * bz
+    out[..., 2] = ax * by - ay * bx
+    return out
 
 
 def _per_frame(value: ArrayLike, n_frames: int, width: int, name: str) -> Array:
@@ -200,16 +222,16 @@ def two_bone_deltas(
 
     u = a - b
     v = c - b
-    l1 = np.linalg.norm(u, axis=-1)
-    l2 = np.linalg.norm(v, axis=-1)
+    l1 = _norm(u)
+    l2 = _norm(v)
     reach_min = np.abs(l1 - l2)
     reach_max = l1 + l2
-    d = np.clip(np.linalg.norm(t - a, axis=-1), reach_min, reach_max)
+    d = np.clip(_norm(t - a), reach_min, reach_max)
 
     # step 1: bend the middle joint
-    cross = np.cross(u, v)
-    sin_b = np.linalg.norm(cross, axis=-1)
-    beta = np.arctan2(sin_b, np.sum(u * v, axis=-1))
+    cross = _cross(u, v)
+    sin_b = _norm(cross)
+    beta = np.arctan2(sin_b, _dot(u, v))
     cos_new = (l1**2 + l2**2 - d**2) / np.maximum(2.0 * l1 * l2, _TINY)
     beta_new = np.arccos(np.clip(cos_new, -1.0, 1.0))
     axis = cross / np.maximum(sin_b, _TINY)[..., None]
@@ -217,18 +239,19 @@ def two_bone_deltas(
     if np.any(straight):
         if bend_axis is not None:
             fallback = np.broadcast_to(np.asarray(bend_axis, dtype=float), shape)
-            fallback = fallback - np.sum(fallback * u, axis=-1, keepdims=True) * u / np.maximum(l1**2, _TINY)[..., None]
+            fallback = fallback - _dot(fallback, u)[..., None] * u / np.maximum(l1**2, _TINY)[..., None]
         else:
             # the world axis least aligned with the limb, made perpendicular to it
             pick = np.argmin(np.abs(u), axis=-1)
-            fallback = np.cross(u, np.eye(3)[pick])
+            fallback = _cross(u, np.eye(3)[pick])
         fallback, _ = _unit(fallback)
         axis = np.where(straight[..., None], fallback, axis)
     middle_delta = quat.from_axis_angle(axis, beta_new - beta)
     c1 = b + quat.rotate(middle_delta, v)
 
     # step 2: swing the limb toward the target (shortest arc)
-    from_dir, _ = _unit(c1 - a)
+    c1a = c1 - a
+    from_dir, c1a_len = _unit(c1a)
     to_dir, to_len = _unit(t - a)
     to_dir = np.where((to_len > _TINY)[..., None], to_dir, from_dir)
     swing = quat.between(from_dir, to_dir)
@@ -236,28 +259,28 @@ def two_bone_deltas(
     # step 3: twist about the upper -> target axis
     w = to_dir
     m2 = quat.rotate(swing, b - a)
-    x = m2 - np.sum(m2 * w, axis=-1, keepdims=True) * w
-    nx = np.linalg.norm(x, axis=-1)
+    x = m2 - _dot(m2, w)[..., None] * w
     if pole is None:
         # keep the bending plane: make its normal the old normal projected
         # perpendicular to the new axis (the closest plane containing it);
         # the knee offset of a plane with unit normal n is w x n
-        normal = np.cross(b - a, c1 - a)
-        n_len = np.linalg.norm(normal, axis=-1)
-        proj = normal - np.sum(normal * w, axis=-1, keepdims=True) * w
-        p_len = np.linalg.norm(proj, axis=-1)
-        y = np.cross(w, proj)
+        normal = _cross(b - a, c1a)
+        n_len = _norm(normal)
+        proj = normal - _dot(normal, w)[..., None] * w
+        p_len = _norm(proj)
+        y = _cross(w, proj)
         # sine of the angle between the upper bone and the limb axis, and how
         # far the old normal is from the new axis
-        s_bend = n_len / np.maximum(l1 * np.linalg.norm(c1 - a, axis=-1), _TINY)
+        s_bend = n_len / np.maximum(l1 * c1a_len, _TINY)
         fade = _ramp(s_bend, _PLANE_FADE) * _ramp(p_len / np.maximum(n_len, _TINY), (0.1, 0.3))
     else:
-        y = (p - a) - np.sum((p - a) * w, axis=-1, keepdims=True) * w
-        ny = np.linalg.norm(y, axis=-1)
+        nx = _norm(x)
+        y = (p - a) - _dot(p - a, w)[..., None] * w
+        ny = _norm(y)
         # the pole's half plane is ill-defined when the middle joint or the
         # pole is near the axis: fade the twist out there
         fade = _ramp(np.minimum(nx, ny) / np.maximum(l1, _TINY), _POLE_FADE)
-    gamma = np.arctan2(np.sum(w * np.cross(x, y), axis=-1), np.sum(x * y, axis=-1))
+    gamma = np.arctan2(_dot(w, _cross(x, y)), _dot(x, y))
     gamma = gamma * fade
     twist = quat.from_axis_angle(w, gamma)
     return quat.normalize(quat.mul(twist, swing)), quat.normalize(middle_delta)
@@ -366,23 +389,49 @@ def two_bone_ik(
     if bend_axis is not None:
         axis_w = quat.rotate(grot[:, jm], np.asarray(bend_axis, dtype=float))
     q_up, q_mid = two_bone_deltas(gpos[:, ju], gpos[:, jm], gpos[:, je], tgt, pole=pole_w, bend_axis=axis_w)
+    want = None if end_rotation is None else _per_frame(end_rotation, n_frames, 4, "end_rotation")
+    return _two_bone_locals(rot, grot, skeleton.parents, (ju, jm, je), q_up, q_mid, want)
 
+
+def _two_bone_locals(
+    rot: Array,
+    grot: Array,
+    parents: NDArray[np.int64],
+    joints: tuple[Any, Any, Any],
+    q_up: Array,
+    q_mid: Array,
+    end_rotation: Array | None,
+) -> Array:
+    """New local rotations from the world deltas of :func:`two_bone_deltas`.
+
+    ``joints`` are the (upper, middle, end) indices of one limb (ints; the
+    deltas (F, 4), ``end_rotation`` (F, 4)) or of several limbs with no
+    joint in common (int arrays (K,); deltas (F, K, 4), ``end_rotation``
+    (F, K, 4)): each limb's rotations only depend on its own joints and
+    their parents, so all limbs (and the upper and middle joints of each)
+    are done in one vectorised pass.
+    """
+    single = np.ndim(joints[0]) == 0
+    ju, jm, je = (np.atleast_1d(np.asarray(j, dtype=np.int64)) for j in joints)
+    if single:
+        q_up, q_mid = q_up[:, None], q_mid[:, None]
+        end_rotation = None if end_rotation is None else end_rotation[:, None]
     out = np.array(rot, copy=True)
-    pu = skeleton.parents[ju]
-    pm = skeleton.parents[jm]
-    # a world rotation q on joint j becomes a local one by conjugating with the
-    # parent's global rotation: L' = inv(G_p) q G_p L
-    g_pu = grot[:, pu] if pu >= 0 else quat.identity((n_frames,))
-    out[:, ju] = quat.normalize(quat.mul(quat.mul(quat.mul(quat.inv(g_pu), q_up), g_pu), rot[:, ju]))
-    g_pm = grot[:, pm]
-    out[:, jm] = quat.normalize(quat.mul(quat.mul(quat.mul(quat.inv(g_pm), q_mid), g_pm), rot[:, jm]))
+    # upper and middle joints together: a world rotation q on joint j becomes
+    # a local one by conjugating with the parent's global rotation,
+    # L' = inv(G_p) q G_p L
+    j2 = np.concatenate([ju, jm])
+    p2 = parents[j2]
+    g_p = grot[:, p2]
+    if np.any(p2 < 0):  # the upper joint is the root: no parent rotation
+        g_p = np.where((p2 >= 0)[None, :, None], g_p, quat.identity())
+    q2 = np.concatenate([q_up, q_mid], axis=1)
+    out[:, j2] = quat.normalize(quat.mul(quat.mul(quat.mul(quat.inv(g_p), q2), g_p), rot[:, j2]))
     if end_rotation is not None:
-        want = _per_frame(end_rotation, n_frames, 4, "end_rotation")
-        pe = skeleton.parents[je]
         # the end's parent moved rigidly with the limb: new global = q_up q_mid G_pe
         # (G_pe is below the middle joint)
-        g_pe_new = quat.mul(quat.mul(q_up, q_mid), grot[:, pe])
-        out[:, je] = quat.normalize(quat.mul(quat.inv(g_pe_new), want))
+        g_pe_new = quat.mul(quat.mul(q_up, q_mid), grot[:, parents[je]])
+        out[:, je] = quat.normalize(quat.mul(quat.inv(g_pe_new), end_rotation))
     return out
 
 

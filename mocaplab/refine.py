@@ -52,6 +52,7 @@ import dataclasses
 import sys
 import types
 from collections.abc import Sequence
+from functools import lru_cache
 from typing import Any, Literal
 
 import numpy as np
@@ -61,8 +62,8 @@ from scipy.ndimage import minimum_filter1d
 from . import kinematics, quat
 from .contacts import Contacts, foot_contacts
 from .displacement import DisplacementMap, displacement_between
-from .ik import _joint, aim_deltas, dls_ik, limb_joints, two_bone_ik
-from .motion import Motion, Skeleton
+from .ik import _joint, _two_bone_locals, aim_deltas, dls_ik, limb_joints, two_bone_deltas, two_bone_ik
+from .motion import Motion, Skeleton, _owned
 
 __all__ = [
     "Goal",
@@ -247,30 +248,91 @@ def _window_targets(positions: Array, targets: Array, mask: Array, weights: Arra
     return out
 
 
-def _plant_goal_targets(
-    positions: Array, fields: Sequence[Array], intervals: list[tuple[int, int]], window: int
-) -> tuple[Array, Array]:
-    """Targets and weights of one joint from one plant field (F, 3) per interval.
+def _spans(intervals: Sequence[Sequence[tuple[int, int]]], n: int, pad: int) -> dict[str, NDArray[np.int64]]:
+    """The frames of every interval of every column, padded by ``pad`` frames (clipped to [0, n)).
 
-    Each interval's bump ``b_k`` (:func:`interval_weights`) carries its own
-    target field ``T_k`` (:func:`_window_targets`); the goal is their
-    bump-weighted mean with weight ``min(1, sum_k b_k)``, so the blended goal
-    ``cur + w (T - cur) = cur + sum_k b_k (T_k - cur)`` stays continuous even
-    where the ramps of two intervals overlap.
+    Returns int arrays with one entry per visited frame, intervals in order:
+    ``"interval"`` (index over all intervals), ``"column"``, ``"start"``,
+    ``"stop"``, ``"frame"``; and ``"first"``, the position of each
+    interval's first visited frame.
     """
-    n = positions.shape[0]
-    bumps = interval_weights(n, intervals, window=window)
-    total = bumps.sum(axis=0)
-    acc = np.zeros((n, 3))
-    for k, (a, b) in enumerate(intervals):
-        live = bumps[k] > 0
-        mask = np.zeros(n, dtype=bool)
-        mask[a:b] = True
-        field = _window_targets(positions, fields[k], mask, bumps[k])
-        acc[live] += bumps[k, live, None] * field[live]
+    ab = np.array([iv for ivs in intervals for iv in ivs], dtype=np.int64).reshape(-1, 2)
+    col = np.repeat(np.arange(len(intervals)), [len(ivs) for ivs in intervals])
+    lo = np.maximum(ab[:, 0] - pad, 0)
+    size = np.minimum(ab[:, 1] + pad, n) - lo
+    first = np.cumsum(size) - size
+    frames = np.arange(int(size.sum())) - np.repeat(first - lo, size)
+    k = np.repeat(np.arange(len(ab)), size)
+    return {"interval": k, "column": col[k], "start": ab[k, 0], "stop": ab[k, 1], "frame": frames, "first": first}
+
+
+def _plant_goal_targets(
+    positions: Array,
+    plants: Sequence[Array],
+    heights: Array | None,
+    intervals: Sequence[Sequence[tuple[int, int]]],
+    window: int,
+) -> tuple[Array, Array]:
+    """Targets and weights of several joints from one plant per contact interval.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (F, n, 3)
+        The joints' current positions.
+    plants : sequence of n ndarrays, shape (K_c, 3)
+        One plant per interval of each joint.
+    heights : ndarray, shape (F, n), optional
+        When given, the height of interval ``k``'s target field ``T_k``
+        follows it frame by frame (else the plant's height).
+    intervals : sequence of n sequences of (start, stop)
+    window : int
+        Blending frames on each side of an interval.
+
+    Returns
+    -------
+    targets : ndarray, shape (F, n, 3)
+    weights : ndarray, shape (F, n)
+
+    Notes
+    -----
+    Each interval's bump ``b_k`` (:func:`interval_weights`) carries its own
+    field extended over the blending windows (:func:`_window_targets`); a
+    joint's goal is the bump-weighted mean of its fields with weight
+    ``min(1, sum_k b_k)``, so the blended goal ``cur + w (T - cur) = cur +
+    sum_k b_k (T_k - cur)`` stays continuous even where the ramps of two
+    intervals overlap.  Vectorised over all intervals of all joints: only
+    the frames where a bump is positive (the interval and ``window`` frames
+    on each side) are visited.  Inside an interval the nearest constrained
+    frame is the frame itself, around it the interval's first or last frame.
+    """
+    n, n_cols = positions.shape[:2]
     targets = np.array(positions, copy=True)
+    if not any(len(ivs) for ivs in intervals):
+        return targets, np.zeros((n, n_cols))
+    sp = _spans(intervals, n, window)
+    frames, fa, fb, col = sp["frame"], sp["start"], sp["stop"], sp["column"]
+    i = frames.astype(float)
+    w1 = float(window) + 1.0
+    # the same expression as interval_weights, on the visited frames only
+    bump = np.minimum(blend_ramp((i - (fa - w1)) / w1), blend_ramp(((fb - 1 + w1) - i) / w1))
+    nearest = np.clip(frames, fa, fb - 1)
+    own = np.concatenate([np.asarray(p, dtype=float).reshape(-1, 3) for p in plants])[sp["interval"]]
+    held = own.copy()
+    if heights is not None:
+        own[:, 1] = heights[frames, col]
+        held[:, 1] = heights[nearest, col]
+    carried = positions[frames, col] + (held - positions[nearest, col])
+    w = bump[:, None]
+    field = (1.0 - w) * carried + w * own
+    inside = (frames >= fa) & (frames < fb)
+    field[inside] = own[inside]
+    slot = frames * n_cols + col  # flat (frame, column) index
+    total = np.bincount(slot, weights=bump, minlength=n * n_cols).reshape(n, n_cols)
+    contrib = w * field
+    acc = np.stack([np.bincount(slot, weights=contrib[:, c], minlength=n * n_cols) for c in range(3)], axis=-1)
+    acc = acc.reshape(n, n_cols, 3)
     pos = total > 0
-    targets[pos] = acc[pos] / total[pos, None]
+    targets[pos] = acc[pos] / total[pos][:, None]
     return targets, np.clip(total, 0.0, 1.0)
 
 
@@ -293,7 +355,8 @@ def plant_positions(
     """
     j = motion.skeleton.index(joint)
     ref = reference if reference is not None else motion
-    return _plants(motion.global_positions()[:, j], ref.global_positions()[:, j, 1], _speed(ref, j), contacts.intervals(joint))
+    pos = motion.global_positions()[:, j, None]
+    return _plants(pos, ref.global_positions()[:, j, 1, None], _speed(ref, j)[:, None], [contacts.intervals(joint)])[0]
 
 
 def _speed(motion: Motion, j: int) -> Array:
@@ -301,15 +364,20 @@ def _speed(motion: Motion, j: int) -> Array:
     return np.linalg.norm(kinematics.velocities(motion.global_positions()[:, j], motion.fps), axis=-1)
 
 
-def _plants(pos: Array, hgt: Array, speed: Array, ivs: list[tuple[int, int]]) -> Array:
+def _plants(pos: Array, hgt: Array, speed: Array, ivs: Sequence[Sequence[tuple[int, int]]]) -> list[Array]:
+    """Plants of several joints: ``pos`` (F, n, 3), ``hgt`` and ``speed`` (F, n), intervals per joint."""
+    out = [np.zeros((len(v), 3)) for v in ivs]
+    if not any(len(v) for v in ivs):
+        return out
+    sp = _spans(ivs, pos.shape[0], 0)
+    frames, col, first = sp["frame"], sp["column"], sp["first"]
     # where the joint rests counts most: weight frames by slowness
-    slow = 1.0 / (speed + 0.1)
-    out = np.zeros((len(ivs), 3))
-    for k, (a, b) in enumerate(ivs):
-        w = slow[a:b] / slow[a:b].sum()
-        out[k] = w @ pos[a:b]
-        out[k, 1] = w @ hgt[a:b]
-    return out
+    slow = 1.0 / (speed[frames, col] + 0.1)
+    total = np.add.reduceat(slow, first)
+    plants = np.add.reduceat(slow[:, None] * pos[frames, col], first, axis=0) / total[:, None]
+    plants[:, 1] = np.add.reduceat(slow * hgt[frames, col], first) / total
+    edges = np.cumsum([0] + [len(v) for v in ivs])
+    return [plants[edges[c] : edges[c + 1]] for c in range(len(ivs))]
 
 
 def _frames(seconds: float, fps: float, what: str) -> int:
@@ -381,33 +449,26 @@ def foot_goals(
     sk = motion.skeleton
     ref = reference if reference is not None else motion
     window = _frames(blend, motion.fps, "blend")
+    names = tuple(contacts.joints)
+    cols = [sk.index(name) for name in names]
     ref_pos = ref.global_positions()
-    speeds = {name: _speed(ref, sk.index(name)) for name in contacts.joints}
-    plants = {
-        name: _plants(motion.global_positions()[:, sk.index(name)], ref_pos[:, sk.index(name), 1], speeds[name],
-                      contacts.intervals(name))
-        for name in contacts.joints
-    }
-    kinds = {name: ("toe" if _is_toe(sk, name, contacts.joints) else "foot") for name in contacts.joints}
-    goals = []
-    for name in contacts.joints:
-        j = sk.index(name)
-        p = plants[name]
-        ivs = contacts.intervals(name)
-        if kinds[name] == "toe":
-            parent = sk.names[int(sk.parents[j])]
-            if parent in contacts.joints:
-                length = float(np.linalg.norm(_bone(motion, name)))
-                p = _consistent_toe(p, ivs, plants[parent], contacts.intervals(parent), length)
-        fields = []
-        for k in range(len(ivs)):
-            f = np.broadcast_to(p[k], (motion.n_frames, 3)).copy()
-            if follow_height:
-                f[:, 1] = ref_pos[:, j, 1]
-            fields.append(f)
-        targets, weights = _plant_goal_targets(motion.global_positions()[:, j], fields, ivs, window)
-        goals.append(Goal(name, targets, weights, kind=kinds[name], stiffness=1.0 / (speeds[name] + 0.05)))  # type: ignore[arg-type]
-    return goals
+    pos = motion.global_positions()[:, cols]
+    heights = ref_pos[:, cols, 1]
+    speeds = np.linalg.norm(kinematics.velocities(ref_pos[:, cols], ref.fps), axis=-1)  # (F, n)
+    ivs = [contacts.intervals(name) for name in names]
+    plants = _plants(pos, heights, speeds, ivs)
+    kinds = ["toe" if _is_toe(sk, name, names) else "foot" for name in names]
+    for k, name in enumerate(names):
+        if kinds[k] == "toe":
+            parent = names.index(sk.names[int(sk.parents[cols[k]])])
+            length = float(np.linalg.norm(_bone(motion, name)))
+            plants[k] = _consistent_toe(plants[k], ivs[k], plants[parent], ivs[parent], length)
+    targets, weights = _plant_goal_targets(pos, plants, heights if follow_height else None, ivs, window)
+    stiffness = 1.0 / (speeds + 0.05)
+    return [
+        Goal(name, targets[:, k], weights[:, k], kind=kinds[k], stiffness=stiffness[:, k])  # type: ignore[arg-type]
+        for k, name in enumerate(names)
+    ]
 
 
 def _bone(motion: Motion, name: str) -> Array:
@@ -421,16 +482,20 @@ def _consistent_toe(
     toe: Array, toe_ivs: list[tuple[int, int]], ankle: Array, ankle_ivs: list[tuple[int, int]], length: float
 ) -> Array:
     out = np.array(toe, copy=True)
-    for k, (a, b) in enumerate(toe_ivs):
-        overlaps = [max(0, min(b, d) - max(a, c)) for c, d in ankle_ivs]
-        if not overlaps or max(overlaps) == 0:
-            continue
-        m = int(np.argmax(overlaps))
-        d = out[k, [0, 2]] - ankle[m, [0, 2]]
-        n = np.linalg.norm(d)
-        ground = np.sqrt(max(length**2 - (out[k, 1] - ankle[m, 1]) ** 2, 0.0))
-        if n > 1e-9:
-            out[k, [0, 2]] = ankle[m, [0, 2]] + d * (ground / n)
+    if not toe_ivs or not ankle_ivs:
+        return out
+    t = np.asarray(toe_ivs, dtype=np.int64).reshape(-1, 2)
+    an = np.asarray(ankle_ivs, dtype=np.int64).reshape(-1, 2)
+    # frames shared by each toe interval (rows) and ankle interval (columns)
+    overlap = np.minimum(t[:, 1, None], an[None, :, 1]) - np.maximum(t[:, 0, None], an[None, :, 0])
+    m = np.argmax(overlap, axis=1)  # the first of the largest overlaps
+    d = out[:, [0, 2]] - ankle[m][:, [0, 2]]
+    n = np.linalg.norm(d, axis=-1)
+    ground = np.sqrt(np.maximum(length**2 - (out[:, 1] - ankle[m, 1]) ** 2, 0.0))
+    move = (overlap[np.arange(len(t)), m] > 0) & (n > 1e-9)
+    moved = ankle[m][:, [0, 2]] + d * (ground / np.where(move, n, 1.0))[:, None]
+    out[move, 0] = moved[move, 0]
+    out[move, 2] = moved[move, 1]
     return out
 
 
@@ -469,20 +534,36 @@ def _refresh(rot: Array, fk: tuple[Array, Array], motion: Motion, changed: Seque
 
     Global rotations and positions of joints outside the subtrees of
     ``changed`` are taken from ``fk``; the subtrees (a few leg joints) are
-    recomputed in index order, vectorised over frames.
+    recomputed level by level (all joints of one depth at once), vectorised
+    over frames.
     """
     sk = motion.skeleton
     grot, gpos = (np.array(a, copy=True) for a in fk)
-    below = np.zeros(sk.n_joints, dtype=bool)
-    below[list(changed)] = True
-    for j in range(1, sk.n_joints):
-        below[j] |= below[sk.parents[j]]
-        if below[j]:
-            p = sk.parents[j]
-            local = sk.offsets[j] if motion.translations is None else motion.translations[:, j]
-            grot[:, j] = quat.mul(grot[:, p], rot[:, j])
-            gpos[:, j] = gpos[:, p] + quat.rotate(grot[:, p], local)
+    for level in _subtree_levels(sk, tuple(sorted({int(j) for j in changed}))):
+        p = sk.parents[level]
+        local = sk.offsets[level] if motion.translations is None else motion.translations[:, level]
+        grot[:, level] = quat.mul(grot[:, p], rot[:, level])
+        gpos[:, level] = gpos[:, p] + quat.rotate(grot[:, p], local)
     return grot, gpos
+
+
+@lru_cache(maxsize=64)
+def _subtree_levels(skeleton: Skeleton, tops: tuple[int, ...]) -> tuple[NDArray[np.int64], ...]:
+    """Joints of the subtrees of ``tops`` (root excluded), grouped by depth, shallowest first."""
+    parents = skeleton.parents
+    below = np.zeros(skeleton.n_joints, dtype=bool)
+    below[list(tops)] = True
+    depth = np.zeros(skeleton.n_joints, dtype=np.int64)
+    for j in range(1, skeleton.n_joints):
+        below[j] |= below[parents[j]]
+        depth[j] = depth[parents[j]] + 1
+    below[0] = False
+    levels = []
+    for d in np.unique(depth[below]):
+        level = np.flatnonzero(below & (depth == d))
+        level.flags.writeable = False
+        levels.append(level)
+    return tuple(levels)
 
 
 def _blend(cur: Array, goal: Goal) -> Array:
@@ -555,6 +636,7 @@ def solve_goals(
     max_drop: float = 0.15,
     drop_window: float = 0.15,
     dls_options: dict[str, Any] | None = None,
+    fk: tuple[Array, Array] | None = None,
 ) -> Motion:
     """The IK layer: meet every goal on every frame (no temporal smoothing).
 
@@ -578,6 +660,9 @@ def solve_goals(
         knee angle.
     dls_options : dict, optional
         Passed to :func:`~mocaplab.ik.dls_ik` for goals with a chain.
+    fk : (global_rotations, global_positions), optional
+        The motion's forward kinematics when already at hand (saves a pass;
+        physical touch-up carries them along).
 
     Returns
     -------
@@ -598,6 +683,29 @@ def solve_goals(
     both weights 1 the ankle and toe plants hold exactly; with both 0 the
     pose is unchanged.
     """
+    return _solve_goals(
+        motion, goals, adjust_root=adjust_root, reach=reach, max_drop=max_drop, drop_window=drop_window,
+        dls_options=dls_options, fk=fk,
+    )[0]
+
+
+def _solve_goals(
+    motion: Motion,
+    goals: Sequence[Goal],
+    *,
+    adjust_root: bool,
+    reach: float,
+    max_drop: float,
+    drop_window: float,
+    dls_options: dict[str, Any] | None,
+    fk: tuple[Array, Array] | None,
+) -> tuple[Motion, tuple[Array, Array]]:
+    """:func:`solve_goals`, also returning the new motion's forward kinematics.
+
+    The kinematics come cheaply: joints the IK layer did not turn keep their
+    transforms (shifted by the root lowering, if any), the legs' subtrees
+    are recomputed once at the end.
+    """
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
     sk = motion.skeleton
@@ -607,7 +715,8 @@ def solve_goals(
     foot_joints = sorted(set(foot_of) | set(toes))
     rot = np.array(motion.rotations, copy=True)
     root = np.array(motion.root_positions, copy=True)
-    grot, gpos = motion.global_rotations(), motion.global_positions()
+    grot, gpos = (motion.global_rotations(), motion.global_positions()) if fk is None else fk
+    root_moved = False
     if adjust_root and foot_joints:
         drop = np.zeros(n)
         for ankle in foot_joints:
@@ -623,6 +732,7 @@ def solve_goals(
         drop = np.where(drop < -1e-9, np.maximum(drop, -max_drop), 0.0)
         drop = _lower_envelope(drop, _frames(drop_window, motion.fps, "drop_window"))
         if np.any(drop < 0):
+            root_moved = True
             root[:, 1] += drop
             gpos = gpos + np.stack([np.zeros(n), drop, np.zeros(n)], axis=-1)[:, None, :]
     for j, g in dls:
@@ -643,18 +753,48 @@ def solve_goals(
             rot = two_bone_ik(rot, root, sk, j, _blend(gpos[:, j], g), end_rotation=grot[:, j], fk=fk)
         grot, gpos = _fk(rot, root, motion)
     if foot_joints:
-        fk = (grot, gpos)
-        for ankle in foot_joints:
-            target = _foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle))
-            rot = two_bone_ik(rot, root, sk, ankle, target, end_rotation=grot[:, ankle], fk=fk)
+        legs = [limb_joints(sk, ankle) for ankle in foot_joints]
+        targets = [_foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle)) for ankle in foot_joints]
+        ankles = np.array(list(toes), dtype=np.int64)
+        tips = np.array([jt for jt, _ in toes.values()], dtype=np.int64)
+        if len({j for leg in legs for j in leg}) == 3 * len(legs):
+            # independent legs: one batched two-bone solve (what two_bone_ik
+            # does leg by leg, the same numbers)
+            ju, jm, je = (np.array(j) for j in zip(*legs, strict=True))
+            a, b, c = gpos[:, ju], gpos[:, jm], gpos[:, je]
+            q_up, q_mid = two_bone_deltas(a, b, c, np.stack(targets, axis=1))
+            rot = _two_bone_locals(rot, grot, sk.parents, (ju, jm, je), q_up, q_mid, grot[:, je])
+            if toes:
+                # where the solve put the ankles (the lower leg turned by
+                # q_mid about the knee, then the leg by q_up about the hip)
+                # and the toes (each ankle kept its global orientation)
+                col = np.array([foot_joints.index(int(j)) for j in ankles], dtype=np.int64)
+                ankle_pos = (a + quat.rotate(q_up, (b - a) + quat.rotate(q_mid, c - b)))[:, col]
+                toe_pos = ankle_pos + (gpos[:, tips] - gpos[:, ankles])
+                g_parent = quat.mul(quat.mul(q_up, q_mid), grot[:, jm])[:, col]
+                g_ankle = grot[:, ankles]
+        else:
+            for ankle, target in zip(foot_joints, targets, strict=True):
+                rot = two_bone_ik(rot, root, sk, ankle, target, end_rotation=grot[:, ankle], fk=(grot, gpos))
+            if toes:
+                grot2, gpos2 = _refresh(rot, (grot, gpos), motion, [leg[0] for leg in legs])
+                ankle_pos, toe_pos = gpos2[:, ankles], gpos2[:, tips]
+                g_parent, g_ankle = grot2[:, sk.parents[ankles]], grot2[:, ankles]
         if toes:
-            grot2, gpos2 = _refresh(rot, fk, motion, [limb_joints(sk, a)[0] for a in foot_joints])
-            for ankle, (jt, gt) in toes.items():
-                q = aim_deltas(gpos2[:, ankle], gpos2[:, jt], gt.targets, weight=gt.weights)
-                parent = int(sk.parents[ankle])
-                new_global = quat.mul(q, grot2[:, ankle])
-                rot[:, ankle] = quat.normalize(quat.mul(quat.inv(grot2[:, parent]), new_global))
-    return motion.replace(rotations=rot, root_positions=root)
+            q = aim_deltas(
+                ankle_pos,
+                toe_pos,
+                np.stack([gt.targets for _, gt in toes.values()], axis=1),
+                weight=np.stack([gt.weights for _, gt in toes.values()], axis=1),
+            )
+            new_global = quat.mul(q, g_ankle)
+            rot[:, ankles] = quat.normalize(quat.mul(quat.inv(g_parent), new_global))
+        grot, gpos = _refresh(rot, (grot, gpos), motion, [leg[0] for leg in legs])
+    if not root_moved:
+        new_motion = motion.replace(rotations=_owned(rot))
+    else:
+        new_motion = motion.replace(rotations=_owned(rot), root_positions=_owned(root))
+    return new_motion, (grot, gpos)
 
 
 def enforce_goals(

@@ -58,6 +58,7 @@ from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy import sparse
 from scipy.ndimage import gaussian_filter1d
 
 from .. import quat
@@ -584,6 +585,53 @@ def smoothed_derivatives(
     v = (xp[pad + 1 : pad + n + 1] - xp[pad - 1 : pad + n - 1]) * (0.5 * fps)
     a = (xp[pad + 1 : pad + n + 1] - 2.0 * s + xp[pad - 1 : pad + n - 1]) * (fps * fps)
     return s.reshape(x.shape), v.reshape(x.shape), a.reshape(x.shape)
+
+
+def _positions_and_accelerations(positions: Array, fps: float, *, width: float) -> tuple[Array, Array]:
+    """The smoothed positions and accelerations of :func:`smoothed_derivatives`, shape (F, ...) each.
+
+    The same numbers (up to rounding), as one product with a cached sparse
+    operator: the end padding, the Gaussian filter and the differences are
+    linear in the positions.  Used where the touch-up needs them on every
+    step (the operator depends only on the frame count, rate and width).
+    """
+    x = np.asarray(positions, dtype=float)
+    n = x.shape[0]
+    if n < 2:
+        return x.copy(), np.zeros_like(x)
+    both = _pos_acc_operator(n, float(fps), float(width)) @ x.reshape(n, -1)
+    return both[:n].reshape(x.shape), both[n:].reshape(x.shape)
+
+
+@lru_cache(maxsize=16)
+def _pos_acc_operator(n: int, fps: float, width: float) -> sparse.csr_matrix:
+    """Sparse (2n, n) map from positions to [smoothed positions; accelerations] (see smoothed_derivatives)."""
+    std = max(float(width), 0.0) / 4.0
+    pad = int(2.0 * std + 0.5) + 1
+    fit = min(n, max(3, 2 * pad))
+    ext = _extrapolator(fit, tuple(range(-pad, 0)))  # (pad, fit)
+    # padding: least-squares parabolas at both ends, the samples in between
+    rows = [np.repeat(np.arange(pad), fit), pad + np.arange(n), np.repeat(np.arange(pad + n, 2 * pad + n)[::-1], fit)]
+    cols = [np.tile(np.arange(fit), pad), np.arange(n), np.tile(n - 1 - np.arange(fit), pad)]
+    vals = [ext.ravel(), np.ones(n), ext.ravel()]
+    padded = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n + 2 * pad, n))
+    if std > 0:
+        # the kernel of gaussian_filter1d (mode "nearest", truncated at 2 std)
+        radius = int(2.0 * std + 0.5)
+        impulse = np.zeros(2 * radius + 1)
+        impulse[radius] = 1.0
+        kernel = gaussian_filter1d(impulse, std, mode="constant", truncate=2.0)[::-1]
+        m = n + 2 * pad
+        i = np.repeat(np.arange(m), 2 * radius + 1)
+        j = np.clip(i + np.tile(np.arange(-radius, radius + 1), m), 0, m - 1)
+        blur = sparse.csr_matrix((np.tile(kernel, m), (i, j)), shape=(m, m))  # duplicates (clamped) add up
+        padded = blur @ padded
+    padded = sparse.csr_matrix(padded)
+    mid = padded[pad : pad + n]
+    acc = (padded[pad + 1 : pad + n + 1] - 2.0 * mid + padded[pad - 1 : pad + n - 1]) * (fps * fps)
+    out = sparse.csr_matrix(sparse.vstack([mid, acc]))
+    out.sum_duplicates()
+    return out
 
 
 def _extrapolate(samples: Array, at: NDArray[np.int64]) -> Array:

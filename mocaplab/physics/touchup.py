@@ -514,91 +514,103 @@ def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None
 # ======================================================================
 # ground frames (section 3.3)
 # ======================================================================
+@lru_cache(maxsize=128)
+def _lever_layout(sets: LinkSets, body: Body) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """Links an adjustment moves, for equations 6-7 (cached per link sets and body).
+
+    Returns the moving links (M,), the S2 part moving each (M,), and, for
+    the carried ones among them, their positions in the moving list and
+    their carried top joints: a rotated link turns about its part's centre
+    with its own centre as lever point, a carried link (S3, or S1 below a
+    root part) translates with its top joint, which is its lever point.
+    """
+    link_top = sets.carried_top[body.owners]
+    carried = link_top >= 0
+    rotated = (sets.roles[body.owners] == 2) & ~carried
+    moving = np.flatnonzero(rotated | carried)
+    part = sets.part[body.owners][moving]
+    slots = np.flatnonzero(carried[moving])
+    tops = link_top[moving][slots]
+    out = (moving, part, slots, tops)
+    for arr in out:
+        arr.flags.writeable = False
+    return out
+
+
 def _ground_rotation(
     motion: Motion, body: Body, sets: LinkSets, bal: Balance, weight: Array, gpos: Array | None = None
 ) -> tuple[Array, Array]:
     """Per-frame world rotation vectors (F, 3) and S2 centres of the root part (F, 3).
 
-    Closed form of equations 6 and 7 in the frame whose x axis points from
-    the ZMP to its projection on the support polygon.
+    Closed form of equations 6 and 7 in the frame whose x axis ``x'`` points
+    from the ZMP to its projection on the support polygon.  With
+    ``alpha_l = m_l (a_ly - g_y)``, ``beta_l = m_l a_l . x'``, each moving
+    link's lever point ``P_l`` (its centre when rotated, its carried top
+    joint when carried) relative to its part's rotation centre ``C``, in
+    coordinates ``dx = (P_l - C) . x'`` and ``dy = (P_l - C)_y``, the ZMP's
+    ``x'`` coordinate after a rotation by ``theta`` is
+    ``(a1 cos(theta) - a2 sin(theta) + a3) / sum_l alpha_l`` with
+    ``a1 = sum_moving (alpha dx - beta dy)``,
+    ``a2 = sum_moving (alpha dy + beta dx)`` and
+    ``a3 = sum_all (alpha x - beta y) - a1`` (the Appendix's coefficients,
+    as per-link sums).
     """
     n = motion.n_frames
     gpos = motion.global_positions() if gpos is None else gpos
     z = bal.zmp
     target = bal.projection
-    todo = np.isfinite(bal.distance) & (bal.distance > 0) & (weight > 0)
+    with np.errstate(invalid="ignore"):
+        todo = (bal.distance > 0) & (weight > 0)  # NaN (flight) compares False
     omega = np.zeros((n, 3))
     root_centre = np.zeros((n, 3))
     if not np.any(todo):
         return omega, root_centre
     idx = np.flatnonzero(todo)
-    dirv = target[idx] - z[idx]
-    dirv[:, 1] = 0.0
-    xa = dirv / np.linalg.norm(dirv, axis=1, keepdims=True)  # x': towards the polygon
-    up = np.array([0.0, 1.0, 0.0])
-    axis = np.cross(xa, up)  # z' = x' x y: +theta turns x' into y
+    # x': horizontal unit vector towards the polygon, (cx, 0, cz)
+    dx = target[idx, 0] - z[idx, 0]
+    dz = target[idx, 2] - z[idx, 2]
+    h = np.hypot(dx, dz)
+    cx, cz = (dx / h)[:, None], (dz / h)[:, None]
 
     r = bal.positions[idx]  # (f, L, 3) smoothed link centres
     acc = bal.accelerations[idx]
     m = body.masses
     alpha = m * (acc[..., 1] - GRAVITY[1])  # (f, L)
-    beta = m * np.einsum("flc,fc->fl", acc, xa)
+    beta = m * (acc[..., 0] * cx + acc[..., 2] * cz)
+    total = alpha * (r[..., 0] * cx + r[..., 2] * cz) - beta * r[..., 1]
 
-    # rotation centres of the S2 parts and the boundary joints of carried parts
+    # rotation centres of the S2 parts: the boundary joint, or the ZMP's
+    # projection on the ground for a part holding the root
     tops = sets.s2_tops
-    centres = np.empty((idx.size, len(tops), 3))
-    for k, t in enumerate(tops):
-        if t == 0:
-            centres[:, k] = target[idx]
-            centres[:, k, 1] = 0.0
-        else:
-            centres[:, k] = gpos[idx, t]
-    root_centre[idx] = centres[:, 0] if tops and tops[0] == 0 else 0.0
-
-    link_role = sets.roles[body.owners]
-    link_part = sets.part[body.owners]
-    # joints carried (S3, or S1 below a root part): their top joint per link
-    link_top = sets.carried_top[body.owners]
-    rotated = (link_role == 2) & (link_top < 0)
-    carried = link_top >= 0
-
-    def coord(v: Array) -> tuple[Array, Array]:  # (f, L, 3) -> x', y
-        return np.einsum("flc,fc->fl", v, xa), v[..., 1]
-
-    x, y = coord(r)
-    numer_c = alpha * x - beta * y  # S1 terms (unchanged links)
-    a_coef = np.zeros_like(alpha)
-    b_coef = np.zeros_like(alpha)
-    c_coef = numer_c.copy()
-    if np.any(rotated):
-        c_l = centres[:, np.where(rotated, link_part, 0)]  # (f, L, 3)
-        dx, dy = coord(r - c_l)
-        cx, cy = coord(c_l)
-        a_coef = np.where(rotated, alpha * dx - beta * dy, a_coef)
-        b_coef = np.where(rotated, -(alpha * dy + beta * dx), b_coef)
-        c_coef = np.where(rotated, alpha * cx - beta * cy, c_coef)
-    if np.any(carried):
-        c_l = centres[:, np.where(carried, link_part, 0)]
-        b_l = gpos[idx][:, np.where(carried, link_top, 0)]
-        dx, dy = coord(b_l - c_l)
-        a_coef = np.where(carried, alpha * dx - beta * dy, a_coef)
-        b_coef = np.where(carried, -(alpha * dy + beta * dx), b_coef)
-        c_coef = np.where(carried, alpha * (x - dx) - beta * (y - dy), c_coef)
+    centres = gpos[idx][:, list(tops)]  # (f, parts, 3)
+    if tops[0] == 0:
+        centres[:, 0] = target[idx]
+        centres[:, 0, 1] = 0.0
+        root_centre[idx] = centres[:, 0]
+    moving, part, slots, carried_tops = _lever_layout(sets, body)
+    lever = r[:, moving]
+    if slots.size:
+        lever[:, slots] = gpos[idx][:, carried_tops]
+    d = lever - centres[:, part]
+    ddx = d[..., 0] * cx + d[..., 2] * cz
+    ddy = d[..., 1]
+    am, bm = alpha[:, moving], beta[:, moving]
+    a1 = (am * ddx - bm * ddy).sum(axis=1)
+    a2 = (am * ddy + bm * ddx).sum(axis=1)  # Z'_x = (a1 cos - a2 sin + a3) / sig, equation 6
+    a3 = total.sum(axis=1) - a1
     sig = alpha.sum(axis=1)
-    a1 = a_coef.sum(axis=1)
-    a2 = -b_coef.sum(axis=1)  # Z'_x = (a1 cos - a2 sin + a3), equation 6
-    a3 = c_coef.sum(axis=1)
-    want = np.einsum("fc,fc->f", target[idx], xa) * sig - a3
+    want = (target[idx, 0] * cx[:, 0] + target[idx, 2] * cz[:, 0]) * sig - a3
     # a1 cos(t) - a2 sin(t) = R cos(t + phi), R = hypot(a1, a2), phi = atan2(a2, a1)
     radius = np.hypot(a1, a2)
     phi = np.arctan2(a2, a1)
-    cosv = np.clip(want / np.where(radius > 0, radius, 1.0), -1.0, 1.0)  # no exact solution: clamp
-    acs = np.arccos(cosv)
-    cand = np.stack([acs - phi, -acs - phi], axis=1)
-    cand = (cand + np.pi) % (2.0 * np.pi) - np.pi
-    theta = cand[np.arange(idx.size), np.argmin(np.abs(cand), axis=1)]
-    theta = np.where(radius > 0, np.clip(theta, -MAX_GROUND_ANGLE, MAX_GROUND_ANGLE), 0.0)
-    omega[idx] = axis * (theta * weight[idx])[:, None]
+    acs = np.arccos(np.clip(want / np.where(radius > 0, radius, 1.0), -1.0, 1.0))  # no exact solution: clamp
+    t1 = (acs - phi + np.pi) % (2.0 * np.pi) - np.pi
+    t2 = (-acs - phi + np.pi) % (2.0 * np.pi) - np.pi
+    theta = np.where(np.abs(t1) <= np.abs(t2), t1, t2)  # the smaller solution
+    theta = np.where(radius > 0, np.clip(theta, -MAX_GROUND_ANGLE, MAX_GROUND_ANGLE), 0.0) * weight[idx]
+    # z' = x' x y = (-cz, 0, cx): +theta turns x' into y
+    omega[idx, 0] = -cz[:, 0] * theta
+    omega[idx, 2] = cx[:, 0] * theta
     return omega, root_centre
 
 
@@ -789,18 +801,35 @@ def _ik_posed(posed: _Posed, contacts: Contacts, reference: Motion) -> _Posed:
 
 
 def _refresh_fk(motion: Motion, grot: Array, gpos: Array, tops: Sequence[int]) -> tuple[Array, Array]:
-    """Global transforms with those of the subtrees of ``tops`` recomputed from ``motion``."""
+    """Global transforms with those of the subtrees of ``tops`` recomputed from ``motion``.
+
+    One vectorised step per depth level (both legs at once).
+    """
     sk = motion.skeleton
-    redo = np.zeros(sk.n_joints, dtype=bool)
-    for t in tops:
-        redo |= _subtree(sk, t)
     grot, gpos = np.array(grot, copy=True), np.array(gpos, copy=True)
-    for j in np.flatnonzero(redo):
-        p = sk.parents[j]
-        local = sk.offsets[j] if motion.translations is None else motion.translations[:, j]
-        grot[:, j] = quat.mul(grot[:, p], motion.rotations[:, j])
-        gpos[:, j] = gpos[:, p] + quat.rotate(grot[:, p], local)
+    for level in _subtree_levels(sk, tuple(sorted({int(t) for t in tops}))):
+        p = sk.parents[level]
+        local = sk.offsets[level] if motion.translations is None else motion.translations[:, level]
+        grot[:, level] = quat.mul(grot[:, p], motion.rotations[:, level])
+        gpos[:, level] = gpos[:, p] + quat.rotate(grot[:, p], local)
     return grot, gpos
+
+
+@lru_cache(maxsize=64)
+def _subtree_levels(skeleton: Skeleton, tops: tuple[int, ...]) -> tuple[NDArray[np.int64], ...]:
+    """Joints of the subtrees of ``tops``, grouped by depth, shallowest first."""
+    inside = np.zeros(skeleton.n_joints, dtype=bool)
+    for t in tops:
+        inside |= _subtree(skeleton, t)
+    depth = np.zeros(skeleton.n_joints, dtype=np.int64)
+    for j in range(1, skeleton.n_joints):
+        depth[j] = depth[skeleton.parents[j]] + 1
+    levels = []
+    for d in np.unique(depth[inside]):
+        level = np.flatnonzero(inside & (depth == d))
+        level.flags.writeable = False
+        levels.append(level)
+    return tuple(levels)
 
 
 def _footplant_fn(
@@ -823,33 +852,23 @@ def _footplant_fn(
             footplants = "plant"
     if footplants == "ik":
         return lambda p: _ik_posed(p, contacts, reference)
-    from ..refine import foot_goals, refine, solve_goals
+    from ..refine import _solve_goals, foot_goals, refine
 
     if footplants == "refine":
         return lambda p: _posed(refine(p.motion, contacts=contacts, reference=reference))
     goals = foot_goals(reference, contacts, reference=reference, blend=PLANT_BLEND)
-    legs = _leg_tops(reference.skeleton, contacts)
 
     def plant(p: _Posed) -> _Posed:
-        new = solve_goals(p.motion, goals, adjust_root=False)
-        # the IK layer turns leg joints only: recompute the legs' transforms
-        other = np.ones(new.n_joints, dtype=bool)
-        for t in legs:
-            other &= ~_subtree(new.skeleton, t)
-        if np.array_equal(new.rotations[:, other], p.motion.rotations[:, other]) and np.array_equal(
-            new.root_positions, p.motion.root_positions
-        ):
-            return _Posed(new, *_refresh_fk(new, p.grot, p.gpos, legs))
-        return _posed(new)
+        # solve_goals without root lowering; it turns the legs' joints only
+        # (two-bone IK from the hips down, then the ankles) and hands back
+        # the new kinematics (the legs' transforms recomputed, the rest kept)
+        new, fk = _solve_goals(
+            p.motion, goals, adjust_root=False, reach=0.99, max_drop=0.15, drop_window=0.15, dls_options=None,
+            fk=(p.grot, p.gpos),
+        )
+        return _Posed(new, *fk)
 
     return plant
-
-
-def _leg_tops(skeleton: Skeleton, contacts: Contacts) -> list[int]:
-    """Upper joints (hips) of the limbs that end at the contact joints' ankles."""
-    from ..ik import limb_joints
-
-    return sorted({limb_joints(skeleton, ankle)[0] for ankle, _ in _feet(skeleton, contacts)})
 
 
 # ======================================================================

@@ -34,8 +34,8 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from functools import cached_property
-from itertools import combinations
+from functools import cached_property, lru_cache
+from itertools import combinations, combinations_with_replacement
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -44,7 +44,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from .. import quat
 from ..motion import Motion
-from .body import GRAVITY, Body, paper_width, smoothed_derivatives
+from .body import GRAVITY, Body, _positions_and_accelerations, paper_width
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..contacts import Contacts
@@ -91,15 +91,27 @@ def zmp_from_links(
             f"Expected positions and accelerations of shape (F, L, 3) and masses (L,), "
             f"got {r.shape}, {a.shape} and {m.shape}"
         )
-    den = np.einsum("l,fl->f", m, a[..., 1])
-    weight = float(m.sum() * np.linalg.norm(gravity))
+    zx, zz, ok = _zmp_xz(r, a, m, float(m.sum() * np.linalg.norm(gravity)))
+    out = np.zeros((r.shape[0], 3))
+    out[:, 0] = np.where(ok, zx, np.nan)
+    out[:, 1] = np.where(ok, 0.0, np.nan)
+    out[:, 2] = np.where(ok, zz, np.nan)
+    return out
+
+
+def _zmp_xz(r: Array, a: Array, m: Array, weight: float) -> tuple[Array, Array, NDArray[np.bool_]]:
+    """Equation 4 on positions ``r`` and accelerations minus gravity ``a`` (F, L, 3).
+
+    Returns ``Z_x``, ``Z_z`` (F,) and where the denominator exceeds 0.1 % of
+    ``weight`` (elsewhere the values are meaningless, never a division by zero).
+    """
+    ma = a * m[:, None]  # (F, L, 3) mass-weighted
+    den = ma[..., 1].sum(axis=1)
     ok = den > 1e-3 * weight
     safe = np.where(ok, den, 1.0)
-    zx = (np.einsum("l,fl,fl->f", m, a[..., 1], r[..., 0]) - np.einsum("l,fl,fl->f", m, a[..., 0], r[..., 1])) / safe
-    zz = (np.einsum("l,fl,fl->f", m, a[..., 1], r[..., 2]) - np.einsum("l,fl,fl->f", m, a[..., 2], r[..., 1])) / safe
-    out = np.stack([zx, np.zeros_like(zx), zz], axis=-1)
-    out[~ok] = np.nan
-    return out
+    zx = (np.einsum("fl,fl->f", ma[..., 1], r[..., 0]) - np.einsum("fl,fl->f", ma[..., 0], r[..., 1])) / safe
+    zz = (np.einsum("fl,fl->f", ma[..., 1], r[..., 2]) - np.einsum("fl,fl->f", ma[..., 2], r[..., 1])) / safe
+    return zx, zz, ok
 
 
 # ------------------------------------------------------------- support polygon
@@ -177,50 +189,62 @@ def polygon_distance(
         raise ValueError(f"Expected `active` of shape ({n_frames}, {n_pts}), got {act.shape}")
     if n_pts == 0:
         return np.full(n_frames, np.nan), np.full((n_frames, 2), np.nan)
+    finite = np.isfinite(z[:, 0]) & np.isfinite(z[:, 1])
+    signed, px, pz = _polygon_xz(z[:, 0], z[:, 1], finite, v[..., 0], v[..., 1], act, depth)
+    return signed, np.column_stack([px, pz])
+
+
+def _polygon_xz(
+    zx: Array, zz: Array, finite: NDArray[np.bool_], vx: Array, vz: Array, act: NDArray[np.bool_], depth: bool
+) -> tuple[Array, Array, Array]:
+    """:func:`polygon_distance` on components: queries ``zx, zz`` (F,), points ``vx, vz`` (F, P).
+
+    Returns the signed distance and the projection's components, NaN where
+    ``finite`` is False or no point is active.
+    """
+    n_frames, n_pts = act.shape
     rows = np.arange(n_frames)
-    zf = np.where(np.isfinite(z), z, 0.0)
-    # nearest point over single points and all segments between active points
-    diff = v - zf[:, None, :]  # (F, P, 2)
-    d_pt = np.where(act, np.einsum("fpc,fpc->fp", diff, diff), np.inf)
-    best = np.argmin(d_pt, axis=1)
-    best_d = d_pt[rows, best]
-    best_p = v[rows, best]
-    pairs = _pairs(n_pts)
-    if pairs.size:
-        i, j = pairs[:, 0], pairs[:, 1]
-        pa = v[:, i]  # (F, K, 2)
-        e = v[:, j] - pa
-        ee = np.einsum("fkc,fkc->fk", e, e)
-        pair_ok = act[:, i] & act[:, j] & (ee > _EPS * _EPS)
-        t = np.clip(-np.einsum("fkc,fkc->fk", diff[:, i], e) / np.where(pair_ok, ee, 1.0), 0.0, 1.0)
-        q = pa + t[..., None] * e
-        dq = q - zf[:, None, :]
-        d_seg = np.where(pair_ok, np.einsum("fkc,fkc->fk", dq, dq), np.inf)
-        k = np.argmin(d_seg, axis=1)
-        dk = d_seg[rows, k]
-        better = dk < best_d
-        best_d = np.where(better, dk, best_d)
-        best_p = np.where(better[:, None], q[rows, k], best_p)
-    # inside test: the directions from the query to the points leave no
-    # angular gap of half a turn or more
-    ang = np.arctan2(diff[..., 1], diff[..., 0])
-    srt = np.sort(np.where(act, ang, 10.0), axis=1)  # inactive last
-    n_act = act.sum(axis=1)
-    gaps = np.diff(srt, axis=1)
-    valid_gap = np.arange(1, n_pts)[None, :] < n_act[:, None]
-    widest = np.max(np.where(valid_gap, gaps, 0.0), axis=1, initial=0.0)
-    last = srt[rows, np.maximum(n_act - 1, 0)]
-    widest = np.maximum(widest, srt[:, 0] + 2.0 * np.pi - last)
-    inside = (n_act >= 3) & (widest < np.pi - 1e-12)
+    zx = np.where(finite, zx, 0.0)
+    zz = np.where(finite, zz, 0.0)
+    # points relative to the query, components apart: (F, P) each
+    dx = vx - zx[:, None]
+    dz = vz - zz[:, None]
+    # nearest point over all segments between active points, a point being
+    # the segment from itself to itself (pairs i <= j)
+    i, j = _pairs(n_pts, True).T
+    ax, az = dx[:, i], dz[:, i]  # (F, K)
+    ex, ez = dx[:, j] - ax, dz[:, j] - az
+    ee = ex * ex + ez * ez
+    t = np.clip(-(ax * ex + az * ez) / np.where(ee > _EPS * _EPS, ee, np.inf), 0.0, 1.0)
+    qx, qz = ax + t * ex, az + t * ez  # nearest point of each segment, relative to the query
+    d_seg = np.where(act[:, i] & act[:, j], qx * qx + qz * qz, np.inf)
+    k = np.argmin(d_seg, axis=1)
+    best_d = d_seg[rows, k]
+    qx, qz = qx[rows, k], qz[rows, k]
+    # inside test: outside a convex hull, every point p lies behind the line
+    # through the nearest point q across z - q, <p - q, z - q> <= 0; inside
+    # (z = sum_p l_p p, a convex combination, so that |z - q|^2 =
+    # sum_p l_p <p - q, z - q>) some p lies in front of it.  (qx, qz) is
+    # q - z.  A query on a segment (q = z) is on the boundary or inside: 0
+    # either way, told apart by the depth below when it is asked for.
+    ahead = np.where(act, (dx - qx[:, None]) * qx[:, None] + (dz - qz[:, None]) * qz[:, None], np.inf)
     dist = np.sqrt(best_d)
+    inside = ahead.min(axis=1) < -1e-12 * dist
     signed = np.where(inside, 0.0, dist)
-    if depth and np.any(inside) and pairs.size:
-        signed[inside] = -_depth(zf[inside], v[inside], act[inside], pairs)
-    proj = np.where(inside[:, None], zf, best_p)
-    bad = ~np.all(np.isfinite(z), axis=1) | (n_act == 0)
+    n_act = act.sum(axis=1)
+    if depth:
+        inside |= (best_d == 0.0) & (n_act >= 3)
+    if depth and np.any(inside):
+        z0 = np.column_stack([zx, zz])
+        v = np.stack([vx, vz], axis=-1)
+        signed[inside] = -_depth(z0[inside], v[inside], act[inside], _pairs(n_pts))
+    bad = ~finite | (n_act == 0)
+    px = np.where(inside, zx, zx + qx)
+    pz = np.where(inside, zz, zz + qz)
     signed[bad] = np.nan
-    proj[bad] = np.nan
-    return signed, proj
+    px[bad] = np.nan
+    pz[bad] = np.nan
+    return signed, px, pz
 
 
 def _depth(z: Array, v: Array, act: NDArray[np.bool_], pairs: NDArray[np.int64]) -> Array:
@@ -247,13 +271,13 @@ def _depth(z: Array, v: Array, act: NDArray[np.bool_], pairs: NDArray[np.int64])
     return np.maximum(np.min(gap, axis=1), 0.0)
 
 
-_PAIRS: dict[int, NDArray[np.int64]] = {}
-
-
-def _pairs(n: int) -> NDArray[np.int64]:
-    if n not in _PAIRS:
-        _PAIRS[n] = np.array(list(combinations(range(n), 2)), dtype=np.int64).reshape(-1, 2)
-    return _PAIRS[n]
+@lru_cache(maxsize=32)
+def _pairs(n: int, with_self: bool = False) -> NDArray[np.int64]:
+    """Index pairs ``i < j`` (``i <= j`` with ``with_self``) of ``n`` points, shape (K, 2)."""
+    pick = combinations_with_replacement if with_self else combinations
+    out = np.array(list(pick(range(n), 2)), dtype=np.int64).reshape(-1, 2)
+    out.flags.writeable = False
+    return out
 
 
 def signed_distance(point: ArrayLike, polygon: ArrayLike) -> float:
@@ -374,20 +398,39 @@ def balance(
     body.check(motion)
     # link centres and support points in one rotation pass
     owners, offsets, column = body._support_layout(motion.skeleton, tuple(contacts.joints))
+    idx, all_offsets = _point_layout(body, owners, offsets)
     grot, gpos = (motion.global_rotations(), motion.global_positions()) if fk is None else fk
-    idx = np.concatenate([body.owners, owners])
-    pts = gpos[:, idx] + quat.rotate(np.ascontiguousarray(grot[:, idx]), np.concatenate([body.offsets, offsets]))
+    pts = gpos[:, idx] + quat.rotate(grot[:, idx], all_offsets)
     raw, support = pts[:, : body.n_links], pts[:, body.n_links :]
-    r, _, acc = smoothed_derivatives(raw, motion.fps, width=w)
+    r, acc = _positions_and_accelerations(raw, motion.fps, width=w)
     mask = np.asarray(contacts.mask, dtype=bool)
     ground: NDArray[np.bool_] = np.asarray(mask.any(axis=1), dtype=bool)
-    z = zmp_from_links(r, acc, body.masses)
-    z[~ground] = np.nan
+    m = body.masses
+    zx, zz, ok = _zmp_xz(r, acc - GRAVITY, m, float(m.sum() * np.linalg.norm(GRAVITY)))
+    has = ground & ok
     active = mask[:, column]
-    dist, proj2 = polygon_distance(z[:, [0, 2]], support[..., [0, 2]], active, depth=False)
-    proj = np.column_stack([proj2[:, 0], np.zeros(len(proj2)), proj2[:, 1]])
-    com = np.einsum("l,flc->fc", body.masses, raw) / body.total_mass
+    dist, px, pz = _polygon_xz(zx, zz, has, support[..., 0], support[..., 2], active, False)
+    z = np.zeros((motion.n_frames, 3))
+    z[:, 0], z[:, 2] = zx, zz
+    z[~has] = np.nan
+    proj = np.zeros((motion.n_frames, 3))
+    proj[:, 0], proj[:, 2] = px, pz
+    proj[np.isnan(px)] = np.nan
+    com = (m @ raw.reshape(motion.n_frames, body.n_links, 3)) / body.total_mass
     return Balance(z, proj, dist, com, ground, support, active, r, acc)
+
+
+def _point_layout(body: Body, owners: NDArray[np.int64], offsets: Array) -> tuple[NDArray[np.int64], Array]:
+    """Owner joints and local offsets of the link centres followed by the support points (cached)."""
+    key = (id(owners), id(offsets))
+    cache = body.__dict__.setdefault("_point_layout_cache", {})
+    if key not in cache:
+        idx = np.concatenate([body.owners, owners])
+        off = np.concatenate([body.offsets, offsets])
+        idx.flags.writeable = False
+        off.flags.writeable = False
+        cache[key] = (idx, off, owners, offsets)  # keep the keyed arrays alive
+    return cache[key][:2]
 
 
 def zmp_distance(motion: Motion, body: Body | None = None, *, contacts: Contacts | None = None) -> Array:

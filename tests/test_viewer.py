@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import asyncio
+import sys
+import threading
+
 import numpy as np
 import pytest
 
@@ -177,6 +181,10 @@ def test_trame_backend_builds_an_updatable_view(walk):
     assert hasattr(view, "viewer") and "index.html" in view.src  # pyvista's trame iframe widget
     v.slider.value = 30
     assert np.allclose(_sphere_centres(v)[: walk.n_joints], walk.global_positions()[30], atol=1e-9)
+    # the trame server runs without trame-vtklocal (it downloads VTK.wasm from the internet)
+    loaded = getattr(view.viewer.server.root_server, "_loaded_modules", set())
+    assert not [m for m in loaded if getattr(m, "__name__", "").startswith("trame_vtklocal")]
+    assert sys.modules.get("trame.widgets.vtklocal", 0) is not None, "the import block is lifted afterwards"
     v.close()
 
 
@@ -279,4 +287,90 @@ def test_display_hooks(walk, capsys):
     v._ipython_display_()  # outside a kernel IPython prints the widget's text form
     assert v.show() is v.widget
     assert "VBox" in capsys.readouterr().out
+    v.close()
+
+
+# ------------------------------------------------------------------ threads
+# JupyterLab 4.6 sends widget messages to a kernel subshell: with ipykernel 7 the
+# callbacks run in another thread, where VTK cannot render (black view in the browser).
+
+
+async def _until(predicate, what: str) -> None:
+    """Let the running loop work until ``predicate()`` holds."""
+    for _ in range(200):
+        if predicate():
+            return
+        await asyncio.sleep(0.005)
+    raise AssertionError(f"the loop never got to: {what}")
+
+
+def _in_thread(target, *args) -> None:
+    worker = threading.Thread(target=target, args=args, name="subshell-test")
+    worker.start()
+    worker.join(timeout=30)
+    assert not worker.is_alive()
+
+
+def test_updates_from_another_thread_render_in_the_main_thread(walk):
+    main = threading.main_thread()
+    rendered_in: list[threading.Thread] = []
+
+    async def scenario() -> None:
+        v = MotionViewer(walk[:240], backend="static", window_size=(160, 120))
+        v.widget  # noqa: B018 - built in the main thread, as in a notebook cell
+        png = v._view.value
+        real = v.screenshot
+
+        def spy():
+            rendered_in.append(threading.current_thread())
+            return real()
+
+        v.screenshot = spy  # every render of the static view goes through it
+
+        # a kernel-subshell callback: queued onto the main loop, nothing done in the worker
+        _in_thread(v.set_frame, 60)
+        assert v.queued_calls == 1
+        assert v.frame == 0 and rendered_in == [] and v._view.value == png
+        await _until(lambda: v.frame == 60, "set_frame(60)")
+        assert rendered_in == [main] and v._view.value != png
+        assert v.slider.value == 60
+
+        # slider moves from the front end (a burst, as the play button sends): one draw of the newest
+        def burst() -> None:
+            for f in (70, 80, 90):
+                v.slider.value = f
+
+        _in_thread(burst)
+        assert v.frame == 60 and len(rendered_in) == 1
+        await _until(lambda: v.frame == 90, "the slider burst")
+        await asyncio.sleep(0.02)
+        assert rendered_in == [main, main], "one render for the whole burst, in the main thread"
+        assert np.allclose(_sphere_centres(v)[: walk.n_joints], walk.global_positions()[90], atol=1e-9)
+
+        # calls keep their order: new motions first, then the time on their clock
+        slow = walk[:240].resample(30)
+
+        def edit() -> None:
+            v.set_motions(slow)
+            v.set_time(1.0)
+
+        _in_thread(edit)
+        await _until(lambda: v.fps == pytest.approx(30.0) and v.frame == 30, "set_motions then set_time")
+        assert all(t is main for t in rendered_in)
+
+        # an error in a queued call has no caller to reach: it is shown in the widget
+        _in_thread(v.set_frame, 10_000)
+        await _until(lambda: "IndexError" in v._status.value, "the error shown")
+        v.close()
+
+    asyncio.run(scenario())
+
+
+def test_updates_from_another_thread_without_a_loop_run_there(walk):
+    v = MotionViewer(walk[:60], backend="none")  # built with no loop running: nothing to hand calls to
+    v.widget  # noqa: B018
+    _in_thread(v.set_frame, 30)
+    assert v.frame == 30 and v.queued_calls == 0
+    _in_thread(setattr, v.slider, "value", 40)
+    assert v.frame == 40 and v.queued_calls == 0
     v.close()

@@ -46,11 +46,18 @@ import ipywidgets as W
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.layout_engine import ConstrainedLayoutEngine
 from numpy.typing import NDArray
 
 from mocaplab import editing
 
 Backend = Literal["auto", "ipympl", "agg"]
+
+#: CSS pixels kept free along the left edge of an interactive figure: ipympl lays
+#: its toolbar (vertical, on the left) over the canvas, where it hid the tick labels.
+TOOLBAR_PX = 44
+
+_STATUS_STYLE = "display:block; max-width:{px}px; overflow:hidden; text-overflow:ellipsis; white-space:{wrap}"
 
 #: One draggable handle: (constraint index, kind, position in data coordinates, shape (2,)).
 Handle = tuple[int, str, NDArray[np.float64]]
@@ -275,8 +282,17 @@ class DragView:
         self.figure = Figure(figsize=figsize, dpi=100, layout="constrained")
         self._view = CanvasView(self.figure, backend)
         self.canvas = self._view.canvas
+        width_px = int(round(figsize[0] * 100))
         if self._view.interactive:
             self.canvas.add_class(self.canvas_class)
+            # the toolbar floats over the canvas' left edge: lay the axes out to its right
+            free = min(TOOLBAR_PX / width_px, 0.2)
+            self.figure.set_layout_engine(ConstrainedLayoutEngine(rect=(free, 0.0, 1.0 - free, 1.0)))
+        # a status as wide as the figure: a long message is cut with an ellipsis (full text
+        # in its tooltip) instead of widening the layout and pushing the 3D view sideways
+        self._status_px = width_px
+        self.status.layout.width = f"{width_px}px"
+        self.status.layout.overflow = "hidden"
         self.ax = self.figure.add_subplot()
         self.ax.set_title(title)
         plain_ticks(self.ax)
@@ -327,13 +343,21 @@ class DragView:
         self.last_error = exc
         where = traceback.extract_tb(exc.__traceback__)[-1] if exc.__traceback__ else None
         loc = f" ({where.name}, line {where.lineno})" if where else ""
+        style = _STATUS_STYLE.format(px=self._status_width(), wrap="normal; overflow-wrap:anywhere")
         self.status.value = (
-            f'<span class="mocaplab-error" style="color:#b00020">'
+            f'<span class="mocaplab-error" style="color:#b00020; {style}">'
             f"{html.escape(type(exc).__name__)}: {html.escape(str(exc))}{html.escape(loc)}</span>"
         )
 
     def _set_status(self, text: str) -> None:
-        self.status.value = f'<span class="mocaplab-ok">{html.escape(text)}</span>'
+        """One line of status, cut with an ellipsis at the figure's width; the full text in the tooltip."""
+        style = _STATUS_STYLE.format(px=self._status_width(), wrap="nowrap")
+        self.status.value = (
+            f'<span class="mocaplab-ok" style="{style}" title="{html.escape(text)}">{html.escape(text)}</span>'
+        )
+
+    def _status_width(self) -> int:
+        return int(getattr(self, "_status_px", 600))
 
     # -- picking
     def _pick_handle(self, event: Any) -> Handle | None:

@@ -46,13 +46,44 @@ interactive trame view (rotate and zoom with the mouse; it re-renders when
 the slider moves); ``"static"`` renders off-screen and shows a PNG image that
 is re-rendered when the slider moves (used by the tests and by nbval);
 ``"none"`` builds the controls without any 3D view.
+
+Threads
+-------
+VTK renders only in the thread that owns its (EGL off-screen) render window:
+the kernel's main thread, where the viewer is built and where trame's server
+runs on the kernel's asyncio loop.  JupyterLab 4.6 sends widget messages to a
+kernel *subshell* by default, so with ipykernel 7 a slider move or a button
+click runs its Python callback in another thread; rendering there gives a
+black view with white dashes in the browser.  The viewer therefore remembers
+the asyncio loop running in the main thread when it is built and, when one of
+its methods that touch the scene (:meth:`~MotionViewer.set_frame`,
+:meth:`~MotionViewer.set_time`, :meth:`~MotionViewer.set_motions`, the
+overlay methods, :meth:`~MotionViewer.close`, the slider's callback) is called
+from another thread, queues the whole call onto that loop
+(``loop.call_soon_threadsafe``), in call order, and returns at once.  Slider
+moves are coalesced: a burst of them (the play button) draws the newest frame
+once.  Calls made in the main thread, or when no loop was running there (a
+script, the tests), run immediately as before, so the static backend's image
+is re-rendered before the call returns.  An error in a queued call is shown
+in the widget's status line.
+
+The trame server is started without ``trame-vtklocal``: pyvista loads it when
+it is installed, and it then downloads VTK's WebAssembly build from
+gitlab.kitware.com, which prints a traceback into some later cell when the
+machine is offline or behind a firewall.  The views used here (remote and
+vtk.js local rendering) do not need it.
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
+import functools
 import io
+import logging
 import os
+import sys
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -69,6 +100,9 @@ ENV_VAR = "MOCAPLAB_JUPYTER_BACKEND"
 COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 
 OverlayData = ArrayLike | Sequence[ArrayLike] | Callable[[float], ArrayLike]
+
+_log = logging.getLogger(__name__)
+_MAIN_LOOP: asyncio.AbstractEventLoop | None = None  # the loop last seen running in the main thread
 
 
 def default_backend() -> str:
@@ -94,6 +128,58 @@ def _quiet_vtk() -> Iterator[None]:
         yield
     finally:
         vtkLogger.SetStderrVerbosity(old)
+
+
+@contextlib.contextmanager
+def _without_vtklocal() -> Iterator[None]:
+    """Hide ``trame.widgets.vtklocal`` while pyvista starts its trame server.
+
+    pyvista's ``launch_server`` enables trame-vtklocal when the import
+    succeeds, and its set-up downloads VTK's WebAssembly files in a background
+    task (a traceback in a later cell when offline).  A ``None`` entry in
+    ``sys.modules`` makes that import fail with ImportError, which pyvista
+    skips.  The entry is removed afterwards; a module already imported on
+    purpose is left alone.
+    """
+    name = "trame.widgets.vtklocal"
+    if name in sys.modules:
+        yield
+        return
+    sys.modules[name] = None  # type: ignore[assignment]
+    try:
+        yield
+    finally:
+        if name in sys.modules and sys.modules[name] is None:
+            del sys.modules[name]
+
+
+def _main_thread_loop() -> asyncio.AbstractEventLoop | None:
+    """The asyncio loop of the main thread (the kernel's), if one is running.
+
+    Read in the main thread (and remembered for viewers built elsewhere);
+    None in a script or a test without a running loop.
+    """
+    global _MAIN_LOOP
+    if threading.current_thread() is threading.main_thread():
+        try:
+            _MAIN_LOOP = asyncio.get_running_loop()
+        except RuntimeError:
+            return None
+        return _MAIN_LOOP
+    loop = _MAIN_LOOP
+    return loop if loop is not None and not loop.is_closed() else None
+
+
+def _on_main_thread(method: Callable[..., Any]) -> Callable[..., Any]:
+    """Run a scene-changing method in the main thread (queued there when called from another)."""
+
+    @functools.wraps(method)
+    def wrapper(self: MotionViewer, *args: Any, **kwargs: Any) -> Any:
+        if self._queue(functools.partial(method, self, *args, **kwargs)):
+            return None
+        return method(self, *args, **kwargs)
+
+    return wrapper
 
 
 # --------------------------------------------------------------------------
@@ -337,6 +423,11 @@ class MotionViewer:
         self._label: Any = None
         self._status: Any = None
         self._quiet = False
+        self._loop = _main_thread_loop()  # where calls from other threads are queued
+        self._lock = threading.Lock()
+        self._pending_frame: int | None = None  # newest slider frame not drawn yet (other threads)
+        self._render_queued = False
+        self.queued_calls = 0  # calls from other threads handed to the main thread's loop
         self._build_scene(window_size, ground)
         self._apply_frame(self._frame)
 
@@ -464,6 +555,7 @@ class MotionViewer:
         """Frame shown by each character at the current time."""
         return [c.frame_at(self.time) for c in self.characters]
 
+    @_on_main_thread
     def set_frame(self, frame: int) -> None:
         """Show clock frame ``frame`` (also moves the slider if it exists)."""
         f = int(frame)
@@ -474,10 +566,12 @@ class MotionViewer:
             return
         self._apply_frame(f)
 
+    @_on_main_thread
     def set_time(self, t: float) -> None:
         """Show the frame nearest to time ``t`` seconds (clamped to the clip)."""
         self.set_frame(int(np.clip(round(float(t) * self.fps), 0, self.n_frames - 1)))
 
+    @_on_main_thread
     def set_motions(
         self,
         motions: Motion | Sequence[Motion],
@@ -595,11 +689,63 @@ class MotionViewer:
             self.plotter.renderer.ResetCameraClippingRange()
         if self._label is not None:
             frames = ", ".join(str(f) for f in self.character_frames())
-            self._label.value = f"t = {t:.3f} s &nbsp; frame {frames}"
+            self._label.value = f"<span style='white-space:nowrap'>t = {t:.3f} s &nbsp; frame {frames}</span>"
         self._refresh()
 
+    # ------------------------------------------------------------- threads
+    def _queue(self, call: Callable[[], Any]) -> bool:
+        """Hand ``call`` to the main thread's loop if this is another thread; False: run it here.
+
+        Without a loop running in the main thread (a script, the tests) the
+        call runs in the calling thread, as it always did.
+        """
+        if threading.current_thread() is threading.main_thread():
+            return False
+        loop = self._loop
+        if loop is None or loop.is_closed() or not loop.is_running():
+            return False
+        try:
+            loop.call_soon_threadsafe(self._run_queued, call)
+        except RuntimeError:  # the loop closed meanwhile
+            return False
+        self.queued_calls += 1
+        return True
+
+    def _run_queued(self, call: Callable[[], Any]) -> None:
+        """Run a call queued from another thread; show its error (there is no caller to raise to)."""
+        try:
+            call()
+        except Exception as err:  # noqa: BLE001 - shown in the widget and logged
+            _log.exception("MotionViewer: a queued update failed")
+            if self._status is not None:
+                self._status.value = f"<pre style='color:#b00'>{type(err).__name__}: {err}</pre>"
+
+    def _draw_pending_frame(self) -> None:
+        """Show the newest slider frame set from another thread (one draw for a burst of moves)."""
+        with self._lock:
+            frame, self._pending_frame = self._pending_frame, None
+        if frame is not None:
+            self._show_slider_frame(frame)
+
     def _refresh(self) -> None:
-        """Push the new geometry to whatever shows it."""
+        """Push the new geometry to whatever shows it (from the main thread; see the module notes)."""
+        if self._view is None:
+            return
+        if threading.current_thread() is not threading.main_thread():
+            with self._lock:
+                queued, self._render_queued = self._render_queued, True
+            if queued or self._queue(self._refresh_queued):
+                return
+            with self._lock:
+                self._render_queued = False
+        self._render_view()
+
+    def _refresh_queued(self) -> None:
+        with self._lock:
+            self._render_queued = False
+        self._render_view()
+
+    def _render_view(self) -> None:
         if self._view is None:
             return
         if self.backend == "static":
@@ -672,6 +818,7 @@ class MotionViewer:
         style = {"width": float(width), "closed": True, "fill": bool(fill), "opacity": float(opacity)}
         self._add_overlay(name, "polygon", points, color, fps, style)
 
+    @_on_main_thread
     def remove_overlay(self, name: str) -> None:
         """Remove the overlay called ``name``."""
         ov = self.overlays.pop(name, None)
@@ -688,6 +835,7 @@ class MotionViewer:
             raise KeyError(f"No overlay named {name!r}; overlays are {list(self.overlays)}") from None
         return ov.at(self.time)
 
+    @_on_main_thread
     def _add_overlay(
         self, name: str, kind: str, data: Any, color: str, fps: float | None, style: dict[str, Any]
     ) -> None:
@@ -794,7 +942,8 @@ class MotionViewer:
         elif self.backend == "none":
             self._view = None
         else:
-            self._view = self.plotter.show(jupyter_backend=self.backend, return_viewer=True, auto_close=False)
+            with _without_vtklocal():
+                self._view = self.plotter.show(jupyter_backend=self.backend, return_viewer=True, auto_close=False)
         controls = w.HBox([self.play, self.slider, self._label])
         children = ([self._view] if self._view is not None else []) + [controls, self._status]
         box = w.VBox(children)
@@ -802,10 +951,21 @@ class MotionViewer:
         return box
 
     def _on_slider(self, change: dict[str, Any]) -> None:
+        frame = int(change["new"])
+        if threading.current_thread() is not threading.main_thread():
+            with self._lock:  # coalesce: one queued draw shows the newest frame
+                queued, self._pending_frame = self._pending_frame is not None, frame
+            if queued or self._queue(self._draw_pending_frame):
+                return
+            with self._lock:  # no loop to hand it to: draw here, as without subshells
+                self._pending_frame = None
         if self._quiet:  # set_motions moves the controls, then draws once
             return
+        self._show_slider_frame(frame)
+
+    def _show_slider_frame(self, frame: int) -> None:
         try:
-            self._apply_frame(int(change["new"]))
+            self._apply_frame(frame)
             if self._status.value:
                 self._status.value = ""
         except Exception as err:  # show it in the widget instead of losing it in the log
@@ -824,6 +984,7 @@ class MotionViewer:
 
         display(self.widget)
 
+    @_on_main_thread
     def close(self) -> None:
         """Release the render window."""
         self.plotter.close()

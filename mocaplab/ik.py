@@ -115,6 +115,35 @@ def _norm(v: Array) -> Array:
     return np.sqrt(np.einsum("...i,...i->...", v, v))
 
 
+def _axis_angle(axis: Array, angle: Array) -> Array:
+    """Quaternions turning by ``angle`` (...,) about unit ``axis`` (..., 3)."""
+    half = 0.5 * np.asarray(angle, dtype=float)
+    out = np.empty(np.broadcast_shapes(axis.shape[:-1], half.shape) + (4,))
+    out[..., :3] = axis * np.sin(half)[..., None]
+    out[..., 3] = np.cos(half)
+    return out
+
+
+def _between_units(u: Array, v: Array) -> Array:
+    """Shortest-arc quaternions turning unit vectors ``u`` onto unit vectors ``v``.
+
+    :func:`mocaplab.quat.between` without normalising its (already unit)
+    inputs; opposite vectors turn about an axis perpendicular to ``u``, the
+    same axis as :func:`~mocaplab.quat.between` picks.
+    """
+    d = _dot(u, v)
+    q = np.empty(np.broadcast_shapes(u.shape, v.shape)[:-1] + (4,))
+    q[..., :3] = _cross(u, v)
+    q[..., 3] = 1.0 + d
+    opposite = (1.0 + d) < 1e-9
+    if np.any(opposite):
+        alt = _cross(u, np.array([1.0, 0.0, 0.0]))
+        weak = _norm(alt) < 1e-6
+        alt = np.where(weak[..., None], _cross(u, np.array([0.0, 0.0, 1.0])), alt)
+        q[opposite] = np.concatenate([alt, np.zeros(alt.shape[:-1] + (1,))], axis=-1)[opposite]
+    return q / _norm(q)[..., None]
+
+
 def _cross(a: Array, b: Array) -> Array:
     ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
     bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
@@ -234,8 +263,8 @@ def two_bone_deltas(
     beta = np.arctan2(sin_b, _dot(u, v))
     cos_new = (l1**2 + l2**2 - d**2) / np.maximum(2.0 * l1 * l2, _TINY)
     beta_new = np.arccos(np.clip(cos_new, -1.0, 1.0))
-    axis = cross / np.maximum(sin_b, _TINY)[..., None]
     straight = sin_b <= 1e-9 * np.maximum(l1 * l2, _TINY)
+    axis = cross / np.where(straight, 1.0, sin_b)[..., None]  # unit where not straight
     if np.any(straight):
         if bend_axis is not None:
             fallback = np.broadcast_to(np.asarray(bend_axis, dtype=float), shape)
@@ -246,7 +275,7 @@ def two_bone_deltas(
             fallback = _cross(u, np.eye(3)[pick])
         fallback, _ = _unit(fallback)
         axis = np.where(straight[..., None], fallback, axis)
-    middle_delta = quat.from_axis_angle(axis, beta_new - beta)
+    middle_delta = _axis_angle(axis, beta_new - beta)
     c1 = b + quat.rotate(middle_delta, v)
 
     # step 2: swing the limb toward the target (shortest arc)
@@ -254,7 +283,7 @@ def two_bone_deltas(
     from_dir, c1a_len = _unit(c1a)
     to_dir, to_len = _unit(t - a)
     to_dir = np.where((to_len > _TINY)[..., None], to_dir, from_dir)
-    swing = quat.between(from_dir, to_dir)
+    swing = _between_units(from_dir, to_dir)
 
     # step 3: twist about the upper -> target axis
     w = to_dir
@@ -282,7 +311,7 @@ def two_bone_deltas(
         fade = _ramp(np.minimum(nx, ny) / np.maximum(l1, _TINY), _POLE_FADE)
     gamma = np.arctan2(_dot(w, _cross(x, y)), _dot(x, y))
     gamma = gamma * fade
-    twist = quat.from_axis_angle(w, gamma)
+    twist = _axis_angle(w, gamma)
     return quat.normalize(quat.mul(twist, swing)), quat.normalize(middle_delta)
 
 
@@ -297,7 +326,7 @@ def aim_deltas(pivot: ArrayLike, tip: ArrayLike, target: ArrayLike, *, weight: A
     f, _ = _unit(np.asarray(tip, dtype=float) - pivot)
     g, glen = _unit(np.asarray(target, dtype=float) - pivot)
     g = np.where((glen > _TINY)[..., None], g, f)
-    q = quat.between(f, g)
+    q = _between_units(f, g)
     if weight is not None:
         q = quat.exp(quat.log(q) * np.asarray(weight, dtype=float)[..., None])
     return q

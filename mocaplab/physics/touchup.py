@@ -104,9 +104,9 @@ from numpy.typing import NDArray
 from scipy.ndimage import distance_transform_edt, gaussian_filter1d
 
 from .. import quat
-from ..motion import Motion, Skeleton
+from ..motion import Motion, Skeleton, _owned
 from .body import GRAVITY, Body, link_positions, paper_width, smoothed_derivatives
-from .zmp import Balance, _check_contacts, balance, default_contacts
+from .zmp import Balance, _check_contacts, _rebalance, balance, default_contacts
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..contacts import Contacts
@@ -469,6 +469,44 @@ def _posed(motion: Motion) -> _Posed:
     return _Posed(motion, motion.global_rotations(), motion.global_positions())
 
 
+@lru_cache(maxsize=128)
+def _apply_layout(sets: LinkSets) -> dict[str, NDArray[np.int64]]:
+    """Index arrays for :func:`_apply` (cached per link sets).
+
+    ``tops``: non-root S2 tops; ``rigid`` and ``rigid_part``: the S2 joints
+    and their parts; ``carried`` and ``carried_part``: the
+    carried tops and their parts; ``below`` and ``below_slot``: every joint
+    of a carried part and the index of its top in ``carried``.
+    """
+    rigid = np.flatnonzero((sets.part >= 0) & (sets.roles == 2))
+    carried = np.array([u for u, _ in sets.carried], dtype=np.int64)
+    below = np.flatnonzero(sets.carried_top >= 0)
+    slot = {u: k for k, u in enumerate(carried.tolist())}
+    out = {
+        "tops": np.array([t for t in sets.s2_tops if t != 0], dtype=np.int64),
+        "rigid": rigid,
+        "rigid_part": sets.part[rigid],
+        "carried": carried,
+        "carried_part": np.array([k for _, k in sets.carried], dtype=np.int64),
+        "below": below,
+        "below_slot": np.array([slot[int(u)] for u in sets.carried_top[below]], dtype=np.int64),
+    }
+    for arr in out.values():
+        arr.flags.writeable = False
+    return out
+
+
+#: Left-multiplication matrix of a quaternion (x, y, z, w): (q g)_i = sum_j
+#: _SIGN[i, j] q[_INDEX[i, j]] g_j.
+_INDEX = np.array([[3, 2, 1, 0], [2, 3, 0, 1], [1, 0, 3, 2], [0, 1, 2, 3]])
+_SIGN = np.array([[1.0, -1.0, 1.0, 1.0], [1.0, 1.0, -1.0, 1.0], [-1.0, 1.0, 1.0, 1.0], [-1.0, -1.0, -1.0, 1.0]])
+
+
+def _left_matrix(q: Array) -> Array:
+    """Matrices (..., 4, 4) with ``L(q) @ g == quat.mul(q, g)``."""
+    return q[..., _INDEX] * _SIGN
+
+
 def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None) -> _Posed:
     """Rotate every S2 part by the world rotation vectors ``omega`` (F, 3).
 
@@ -477,38 +515,49 @@ def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None
     their global orientation is unchanged, and the root moves by
     ``root_delta`` when it belongs to S2.  The new global transforms follow
     in closed form: an S2 part moves rigidly about its pivot, a carried part
-    translates with its top joint, S1 stays.
+    translates with its top joint, S1 stays.  All parts share the rotation,
+    so each of these is one vectorised operation over all parts.
     """
     motion, grot, gpos = posed
-    rot = np.array(motion.rotations, copy=True)
-    root = np.array(motion.root_positions, copy=True)
+    lay = _apply_layout(sets)
     parents = motion.skeleton.parents
     q = quat.exp(omega)
+    # the shared rotation as matrices acting on row vectors: quaternions
+    # g -> q g and vectors v -> q v, one batched matrix product each for
+    # all joints of all parts (much cheaper than the component formulas)
+    lq = _left_matrix(q).transpose(0, 2, 1)  # (F, 4, 4): g @ lq = q g
+    rq = quat.to_matrix(q).transpose(0, 2, 1)  # (F, 3, 3): v @ rq = q v
+    rot = np.array(motion.rotations, copy=True)
+    root = motion.root_positions
+    # pivot of each part, before and after the move
+    pivot = gpos[:, list(sets.s2_tops)]  # (F, parts, 3)
+    moved = pivot
+    if sets.s2_tops[0] == 0:
+        rot[:, 0] = quat.mul(q, rot[:, 0])
+        if root_delta is not None:
+            root = root + root_delta
+            moved = pivot.copy()
+            moved[:, 0] += root_delta
+    tops = lay["tops"]
+    if tops.size:
+        rot[:, tops] = quat.mul(quat.inv(grot[:, parents[tops]]), grot[:, tops] @ lq)
     new_grot = np.array(grot, copy=True)
     new_gpos = np.array(gpos, copy=True)
-    for k, t in enumerate(sets.s2_tops):
-        if t == 0:
-            rot[:, 0] = quat.mul(q, rot[:, 0])
-            pivot = gpos[:, 0]
-            moved_pivot = pivot + (root_delta if root_delta is not None else 0.0)
-            root = root + (root_delta if root_delta is not None else 0.0)
-        else:
-            gp = grot[:, parents[t]]
-            rot[:, t] = quat.mul(quat.inv(gp), quat.mul(q, grot[:, t]))
-            pivot = moved_pivot = gpos[:, t]
-        rigid = np.flatnonzero((sets.part == k) & (sets.roles == 2))
-        qk = q[:, None, :]
-        new_grot[:, rigid] = quat.mul(qk, grot[:, rigid])
-        new_gpos[:, rigid] = moved_pivot[:, None] + quat.rotate(qk, gpos[:, rigid] - pivot[:, None])
-        for u, part in sets.carried:
-            if part == k:
-                shift = moved_pivot + quat.rotate(q, gpos[:, u] - pivot) - gpos[:, u]
-                new_gpos[:, sets.carried_top == u] += shift[:, None]
-    qi = quat.inv(q)
-    for u, _ in sets.carried:
-        gp = grot[:, parents[u]]
-        rot[:, u] = quat.mul(quat.inv(gp), quat.mul(qi, grot[:, u]))
-    return _Posed(motion.replace(rotations=rot, root_positions=root), new_grot, new_gpos)
+    rigid, part = lay["rigid"], lay["rigid_part"]
+    new_grot[:, rigid] = grot[:, rigid] @ lq
+    new_gpos[:, rigid] = moved[:, part] + (gpos[:, rigid] - pivot[:, part]) @ rq
+    carried = lay["carried"]
+    if carried.size:
+        cp = lay["carried_part"]
+        shift = moved[:, cp] + (gpos[:, carried] - pivot[:, cp]) @ rq - gpos[:, carried]
+        new_gpos[:, lay["below"]] += shift[:, lay["below_slot"]]
+        # inv(q) g: the transposed matrix
+        rot[:, carried] = quat.mul(quat.inv(grot[:, parents[carried]]), grot[:, carried] @ lq.transpose(0, 2, 1))
+    if root is motion.root_positions:
+        new = motion.replace(rotations=_owned(rot))
+    else:
+        new = motion.replace(rotations=_owned(rot), root_positions=_owned(root))
+    return _Posed(new, new_grot, new_gpos)
 
 
 # ======================================================================
@@ -986,17 +1035,21 @@ def step(state: TouchUpState) -> TouchUpState:
     adj = state.next_adjustment
     motion, body, contacts = state.motion, state.body, state.contacts
     posed = _Posed(motion, *state.kinematics) if state.kinematics is not None else _posed(motion)
-    stages = flight_stages(contacts)
-    window = int(round(state.flight_window * motion.fps))
     if adj.stage == "ground":
         new = _ground_step(posed, body, adj, state.balance)
-    elif stages:
+    elif stages := flight_stages(contacts):
+        window = int(round(state.flight_window * motion.fps))
         new = _flight_step(posed, body, adj, stages, _flight_weights(motion.n_frames, stages, window), window)
     else:
         new = posed
     if state.fix is not None and new is not posed and _moves_contacts(motion.skeleton, adj, contacts):
         new = state.fix(new)
-    bal = balance(new.motion, body, contacts=contacts, fk=new[1:])
+    if new is posed:
+        bal = state.balance
+    else:
+        # redo the balance analysis for the links whose joints moved only
+        moved = np.any(new.gpos != posed.gpos, axis=(0, 2)) | np.any(new.grot != posed.grot, axis=(0, 2))
+        bal = _rebalance(state.balance, new.motion, body, contacts, new[1:], moved)
     return dataclasses.replace(
         state, motion=new.motion, index=state.index + 1, balance=bal, label=adj.label, kinematics=new[1:]
     )

@@ -195,12 +195,21 @@ def polygon_distance(
 
 
 def _polygon_xz(
-    zx: Array, zz: Array, finite: NDArray[np.bool_], vx: Array, vz: Array, act: NDArray[np.bool_], depth: bool
+    zx: Array,
+    zz: Array,
+    finite: NDArray[np.bool_],
+    vx: Array,
+    vz: Array,
+    act: NDArray[np.bool_],
+    depth: bool,
+    segments: tuple[Array, ...] | None = None,
 ) -> tuple[Array, Array, Array]:
     """:func:`polygon_distance` on components: queries ``zx, zz`` (F,), points ``vx, vz`` (F, P).
 
-    Returns the signed distance and the projection's components, NaN where
-    ``finite`` is False or no point is active.
+    ``segments`` (from :func:`_segments` on the same points) saves their
+    recomputation when the points are queried again.  Returns the signed
+    distance and the projection's components, NaN where ``finite`` is False
+    or no point is active.
     """
     n_frames, n_pts = act.shape
     rows = np.arange(n_frames)
@@ -212,12 +221,11 @@ def _polygon_xz(
     # nearest point over all segments between active points, a point being
     # the segment from itself to itself (pairs i <= j)
     i, j = _pairs(n_pts, True).T
+    ex, ez, den, valid = _segments(vx, vz, act) if segments is None else segments
     ax, az = dx[:, i], dz[:, i]  # (F, K)
-    ex, ez = dx[:, j] - ax, dz[:, j] - az
-    ee = ex * ex + ez * ez
-    t = np.clip(-(ax * ex + az * ez) / np.where(ee > _EPS * _EPS, ee, np.inf), 0.0, 1.0)
+    t = np.clip(-(ax * ex + az * ez) / den, 0.0, 1.0)
     qx, qz = ax + t * ex, az + t * ez  # nearest point of each segment, relative to the query
-    d_seg = np.where(act[:, i] & act[:, j], qx * qx + qz * qz, np.inf)
+    d_seg = np.where(valid, qx * qx + qz * qz, np.inf)
     k = np.argmin(d_seg, axis=1)
     best_d = d_seg[rows, k]
     qx, qz = qx[rows, k], qz[rows, k]
@@ -245,6 +253,19 @@ def _polygon_xz(
     px[bad] = np.nan
     pz[bad] = np.nan
     return signed, px, pz
+
+
+def _segments(vx: Array, vz: Array, act: NDArray[np.bool_]) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
+    """The query-independent part of :func:`_polygon_xz`: segments between point pairs ``i <= j``.
+
+    Returns their directions ``ex, ez``, the denominators of the projection
+    (squared lengths, infinite for a point) and which are between active
+    points, each (F, K).
+    """
+    i, j = _pairs(act.shape[1], True).T
+    ex, ez = vx[:, j] - vx[:, i], vz[:, j] - vz[:, i]
+    ee = ex * ex + ez * ez
+    return ex, ez, np.where(ee > _EPS * _EPS, ee, np.inf), act[:, i] & act[:, j]
 
 
 def _depth(z: Array, v: Array, act: NDArray[np.bool_], pairs: NDArray[np.int64]) -> Array:
@@ -403,21 +424,75 @@ def balance(
     pts = gpos[:, idx] + quat.rotate(grot[:, idx], all_offsets)
     raw, support = pts[:, : body.n_links], pts[:, body.n_links :]
     r, acc = _positions_and_accelerations(raw, motion.fps, width=w)
+    return _finish(motion, body, contacts, column, raw, r, acc, support)
+
+
+def _rebalance(
+    previous: Balance,
+    motion: Motion,
+    body: Body,
+    contacts: Contacts,
+    fk: tuple[Array, Array],
+    moved: NDArray[np.bool_],
+) -> Balance:
+    """:func:`balance` (default width) of a motion whose joints differ only in ``moved`` (J,) from ``previous``'s.
+
+    Only the links and support points of moved joints are recomputed (the
+    smoothing works column by column, so the numbers are the very same as
+    a full :func:`balance`); the ZMP and the distances are redone.
+    """
+    raw_prev = previous.__dict__.get("_raw")
+    if raw_prev is None or raw_prev.shape[0] != motion.n_frames:
+        return balance(motion, body, contacts=contacts, fk=fk)
+    owners, offsets, column = body._support_layout(motion.skeleton, tuple(contacts.joints))
+    grot, gpos = fk
+    links = np.flatnonzero(moved[body.owners])
+    raw, r, acc = raw_prev, previous.positions, previous.accelerations
+    if links.size:
+        own = body.owners[links]
+        raw, r, acc = raw.copy(), r.copy(), acc.copy()
+        raw[:, links] = gpos[:, own] + quat.rotate(grot[:, own], body.offsets[links])
+        r[:, links], acc[:, links] = _positions_and_accelerations(raw[:, links], motion.fps, width=paper_width(5.0, motion.fps))
+    support, segments = previous.support, previous.__dict__.get("_segments")
+    if np.any(moved[owners]):
+        support, segments = gpos[:, owners] + quat.rotate(grot[:, owners], offsets), None
+    return _finish(motion, body, contacts, column, raw, r, acc, support, segments)
+
+
+def _finish(
+    motion: Motion,
+    body: Body,
+    contacts: Contacts,
+    column: NDArray[np.int64],
+    raw: Array,
+    r: Array,
+    acc: Array,
+    support: Array,
+    segments: tuple[Array, ...] | None = None,
+) -> Balance:
+    """ZMP, distances and the Balance record from link centres (raw and smoothed) and support points."""
     mask = np.asarray(contacts.mask, dtype=bool)
     ground: NDArray[np.bool_] = np.asarray(mask.any(axis=1), dtype=bool)
     m = body.masses
     zx, zz, ok = _zmp_xz(r, acc - GRAVITY, m, float(m.sum() * np.linalg.norm(GRAVITY)))
     has = ground & ok
     active = mask[:, column]
-    dist, px, pz = _polygon_xz(zx, zz, has, support[..., 0], support[..., 2], active, False)
+    vx, vz = support[..., 0], support[..., 2]
+    if segments is None:
+        segments = _segments(vx, vz, active)
+    dist, px, pz = _polygon_xz(zx, zz, has, vx, vz, active, False, segments)
     z = np.zeros((motion.n_frames, 3))
     z[:, 0], z[:, 2] = zx, zz
     z[~has] = np.nan
     proj = np.zeros((motion.n_frames, 3))
     proj[:, 0], proj[:, 2] = px, pz
     proj[np.isnan(px)] = np.nan
-    com = (m @ raw.reshape(motion.n_frames, body.n_links, 3)) / body.total_mass
-    return Balance(z, proj, dist, com, ground, support, active, r, acc)
+    com = (m @ raw) / body.total_mass
+    out = Balance(z, proj, dist, com, ground, support, active, r, acc)
+    # for _rebalance: the unsmoothed link centres and the support segments
+    object.__setattr__(out, "_raw", raw)
+    object.__setattr__(out, "_segments", segments)
+    return out
 
 
 def _point_layout(body: Body, owners: NDArray[np.int64], offsets: Array) -> tuple[NDArray[np.int64], Array]:

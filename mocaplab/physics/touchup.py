@@ -89,7 +89,14 @@ Choices made where the paper leaves them open
 
 * Speed: the forward kinematics of the current motion travel with the
   state; after an adjustment they follow in closed form (S2 moves rigidly,
-  carried parts translate), after the leg IK only the legs are recomputed.
+  carried parts translate: one batched matrix product for all parts), the
+  IK layer hands back the legs' recomputed transforms.  Contacts, plant
+  goals and flight windows are computed once, from the input, in
+  :func:`start`.  After each step the ZMP analysis is redone only for the
+  links whose joints moved (an arm adjustment leaves the legs' link
+  centres, their smoothed accelerations and the support polygons as they
+  were; the numbers are identical to a fresh :func:`balance`).  Smoothing
+  kernels and derivative filters are cached sparse operators.
 
 Examples
 --------
@@ -636,8 +643,7 @@ def _ground_rotation(
     gpos = motion.global_positions() if gpos is None else gpos
     z = bal.zmp
     target = bal.projection
-    with np.errstate(invalid="ignore"):
-        todo = (bal.distance > 0) & (weight > 0)  # NaN (flight) compares False
+    todo = (bal.distance > 0) & (weight > 0)  # NaN (flight) compares False
     omega = np.zeros((n, 3))
     root_centre = np.zeros((n, 3))
     if not np.any(todo):

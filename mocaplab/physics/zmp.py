@@ -221,11 +221,17 @@ def _polygon_xz(
     # nearest point over all segments between active points, a point being
     # the segment from itself to itself (pairs i <= j)
     i, j = _pairs(n_pts, True).T
-    ex, ez, den, valid = _segments(vx, vz, act) if segments is None else segments
+    ex, ez, scale, penalty = _segments(vx, vz, act) if segments is None else segments
     ax, az = dx[:, i], dz[:, i]  # (F, K)
-    t = np.clip(-(ax * ex + az * ez) / den, 0.0, 1.0)
+    # t = clip(-<a, e> / |e|^2, 0, 1), in place
+    t = ax * ex
+    t += az * ez
+    t *= scale
+    np.clip(t, 0.0, 1.0, out=t)
     qx, qz = ax + t * ex, az + t * ez  # nearest point of each segment, relative to the query
-    d_seg = np.where(valid, qx * qx + qz * qz, np.inf)
+    d_seg = qx * qx
+    d_seg += qz * qz
+    d_seg += penalty  # +inf for pairs with an inactive point
     k = np.argmin(d_seg, axis=1)
     best_d = d_seg[rows, k]
     qx, qz = qx[rows, k], qz[rows, k]
@@ -255,17 +261,18 @@ def _polygon_xz(
     return signed, px, pz
 
 
-def _segments(vx: Array, vz: Array, act: NDArray[np.bool_]) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
+def _segments(vx: Array, vz: Array, act: NDArray[np.bool_]) -> tuple[Array, Array, Array, Array]:
     """The query-independent part of :func:`_polygon_xz`: segments between point pairs ``i <= j``.
 
-    Returns their directions ``ex, ez``, the denominators of the projection
-    (squared lengths, infinite for a point) and which are between active
-    points, each (F, K).
+    Returns their directions ``ex, ez``, ``-1 / |e|^2`` (0 for a point) and
+    a penalty, 0 for segments between active points and infinite for the
+    others, each (F, K).
     """
     i, j = _pairs(act.shape[1], True).T
     ex, ez = vx[:, j] - vx[:, i], vz[:, j] - vz[:, i]
     ee = ex * ex + ez * ez
-    return ex, ez, np.where(ee > _EPS * _EPS, ee, np.inf), act[:, i] & act[:, j]
+    scale = -1.0 / np.where(ee > _EPS * _EPS, ee, np.inf)
+    return ex, ez, scale, np.where(act[:, i] & act[:, j], 0.0, np.inf)
 
 
 def _depth(z: Array, v: Array, act: NDArray[np.bool_], pairs: NDArray[np.int64]) -> Array:

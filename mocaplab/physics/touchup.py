@@ -90,9 +90,9 @@ Choices made where the paper leaves them open
 * Speed: the forward kinematics of the current motion travel with the
   state; after an adjustment they follow in closed form (S2 moves rigidly,
   carried parts translate: one batched matrix product for all parts), the
-  IK layer hands back the legs' recomputed transforms.  Contacts, plant
-  goals and flight windows are computed once, from the input, in
-  :func:`start`.  After each step the ZMP analysis is redone only for the
+  IK layer hands back the legs' recomputed transforms.  Contacts and plant
+  goals are computed once, from the input, in :func:`start`.  After each
+  step the ZMP analysis is redone only for the
   links whose joints moved (an arm adjustment leaves the legs' link
   centres, their smoothed accelerations and the support polygons as they
   were; the numbers are identical to a fresh :func:`balance`).  Smoothing

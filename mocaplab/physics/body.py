@@ -603,7 +603,7 @@ def _positions_and_accelerations(positions: Array, fps: float, *, width: float) 
     return both[:n].reshape(x.shape), both[n:].reshape(x.shape)
 
 
-@lru_cache(maxsize=16)
+@lru_cache(maxsize=4)
 def _pos_acc_operator(n: int, fps: float, width: float) -> sparse.csr_matrix:
     """Sparse (2n, n) map from positions to [smoothed positions; accelerations] (see smoothed_derivatives)."""
     std = max(float(width), 0.0) / 4.0

@@ -95,8 +95,9 @@ Choices made where the paper leaves them open
   step the ZMP analysis is redone only for the
   links whose joints moved (an arm adjustment leaves the legs' link
   centres, their smoothed accelerations and the support polygons as they
-  were; the numbers are identical to a fresh :func:`balance`).  Smoothing
-  kernels and derivative filters are cached sparse operators.
+  were; the numbers are identical to a fresh :func:`balance`).  The ZMP's
+  smoothed positions and accelerations are one product with a cached
+  sparse operator.
 
 Examples
 --------
@@ -115,7 +116,6 @@ from typing import TYPE_CHECKING, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import sparse
 from scipy.ndimage import distance_transform_edt, gaussian_filter1d
 
 from .. import quat
@@ -463,28 +463,24 @@ def _smooth(x: Array, width: float) -> Array:
     """Gaussian smoothing over frames (std ``width / 4``, two-std truncation).
 
     At the ends the kernel is cut to the existing frames and renormalised
-    (see the module notes).  One product with a cached sparse operator.
+    (see the module notes): a normalised convolution, the zero-padded
+    filter divided by the filtered ones.
     """
     n = x.shape[0]
-    if width / 4.0 <= 0 or n < 2:
+    std = width / 4.0
+    if std <= 0 or n < 2:
         return x
-    return (_smoothing_operator(n, float(width)) @ x.reshape(n, -1)).reshape(x.shape)
+    out = gaussian_filter1d(x, std, axis=0, mode="constant", truncate=2.0)
+    out /= _kernel_mass(n, float(std)).reshape((n,) + (1,) * (x.ndim - 1))
+    return out
 
 
 @lru_cache(maxsize=32)
-def _smoothing_operator(n: int, width: float) -> sparse.csr_matrix:
-    """Sparse (n, n) Gaussian smoothing, cut at the clip's ends and renormalised per row."""
-    std = width / 4.0
-    radius = int(2.0 * std + 0.5)
-    impulse = np.zeros(2 * radius + 1)
-    impulse[radius] = 1.0
-    kernel = gaussian_filter1d(impulse, std, mode="constant", truncate=2.0)  # scipy's own weights
-    rows = np.repeat(np.arange(n), 2 * radius + 1)
-    cols = rows + np.tile(np.arange(-radius, radius + 1), n)
-    vals = np.tile(kernel, n)
-    keep = (cols >= 0) & (cols < n)
-    op = sparse.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(n, n))
-    return sparse.csr_matrix(sparse.diags(1.0 / np.asarray(op.sum(axis=1)).ravel()) @ op)
+def _kernel_mass(n: int, std: float) -> Array:
+    """Weight of the truncated Gaussian kernel that falls inside ``n`` frames, per frame (n,)."""
+    mass = gaussian_filter1d(np.ones(n), std, mode="constant", truncate=2.0)
+    mass.flags.writeable = False
+    return mass
 
 
 def _rotate_about(omega: Array, centre: Array, point: Array) -> Array:

@@ -30,7 +30,7 @@ def __getattr__(name: str):
 
         return cmu
     if name == "refine":
-        from .refine import refine
+        from .refinement import refine
 
         return refine
     raise AttributeError(f"module 'mocaplab' has no attribute {name!r}")

@@ -218,7 +218,7 @@ def test_discrete_plug_point(pair, monkeypatch):
 
 
 def test_end_effectors_recorded_and_refined(pair):
-    refine = pytest.importorskip("mocaplab.refine")
+    refine = pytest.importorskip("mocaplab.refinement")
     a, b = pair
     hand = a.global_positions()[40, a.skeleton.index("RightHand")] + [0.0, 0.1, 0.0]
     ee = refine.EndEffector("RightHand", 40, hand)

@@ -39,11 +39,11 @@ Constraints (:mod:`mocaplab.editing.constraints`), frozen dataclasses
     ``Duration(character, frame, end_frame, duration, *, hard=False, weight=1.0)``
     ``Sync(character, frame, other, other_frame, *, offset=0.0, hard=False,
     weight=1.0, frames=None, other_frames=None)`` (``t[frame] = t_other[other_frame] + offset``)
-    End effectors: a :class:`mocaplab.refine.EndEffector` (its ``character``
+    End effectors: a :class:`mocaplab.refinement.EndEffector` (its ``character``
     is the scene index) goes straight into the constraint list, or wrapped as
     ``EndEffectorConstraint(character, end_effector)``; path editing ignores
     them, ``EditResult.end_effectors[k]`` records them and
-    ``EditResult.refined()`` hands them to :func:`mocaplab.refine.refine_scene`.
+    ``EditResult.refined()`` hands them to :func:`mocaplab.refinement.refine_scene`.
     Variational form: pass ``frame=None, frames=(start, end)`` (inclusive);
     sampled every 10th frame.  Every constraint has ``.target``,
     ``.with_target(new_target)``, ``.hard``, ``.weight``, ``.characters``.

@@ -485,10 +485,10 @@ class Sync(Constraint):
 
 @dataclasses.dataclass(frozen=True)
 class EndEffectorConstraint:
-    """An end-effector constraint of :mod:`mocaplab.refine` attached to ``character``.
+    """An end-effector constraint of :mod:`mocaplab.refinement` attached to ``character``.
 
     Path editing ignores it; the scene records it (``EditResult.end_effectors``)
-    and hands it to :func:`mocaplab.refine.refine` for full-body refinement
+    and hands it to :func:`mocaplab.refinement.refine` for full-body refinement
     (Kim et al. 2009, section 4.3).  Frames inside ``constraint`` refer to the
     character's own frames.
     """

@@ -890,7 +890,7 @@ def protected_frames(constraints: Iterable[Any], character: int) -> set[int]:
 
     Every frame of an instant constraint, and the first and last frames of
     a variational one (also for end-effector constraints of
-    :mod:`mocaplab.refine`).
+    :mod:`mocaplab.refinement`).
     """
     out: set[int] = set()
     for c in constraints:

@@ -89,11 +89,11 @@ _OPTIONS: dict[str, Any] = {
 
 
 def _is_effector(c: Any) -> bool:
-    """True for a :class:`mocaplab.refine.EndEffector` (imported lazily)."""
+    """True for a :class:`mocaplab.refinement.EndEffector` (imported lazily)."""
     if type(c).__name__ != "EndEffector":
         return False
     try:
-        from ..refine import EndEffector
+        from ..refinement import EndEffector
     except ImportError:  # pragma: no cover - refine not available
         return False
     return isinstance(c, EndEffector)
@@ -682,7 +682,7 @@ class EditResult:
     @cached_property
     def _refined_list(self) -> list[Motion]:
         try:
-            from ..refine import refine_scene
+            from ..refinement import refine_scene
         except ImportError:
             raise NotImplementedError("full-body refinement needs mocaplab.refine, which is not available") from None
         K = len(self.characters)
@@ -698,7 +698,7 @@ class EditResult:
         """Full-body refined motions on the shared clock (section 4.3).
 
         The time-warped motions (:attr:`motions` without refinement) go through
-        :func:`mocaplab.refine.refine_scene` with the input clips warped the
+        :func:`mocaplab.refinement.refine_scene` with the input clips warped the
         same way as references (their foot contacts are planted) and the
         scene's end-effector constraints, whose frames (each character's own
         frames) are mapped to the nearest clock ticks, so interactions between

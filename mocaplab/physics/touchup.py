@@ -72,12 +72,12 @@ Choices made where the paper leaves them open
   of its efficiency"):
 
   - ``"plant"`` (what ``"auto"`` picks): the refinement module's plant goals
-    (:func:`mocaplab.refine.foot_goals`, one plant position per contact
+    (:func:`mocaplab.refinement.foot_goals`, one plant position per contact
     interval of the input, blended in and out over 0.05 s, shorter than
     refine's default so that corrections leak little into flight frames)
-    met by its IK layer (:func:`mocaplab.refine.solve_goals`) without root
+    met by its IK layer (:func:`mocaplab.refinement.solve_goals`) without root
     lowering;
-  - ``"refine"``: the full :func:`mocaplab.refine.refine`, which also
+  - ``"refine"``: the full :func:`mocaplab.refinement.refine`, which also
     lowers the root where a leg cannot reach and smooths the corrections
     with a displacement map; both leak into flight frames and bend the
     ballistic centre-of-mass path again (on the CMU hops of 49_03 the fitted
@@ -923,15 +923,10 @@ def _footplant_fn(
     if footplants not in ("auto", "plant", "refine", "ik"):
         raise ValueError(f"Expected `footplants` 'auto', 'plant', 'refine', 'ik', a callable or None, got {footplants!r}")
     if footplants == "auto":
-        try:
-            from .. import refine as _refine  # noqa: F401
-        except ImportError:
-            footplants = "ik"
-        else:
-            footplants = "plant"
+        footplants = "plant"
     if footplants == "ik":
         return lambda p: _ik_posed(p, contacts, reference)
-    from ..refine import _solve_goals, foot_goals, refine
+    from ..refinement import _solve_goals, foot_goals, refine
 
     if footplants == "refine":
         return lambda p: _posed(refine(p.motion, contacts=contacts, reference=reference))

@@ -49,7 +49,7 @@ Constraint layer
 contact intervals (mapped through the pose timing), the end effector is
 brought back to its original position by two-bone IK
 (:func:`mocaplab.ik.two_bone_ik`), blended in and out over a short window
-with :func:`mocaplab.refine.blend_ramp`.
+with :func:`mocaplab.refinement.blend_ramp`.
 """
 
 from __future__ import annotations
@@ -819,7 +819,7 @@ class ConstraintLayer:
 
     def weights_and_targets(self, sm: StaggeredMotion, t: Array) -> tuple[Array, Array]:
         """Blend weights (F, E) and targets (F, E, 3) at times ``t`` for ``sm``'s pose timing."""
-        from ..refine import blend_ramp
+        from ..refinement import blend_ramp
 
         u = _pose_u(sm.times, t)
         # time of every original frame under the current pose timing

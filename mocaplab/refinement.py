@@ -32,9 +32,11 @@ caller:
 before editing when ``reference`` is given) and end effectors, then calls
 :func:`enforce_goals`.  :func:`refine_scene` does the same for several
 characters whose constraints refer to each other (palms meeting).  Physical
-touch-up calls :func:`refine` after each adjustment with the reference's
-contacts; the staggered-pose constraint layer calls :func:`blend_weights`
-and :func:`solve_goals` / :func:`enforce_goals` directly.
+touch-up re-plants the feet after each adjustment with the same goals
+(:func:`foot_goals` of the reference's contacts, built once) solved by the
+IK layer :func:`solve_goals` (``footplants="refine"`` there runs the whole of
+:func:`refine`); the staggered-pose constraint layer uses :func:`blend_ramp`
+with the limb IK of :mod:`mocaplab.ik`.
 
 Measures: :func:`foot_skate` (mm per frame), :func:`end_effector_residuals`
 (mm) and :func:`max_joint_angle_jump` (degrees).
@@ -49,8 +51,6 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-import sys
-import types
 from collections.abc import Sequence
 from functools import lru_cache
 from typing import Any, Literal
@@ -1327,15 +1327,3 @@ def max_joint_angle_jump(before: Motion, after: Motion, *, joints: Sequence[Join
     c = quat.mul(quat.inv(before.rotations[:, sel]), after.rotations[:, sel])
     step = quat.mul(quat.inv(c[:-1]), c[1:])
     return float(np.degrees(quat.angle(step).max()))
-
-
-# ``mocaplab.refine`` names both this module and the entry point
-# ``mocaplab.refine(motion, ...)``: once the module is imported, Python binds
-# the attribute ``mocaplab.refine`` to the module, so the module itself must
-# be callable for the entry point to keep working.
-class _CallableModule(types.ModuleType):
-    def __call__(self, motion: Motion, **options: object) -> Motion:
-        return refine(motion, **options)  # type: ignore[arg-type]
-
-
-sys.modules[__name__].__class__ = _CallableModule

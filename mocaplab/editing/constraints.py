@@ -197,12 +197,23 @@ class Constraint:
         return dataclasses.replace(self, **{self.target_name: new_target})
 
     def frame_refs(self) -> list[tuple[int, int]]:
-        """Every ``(character, frame)`` this constraint reads (for range checks)."""
-        raise NotImplementedError
+        """Every ``(character, frame)`` this constraint reads (for range checks).
+
+        The default serves constraints on one frame of one character; those
+        that read two frames or two characters override it.
+        """
+        return [(self.character, f[0]) for f in self.samples(1_000_000)]
 
     def samples(self, step: int = 10) -> list[tuple[int, ...]]:
-        """Frame tuples of the instant constraints this one stands for."""
-        raise NotImplementedError
+        """Frame tuples of the instant constraints this one stands for.
+
+        The default: the frame itself, or every ``step``-th frame of a
+        variational interval (its end always included).
+        """
+        frames: tuple[int, int] | None = getattr(self, "frames", None)
+        if frames is None:
+            return [(int(self.frame),)]  # type: ignore[arg-type]
+        return [(f,) for f in _sample(frames[0], frames[1], step)]
 
     def structure(self) -> tuple[Any, ...]:
         """Everything that enters the solver's matrix (a drag keeps it)."""
@@ -239,14 +250,6 @@ class PinPosition(Constraint):
         self._check_common()
         object.__setattr__(self, "position", _pair(self.position, "position"))
 
-    def frame_refs(self) -> list[tuple[int, int]]:
-        return [(self.character, f[0]) for f in self.samples(1_000_000)]
-
-    def samples(self, step: int = 10) -> list[tuple[int, ...]]:
-        if self.frames is None:
-            return [(int(self.frame),)]  # type: ignore[arg-type]
-        return [(f,) for f in _sample(*self.frames, step)]
-
 
 @dataclasses.dataclass(frozen=True)
 class PinDirection(Constraint):
@@ -270,14 +273,6 @@ class PinDirection(Constraint):
     def __post_init__(self) -> None:
         self._check_common()
         object.__setattr__(self, "direction", direction_vector(self.direction))
-
-    def frame_refs(self) -> list[tuple[int, int]]:
-        return [(self.character, f[0]) for f in self.samples(1_000_000)]
-
-    def samples(self, step: int = 10) -> list[tuple[int, ...]]:
-        if self.frames is None:
-            return [(int(self.frame),)]  # type: ignore[arg-type]
-        return [(f,) for f in _sample(*self.frames, step)]
 
 
 def _paired_samples(
@@ -383,14 +378,6 @@ class AbsoluteTime(Constraint):
     def __post_init__(self) -> None:
         self._check_common()
         object.__setattr__(self, "time", _scalar(self.time, "time"))
-
-    def frame_refs(self) -> list[tuple[int, int]]:
-        return [(self.character, f[0]) for f in self.samples(1_000_000)]
-
-    def samples(self, step: int = 10) -> list[tuple[int, ...]]:
-        if self.frames is None:
-            return [(int(self.frame),)]  # type: ignore[arg-type]
-        return [(f,) for f in _sample(*self.frames, step)]
 
 
 @dataclasses.dataclass(frozen=True)

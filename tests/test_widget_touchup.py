@@ -65,6 +65,9 @@ def test_schedule_edits_reach_the_session(bent):
     assert w.session.schedule[2].s2 == ("LeftArm",)
     w.step_button.click()
     assert w.session.index == 2 and w.status.value == ""
+    # the message is HTML-escaped, so a name like "<Wing>" is shown, not eaten as a tag
+    w.rows[2].s2.value = "<Wing>"
+    assert "&lt;Wing&gt;" in w.status.value and "<Wing>" not in w.status.value
 
 
 def test_stepper_accepts_a_session_and_rejects_bad_input(bent):

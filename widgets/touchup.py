@@ -24,6 +24,7 @@ Callbacks show their exceptions in the widget's status line.
 
 from __future__ import annotations
 
+import html
 import io
 from collections.abc import Sequence
 from typing import Any
@@ -298,7 +299,7 @@ class TouchUpStepper:
             action()
             self.status.value = ""
         except Exception as err:  # shown in the widget, not lost in the log
-            self.status.value = f"<pre style='color:#b00'>{type(err).__name__}: {err}</pre>"
+            self.status.value = f"<pre style='color:#b00'>{html.escape(f'{type(err).__name__}: {err}')}</pre>"
 
     # ------------------------------------------------------------ drawing
     @staticmethod

@@ -389,6 +389,16 @@ def test_write_then_read_real_clips(tmp_path, mocap_dir, cmu, clip):
     assert max_position_error(m, back) < 1e-4  # 0.1 mm
 
 
+@pytest.mark.parametrize("fps", [60.0, 120.0, 30.0, 24.0])
+def test_write_then_read_keeps_fps_exactly(tmp_path, fps):
+    # a clip written and read back must still concatenate with the original
+    sk = Skeleton(["hips", "knee"], [-1, 0], [[0, 0, 0], [0, -0.5, 0]])
+    m = Motion(sk, np.tile([0.0, 0.0, 0.0, 1.0], (3, 2, 1)), np.zeros((3, 3)), fps)
+    save_bvh(m, tmp_path / "f.bvh")
+    back = load_bvh(tmp_path / "f.bvh", scale=0.01)
+    assert back.fps == fps
+
+
 @pytest.mark.parametrize("order", ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"])
 def test_write_then_read_random_poses(tmp_path, rng, order):
     parents = [-1, 0, 1, 2, 0, 4, 5, 0, 7]

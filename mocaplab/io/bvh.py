@@ -657,7 +657,8 @@ def save_bvh(
         stack.extend(("open", c, depth + 1) for c in reversed(children[j]))
     out.append("MOTION")
     out.append(f"Frames: {n_frames}")
-    out.append(f"Frame Time: {1.0 / motion.fps:.10g}")
+    # 17 significant digits: reading back gives the same fps to the last bit
+    out.append(f"Frame Time: {1.0 / motion.fps:.17g}")
     row = " ".join([num] * data.shape[1])
     out.extend(row % tuple(values) for values in data.tolist())
     with open(os.fspath(path), "w", encoding="utf-8", newline="\n") as fh:

@@ -185,10 +185,17 @@ class Skeleton:
             d[j] = d[self.parents[j]] + 1
         return d
 
+    def _joint(self, j: str | int, arg: str) -> int:
+        """Index of a joint given by name or index (numpy integers too)."""
+        if isinstance(j, str):
+            return self.index(j)
+        if isinstance(j, (int, np.integer)) and not isinstance(j, bool) and 0 <= int(j) < self.n_joints:
+            return int(j)
+        raise ValueError(f"Expected `{arg}` to be a joint name or an index in [0, {self.n_joints}), got {j!r}")
+
     def chain(self, start: str | int, end: str | int) -> list[int]:
         """Joints from ``start`` down to its descendant ``end`` (both included)."""
-        s = start if isinstance(start, int) else self.index(start)
-        e = end if isinstance(end, int) else self.index(end)
+        s, e = self._joint(start, "start"), self._joint(end, "end")
         out = [e]
         while out[-1] != s:
             if out[-1] <= 0:

@@ -253,6 +253,17 @@ def test_skeleton_helpers():
     assert np.allclose(sk.scaled(2.0).end_site_offsets, 2 * sk.end_site_offsets)
 
 
+def test_chain_accepts_numpy_indices_and_rejects_bad_ones():
+    sk = skeleton()
+    assert sk.chain(np.int64(0), np.int64(4)) == [0, 3, 4]
+    assert sk.chain(0, "RightLeg") == [0, 3, 4]
+    for bad in (-1, 5):
+        with pytest.raises(ValueError, match=r"Expected `start` to be a joint name or an index in \[0, 5\)"):
+            sk.chain(bad, 4)
+    with pytest.raises(ValueError, match="Expected `end`"):
+        sk.chain(0, 9)
+
+
 def test_end_site_positions_rest_pose():
     sk = skeleton()
     m = Motion(sk, quat.identity((1, 5)), np.array([[0, 1.0, 0]]), 30.0)

@@ -127,6 +127,9 @@ def test_captured_walk_keeps_its_zmp_near_the_support_polygon(cmu):
     assert np.allclose(bal.distance, np.maximum(bal.signed_distance, 0.0))
     poly = bal.polygon(10)
     assert poly.shape[1] == 3 and np.all(poly[:, 1] == 0)
+    # touch-up histories share Balance objects: their arrays cannot be changed
+    with pytest.raises(ValueError, match="read-only"):
+        bal.distance[0] = 1.0
 
 
 def test_flight_frames_have_no_zmp(cmu):

@@ -372,6 +372,13 @@ class Balance:
     positions: Array
     accelerations: Array
 
+    def __post_init__(self) -> None:
+        # states of a touch-up history share Balance objects: keep them read-only
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, np.ndarray):
+                value.flags.writeable = False
+
     @cached_property
     def signed_distance(self) -> Array:
         """Signed ZMP distance: positive outside, minus the depth inside, NaN in flight, shape (F,)."""

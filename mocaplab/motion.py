@@ -210,9 +210,22 @@ class Skeleton:
         )
 
     def mirror_map(self) -> NDArray[np.int64]:
-        """For each joint, the index of its left/right counterpart (itself if none)."""
+        """For each joint, the index of its left/right counterpart (itself if none).
+
+        Counterparts are found by :func:`mirror_name`; a name it leaves alone
+        and that starts with a lowercase ``l`` or ``r`` is paired with the
+        same name starting with the other letter *if that joint exists* (the
+        Acclaim/CMU ASF names ``lfemur``/``rfemur``, while ``lowerback``
+        stays itself).
+        """
         lookup = {n: i for i, n in enumerate(self.names)}
-        return np.array([lookup.get(mirror_name(n), i) for i, n in enumerate(self.names)], dtype=np.int64)
+        out = []
+        for i, n in enumerate(self.names):
+            other = mirror_name(n)
+            if other == n and n[:1] in ("l", "r"):
+                other = ("r" if n[0] == "l" else "l") + n[1:]
+            out.append(lookup.get(other, i))
+        return np.array(out, dtype=np.int64)
 
     def describe(self) -> str:
         """An indented text tree of the hierarchy."""

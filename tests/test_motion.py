@@ -264,6 +264,13 @@ def test_chain_accepts_numpy_indices_and_rejects_bad_ones():
         sk.chain(0, 9)
 
 
+def test_mirror_map_pairs_acclaim_names():
+    # CMU ASF/AMC names: lowercase l/r prefix on a lowercase word
+    names = ["root", "lfemur", "ltibia", "rfemur", "rtibia", "lowerback", "rhand"]
+    sk = Skeleton(names, [-1, 0, 1, 0, 3, 0, 5], np.zeros((7, 3)))
+    assert sk.mirror_map().tolist() == [0, 3, 4, 1, 2, 5, 6]
+
+
 def test_end_site_positions_rest_pose():
     sk = skeleton()
     m = Motion(sk, quat.identity((1, 5)), np.array([[0, 1.0, 0]]), 30.0)

@@ -454,7 +454,7 @@ class Motion:
         tr = None
         if self.translations is not None:
             tr = (1 - a)[:, None, None] * self.translations[i0] + a[:, None, None] * self.translations[i1]
-        return self.replace(rotations=rot, root_positions=root, translations=tr, fps=fps or self.fps)
+        return self.replace(rotations=rot, root_positions=root, translations=tr, fps=self.fps if fps is None else fps)
 
     def mirror(self) -> Motion:
         """Mirror image across the ``x = 0`` plane, left and right joints swapped."""
@@ -486,8 +486,13 @@ class Motion:
         """A new Motion with the root trajectory and/or root orientation replaced."""
         rot = self.rotations
         if root_rotations is not None:
+            new_root = np.asarray(root_rotations, dtype=float)
+            if new_root.shape != (self.n_frames, 4):
+                raise ValueError(
+                    f"Expected `root_rotations` of shape ({self.n_frames}, 4), got {new_root.shape}"
+                )
             rot = np.array(self.rotations, copy=True)
-            rot[:, 0] = np.asarray(root_rotations, dtype=float)
+            rot[:, 0] = new_root
         root = self.root_positions if root_positions is None else root_positions
         return self.replace(rotations=rot, root_positions=root)
 

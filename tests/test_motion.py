@@ -275,3 +275,11 @@ def test_end_site_positions_rest_pose():
     sk = skeleton()
     m = Motion(sk, quat.identity((1, 5)), np.array([[0, 1.0, 0]]), 30.0)
     assert np.allclose(m.end_site_positions()[0], [[0.12, 0.2, 0.1], [-0.12, 0.2, 0.1]])
+
+
+def test_sample_and_with_root_check_their_arguments(cmu):
+    walk = cmu("16_15")[:20]
+    with pytest.raises(ValueError, match="fps"):
+        walk.sample([0.0, 0.01], fps=0)
+    with pytest.raises(ValueError, match=r"root_rotations.*\(20, 4\)"):
+        walk.with_root(root_rotations=np.zeros((19, 4)))

@@ -512,7 +512,7 @@ def concatenate(motions: Sequence[Motion]) -> Motion:
     for k, m in enumerate(motions[1:], start=1):
         if m.skeleton.names != first.skeleton.names or not np.allclose(m.skeleton.offsets, first.skeleton.offsets):
             raise ValueError(f"Motion {k} has a different skeleton from motion 0")
-        if abs(m.fps - first.fps) > 1e-9:
+        if abs(m.fps - first.fps) > 1e-5 * first.fps:  # BVH frame times often carry 5 significant digits
             raise ValueError(f"Motion {k} runs at {m.fps} fps, motion 0 at {first.fps} fps")
     has_tr = [m.translations is not None for m in motions]
     tr = None

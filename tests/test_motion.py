@@ -283,3 +283,11 @@ def test_sample_and_with_root_check_their_arguments(cmu):
         walk.sample([0.0, 0.01], fps=0)
     with pytest.raises(ValueError, match=r"root_rotations.*\(20, 4\)"):
         walk.with_root(root_rotations=np.zeros((19, 4)))
+
+
+def test_concatenate_accepts_frame_rates_equal_to_file_precision(cmu):
+    walk = cmu("16_15")[:10]
+    from_file = walk.replace(fps=1.0 / 0.0083333)  # a BVH "Frame Time: .0083333"
+    assert concatenate([walk, from_file]).n_frames == 20
+    with pytest.raises(ValueError, match="fps"):
+        concatenate([walk, walk.replace(fps=60.0)])

@@ -21,15 +21,18 @@ new one.
 from __future__ import annotations
 
 import dataclasses
-import re
+import warnings
 from collections.abc import Sequence
 from functools import cached_property
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import kinematics, quat
+
+if TYPE_CHECKING:
+    from .roles import Roles
 
 __all__ = ["Skeleton", "Motion", "concatenate", "mirror_name"]
 
@@ -105,6 +108,9 @@ class Skeleton:
         Joint that carries each BVH ``End Site``.
     end_site_offsets : array_like, shape (E, 3), optional
         Offset of each end site from its joint (metres).
+    role_overrides : tuple of (role, joint name) pairs, optional
+        Joint roles fixed by hand (see :meth:`with_roles`); the others are
+        inferred (:attr:`roles`).
 
     Examples
     --------
@@ -123,6 +129,7 @@ class Skeleton:
     end_site_offsets: NDArray[np.float64] = dataclasses.field(
         default_factory=lambda: np.zeros((0, 3))
     )
+    role_overrides: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.names)
@@ -162,6 +169,36 @@ class Skeleton:
         object.__setattr__(self, "channels", channels)
         object.__setattr__(self, "end_site_parents", _frozen(esp, np.int64))
         object.__setattr__(self, "end_site_offsets", _frozen(eso))
+        overrides = dict(self.role_overrides.items() if isinstance(self.role_overrides, dict) else self.role_overrides)
+        if overrides:
+            from .roles import Roles
+
+            Roles(names, overrides)  # role and joint names are checked here
+        object.__setattr__(self, "role_overrides", tuple((k, overrides[k]) for k in sorted(overrides)))
+
+    # ------------------------------------------------------------- roles
+    @cached_property
+    def roles(self) -> Roles:
+        """The joint roles (pelvis, knees, wrists, ...), inferred once (see :mod:`mocaplab.roles`).
+
+        Raises :class:`~mocaplab.roles.RolesError` only when a missing role
+        is indexed; roles a skeleton lacks are simply absent.
+        """
+        from .roles import infer_roles
+
+        return infer_roles(self, overrides=dict(self.role_overrides))
+
+    def with_roles(self, **roles: Any) -> Skeleton:
+        """A new skeleton with some joint roles named by hand.
+
+        >>> sk = Skeleton(["root", "a", "b", "c"], [-1, 0, 1, 2], [[0, 0, 0], [0, -0.4, 0], [0, -0.4, 0], [0, 0, 0.1]])
+        >>> sk.with_roles(left_ankle="b").roles["left_knee"]
+        'a'
+        """
+        merged = dict(self.role_overrides)
+        merged.update({k: v for k, v in roles.items()})
+        merged = {k: v for k, v in merged.items() if v is not None}
+        return dataclasses.replace(self, role_overrides=tuple(merged.items()))
 
     @property
     def n_joints(self) -> int:
@@ -212,20 +249,12 @@ class Skeleton:
     def mirror_map(self) -> NDArray[np.int64]:
         """For each joint, the index of its left/right counterpart (itself if none).
 
-        Counterparts are found by :func:`mirror_name`; a name it leaves alone
-        and that starts with a lowercase ``l`` or ``r`` is paired with the
-        same name starting with the other letter *if that joint exists* (the
-        Acclaim/CMU ASF names ``lfemur``/``rfemur``, while ``lowerback``
-        stays itself).
+        Pairs come from the joint roles, the limb subtrees matched by shape,
+        and the names (:func:`mocaplab.roles.mirror_map`).
         """
-        lookup = {n: i for i, n in enumerate(self.names)}
-        out = []
-        for i, n in enumerate(self.names):
-            other = mirror_name(n)
-            if other == n and n[:1] in ("l", "r"):
-                other = ("r" if n[0] == "l" else "l") + n[1:]
-            out.append(lookup.get(other, i))
-        return np.array(out, dtype=np.int64)
+        from .roles import mirror_map
+
+        return mirror_map(self)
 
     def describe(self) -> str:
         """An indented text tree of the hierarchy."""
@@ -233,24 +262,14 @@ class Skeleton:
         return "\n".join("  " * int(depth[j]) + self.names[j] for j in range(self.n_joints))
 
 
-_SIDE_PATTERNS = (
-    (re.compile(r"Left"), "Right"),
-    (re.compile(r"Right"), "Left"),
-    (re.compile(r"left"), "right"),
-    (re.compile(r"right"), "left"),
-    (re.compile(r"^L(?=[A-Z_])"), "R"),
-    (re.compile(r"^R(?=[A-Z_])"), "L"),
-    (re.compile(r"^l(?=[A-Z_])"), "r"),
-    (re.compile(r"^r(?=[A-Z_])"), "l"),
-)
-
-
 def mirror_name(name: str) -> str:
-    """The joint name of the other side (``LeftArm`` -> ``RightArm``, ``lThigh`` -> ``rThigh``)."""
-    for pattern, repl in _SIDE_PATTERNS:
-        if pattern.search(name):
-            return pattern.sub(repl, name, count=1)
-    return name
+    """The joint name of the other side (``LeftArm`` -> ``RightArm``, ``Toes_L`` -> ``Toes_R``).
+
+    See :func:`mocaplab.roles.mirror_name`.
+    """
+    from .roles import mirror_name as _mirror_name
+
+    return _mirror_name(name)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -390,6 +409,53 @@ class Motion:
         grot, gpos = self._fk
         return gpos[:, sk.end_site_parents] + quat.rotate(grot[:, sk.end_site_parents], sk.end_site_offsets)
 
+    # ------------------------------------------------------------ the path
+    @cached_property
+    def path_joint(self) -> int:
+        """Index of the joint that carries the character over the ground.
+
+        The pelvis role (:attr:`Skeleton.roles`); for skeletons whose roles
+        cannot be inferred, joint 0, unless joint 0 never moves and a joint
+        below it carries animated translations (then the shallowest such
+        joint).  A :class:`UserWarning` names the joint when it is not
+        joint 0 (a static reference joint above a travelling pelvis is a
+        common export layout).  Motion paths, editing, physical touch-up,
+        staggered poses and the viewer follow this joint.
+        """
+        from .roles import RolesError
+
+        sk = self.skeleton
+        try:
+            j = sk.roles.index("pelvis")
+        except RolesError:
+            j = 0
+            if self.translations is not None and np.ptp(self.root_positions, axis=0).max() < 1e-9:
+                moving = np.flatnonzero(np.ptp(self.translations, axis=0).max(axis=-1) > 1e-6)
+                if moving.size:
+                    depth = sk.depth()
+                    j = int(moving[np.argmin(depth[moving])])
+        if j != 0:
+            still = np.ptp(self.root_positions, axis=0).max() < 1e-9
+            why = f"joint 0 {sk.names[0]!r} never moves" if still else "it is the pelvis"
+            warnings.warn(
+                f"The motion path follows joint {sk.names[j]!r} (index {j}), not joint 0: {why}",
+                UserWarning,
+                stacklevel=2,
+            )
+        return int(j)
+
+    @property
+    def pelvis_positions(self) -> NDArray[np.float64]:
+        """World positions of :attr:`path_joint`, shape (F, 3) (the root's when it is joint 0)."""
+        j = self.path_joint
+        return self.root_positions if j == 0 else self.global_positions()[:, j]
+
+    @property
+    def pelvis_rotations(self) -> NDArray[np.float64]:
+        """World rotations of :attr:`path_joint`, shape (F, 4)."""
+        j = self.path_joint
+        return self.rotations[:, 0] if j == 0 else self.global_rotations()[:, j]
+
     def joint_velocities(self) -> NDArray[np.float64]:
         """World joint velocities, shape (F, J, 3), metres per second."""
         return kinematics.velocities(self.global_positions(), self.fps)
@@ -496,11 +562,23 @@ class Motion:
         root = self.root_positions if root_positions is None else root_positions
         return self.replace(rotations=rot, root_positions=root)
 
-    def transformed(self, *, yaw: float = 0.0, translation: ArrayLike = (0.0, 0.0, 0.0)) -> Motion:
-        """Rigidly turn the whole clip by ``yaw`` radians about the vertical axis
-        through the origin, then translate it."""
-        q = quat.from_yaw(np.float64(yaw))
-        root = quat.rotate(q, self.root_positions) + np.asarray(translation, dtype=float)
+    def transformed(self, *, yaw: ArrayLike = 0.0, translation: ArrayLike = (0.0, 0.0, 0.0)) -> Motion:
+        """Rigidly turn the clip by ``yaw`` radians about the vertical axis
+        through the origin, then translate it.
+
+        ``yaw`` may be one angle or one per frame, shape (F,); ``translation``
+        shape (3,) or (F, 3): a per-frame rigid motion of the whole body over
+        the ground, applied at joint 0 so that every joint (a travelling
+        pelvis below a static root too) moves with it.
+        """
+        yaw = np.asarray(yaw, dtype=float)
+        if yaw.shape not in ((), (self.n_frames,)):
+            raise ValueError(f"Expected `yaw` as one angle or shape ({self.n_frames},), got {yaw.shape}")
+        t = np.asarray(translation, dtype=float)
+        if t.shape not in ((3,), (self.n_frames, 3)):
+            raise ValueError(f"Expected `translation` of shape (3,) or ({self.n_frames}, 3), got {t.shape}")
+        q = quat.from_yaw(yaw)
+        root = quat.rotate(q, self.root_positions) + t
         return self.with_root(root_positions=root, root_rotations=quat.mul(q, self.rotations[:, 0]))
 
 

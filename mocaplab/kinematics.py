@@ -10,10 +10,15 @@ vectorised over all frames, computes the whole clip.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from functools import lru_cache
+
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["fk", "velocities"]
+from . import quat
+
+__all__ = ["fk", "fk_below", "subtree_levels", "velocities"]
 
 
 def fk(
@@ -103,6 +108,75 @@ def fk(
         gp[1, level] = py + vy + aw * ty + (az * tx - ax * tz)
         gp[2, level] = pz + vz + aw * tz + (ax * ty - ay * tx)
     return gq.transpose(2, 1, 0), gp.transpose(2, 1, 0)
+
+
+def fk_below(
+    rotations: NDArray[np.float64],
+    fk_result: tuple[NDArray[np.float64], NDArray[np.float64]],
+    offsets: NDArray[np.float64],
+    parents: NDArray[np.int64],
+    tops: Iterable[int],
+    *,
+    translations: NDArray[np.float64] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Partial forward kinematics: recompute only the subtrees of ``tops``.
+
+    The one partial-FK function of the package: after an IK step has turned
+    a few joints (the legs), the joints outside the subtrees of ``tops``
+    keep the global transforms in ``fk_result``; the subtrees are recomputed
+    from ``rotations`` level by level (all joints of one depth at once),
+    vectorised over frames.  The root (joint 0) is never recomputed: give
+    ``fk_result`` with the root already placed.
+
+    Parameters
+    ----------
+    rotations : ndarray, shape (F, J, 4)
+        Local rotations (the new ones).
+    fk_result : (global_rotations, global_positions)
+        Shapes (F, J, 4) and (F, J, 3): transforms valid outside the subtrees.
+    offsets, parents
+        The skeleton's, as for :func:`fk`.
+    tops : iterable of int
+        Joints whose subtrees (the joints themselves included) changed.
+    translations : ndarray, shape (F, J, 3), optional
+        Animated local translations, as for :func:`fk`.
+
+    Returns
+    -------
+    global_rotations, global_positions : ndarray
+        New arrays; the inputs are not modified.
+    """
+    grot, gpos = (np.array(a, copy=True) for a in fk_result)
+    parents = np.asarray(parents, dtype=np.int64)
+    for level in subtree_levels(parents, tuple(sorted({int(t) for t in tops}))):
+        p = parents[level]
+        local = offsets[level] if translations is None else translations[:, level]
+        grot[:, level] = quat.mul(grot[:, p], rotations[:, level])
+        gpos[:, level] = gpos[:, p] + quat.rotate(grot[:, p], local)
+    return grot, gpos
+
+
+def subtree_levels(parents: NDArray[np.int64], tops: tuple[int, ...]) -> tuple[NDArray[np.int64], ...]:
+    """Joints of the subtrees of ``tops`` (root excluded), grouped by depth, shallowest first."""
+    return _subtree_levels(np.asarray(parents, dtype=np.int64).tobytes(), tuple(int(t) for t in tops))
+
+
+@lru_cache(maxsize=128)
+def _subtree_levels(parents_bytes: bytes, tops: tuple[int, ...]) -> tuple[NDArray[np.int64], ...]:
+    parents = np.frombuffer(parents_bytes, dtype=np.int64)
+    below = np.zeros(len(parents), dtype=bool)
+    below[list(tops)] = True
+    depth = np.zeros(len(parents), dtype=np.int64)
+    for j in range(1, len(parents)):
+        below[j] |= below[parents[j]]
+        depth[j] = depth[parents[j]] + 1
+    below[0] = False
+    levels = []
+    for d in np.unique(depth[below]):
+        level = np.flatnonzero(below & (depth == d))
+        level.flags.writeable = False
+        levels.append(level)
+    return tuple(levels)
 
 
 def _levels(parents: NDArray[np.int64]) -> list[NDArray[np.int64]]:

@@ -52,7 +52,6 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from functools import lru_cache
 from typing import Any, Literal
 
 import numpy as np
@@ -530,40 +529,9 @@ def _fk(rot: Array, root: Array, motion: Motion) -> tuple[Array, Array]:
 
 
 def _refresh(rot: Array, fk: tuple[Array, Array], motion: Motion, changed: Sequence[int]) -> tuple[Array, Array]:
-    """Forward kinematics again only below the ``changed`` joints (root excluded).
-
-    Global rotations and positions of joints outside the subtrees of
-    ``changed`` are taken from ``fk``; the subtrees (a few leg joints) are
-    recomputed level by level (all joints of one depth at once), vectorised
-    over frames.
-    """
+    """Forward kinematics again only below the ``changed`` joints (:func:`mocaplab.kinematics.fk_below`)."""
     sk = motion.skeleton
-    grot, gpos = (np.array(a, copy=True) for a in fk)
-    for level in _subtree_levels(sk, tuple(sorted({int(j) for j in changed}))):
-        p = sk.parents[level]
-        local = sk.offsets[level] if motion.translations is None else motion.translations[:, level]
-        grot[:, level] = quat.mul(grot[:, p], rot[:, level])
-        gpos[:, level] = gpos[:, p] + quat.rotate(grot[:, p], local)
-    return grot, gpos
-
-
-@lru_cache(maxsize=64)
-def _subtree_levels(skeleton: Skeleton, tops: tuple[int, ...]) -> tuple[NDArray[np.int64], ...]:
-    """Joints of the subtrees of ``tops`` (root excluded), grouped by depth, shallowest first."""
-    parents = skeleton.parents
-    below = np.zeros(skeleton.n_joints, dtype=bool)
-    below[list(tops)] = True
-    depth = np.zeros(skeleton.n_joints, dtype=np.int64)
-    for j in range(1, skeleton.n_joints):
-        below[j] |= below[parents[j]]
-        depth[j] = depth[parents[j]] + 1
-    below[0] = False
-    levels = []
-    for d in np.unique(depth[below]):
-        level = np.flatnonzero(below & (depth == d))
-        level.flags.writeable = False
-        levels.append(level)
-    return tuple(levels)
+    return kinematics.fk_below(rot, fk, sk.offsets, sk.parents, changed, translations=motion.translations)
 
 
 def _blend(cur: Array, goal: Goal) -> Array:

@@ -16,12 +16,12 @@ from .motion import Motion, Skeleton, concatenate
 
 __version__ = "0.1.0"
 
-__all__ = ["Motion", "Skeleton", "concatenate", "load_bvh", "save_bvh", "cmu", "refine", "__version__"]
+__all__ = ["Motion", "Skeleton", "concatenate", "load", "load_bvh", "save_bvh", "cmu", "refine", "__version__"]
 
 
 def __getattr__(name: str):
     # light lazy entry points, so `import mocaplab` stays cheap
-    if name in ("load_bvh", "save_bvh", "load_asf_amc"):
+    if name in ("load", "load_bvh", "save_bvh", "load_asf_amc"):
         from . import io
 
         return getattr(io, name)

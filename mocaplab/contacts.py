@@ -27,13 +27,14 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterable, Sequence
-from typing import Literal
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .motion import Motion
+from .roles import resolve_roles
 
 __all__ = [
     "Contacts",
@@ -44,15 +45,6 @@ __all__ = [
     "mask_from_intervals",
     "clean_mask",
 ]
-
-# Foot joints looked up by name, per side, in this order.  The first group of
-# names that exists on a side is used.  CMU (BVH and ASF/AMC) names come first,
-# then the Daz skeleton of the CMU salsa pairs, then common variants.
-_FOOT_NAMES: tuple[tuple[tuple[str, ...], ...], ...] = (
-    (("LeftFoot", "LeftToeBase"), ("lfoot", "ltoes"), ("lFoot",), ("LeftFoot", "LeftToe"), ("LeftFoot",)),
-    (("RightFoot", "RightToeBase"), ("rfoot", "rtoes"), ("rFoot",), ("RightFoot", "RightToe"), ("RightFoot",)),
-)
-
 
 # --------------------------------------------------------------------------
 # the result type
@@ -231,35 +223,26 @@ def clean_mask(mask: ArrayLike, *, min_length: int = 1, max_gap: int = 0) -> NDA
 # --------------------------------------------------------------------------
 # joint selection
 # --------------------------------------------------------------------------
-def default_foot_joints(skeleton_or_motion: object) -> tuple[str, ...]:
-    """The ankle and toe joints of both feet, found by name.
+def default_foot_joints(skeleton_or_motion: object, *, roles: Mapping[str, Any] | None = None) -> tuple[str, ...]:
+    """The ankle and toe joints of both feet, from the skeleton's joint roles.
 
     CMU skeletons give ``("LeftFoot", "LeftToeBase", "RightFoot",
-    "RightToeBase")``; the Daz skeleton of the CMU salsa clips gives
-    ``("lFoot", "rFoot")``.  Raises ValueError when a side has no known foot
-    joint (pass ``joints=`` explicitly then).
+    "RightToeBase")``; the Daz skeleton of the CMU salsa clips, which has no
+    toe joints, gives ``("lFoot", "rFoot")``.  ``roles`` overrides roles as
+    in :func:`mocaplab.roles.resolve_roles`.  Raises
+    :class:`~mocaplab.roles.RolesError` (a ValueError) naming the missing
+    roles and the call that supplies them when a side has no ankle.
     """
-    sk = getattr(skeleton_or_motion, "skeleton", skeleton_or_motion)
-    names = set(getattr(sk, "names", ()))
-    found: list[str] = []
-    for side, groups in zip(("left", "right"), _FOOT_NAMES, strict=True):
-        for group in groups:
-            if all(g in names for g in group):
-                found.extend(group)
-                break
-        else:
-            raise ValueError(
-                f"Could not find the {side} foot joints by name (tried {[list(g) for g in groups]}); "
-                "pass `joints=` with the joint names to use"
-            )
-    return tuple(found)
+    return resolve_roles(skeleton_or_motion, roles).foot_joints()
 
 
-def _resolve(motion: Motion, joints: Sequence[str] | None) -> tuple[tuple[str, ...], NDArray[np.int64]]:
+def _resolve(
+    motion: Motion, joints: Sequence[str] | None, roles: Mapping[str, Any] | None = None
+) -> tuple[tuple[str, ...], NDArray[np.int64]]:
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
     if joints is None:
-        names = default_foot_joints(motion)
+        names = default_foot_joints(motion, roles=roles)
     else:
         if isinstance(joints, str):
             joints = (joints,)
@@ -283,6 +266,7 @@ def foot_contacts(
     motion: Motion,
     *,
     joints: Sequence[str] | None = None,
+    roles: Mapping[str, Any] | None = None,
     height: float = 0.06,
     speed: float = 0.6,
     min_duration: float = 0.05,
@@ -301,8 +285,10 @@ def foot_contacts(
     motion : Motion
     joints : sequence of str, optional
         Joints to test; default :func:`default_foot_joints` (ankle and toe of
-        each foot).  Each joint is tested on its own: a foot is planted when
-        its ankle *or* its toe is.
+        each foot, from the joint roles).  Each joint is tested on its own: a
+        foot is planted when its ankle *or* its toe is.
+    roles : mapping, optional
+        Joint-role overrides (:func:`mocaplab.roles.resolve_roles`).
     height : float
         Height threshold, metres.  With ``floor="clip"`` (default) the height
         is measured **above the joint's own floor level in this clip**, the
@@ -345,7 +331,7 @@ def foot_contacts(
     >>> c = foot_contacts(cmu("16_15"))          # doctest: +SKIP
     >>> c.intervals("LeftFoot")[:2]              # doctest: +SKIP
     """
-    names, idx = _resolve(motion, joints)
+    names, idx = _resolve(motion, joints, roles)
     for value, what in ((height, "height"), (speed, "speed")):
         if not np.isfinite(value) or value <= 0:
             raise ValueError(f"Expected `{what}` > 0, got {value!r}")
@@ -373,6 +359,7 @@ def stillness_contacts(
     motion: Motion,
     *,
     joints: Sequence[str] | None = None,
+    roles: Mapping[str, Any] | None = None,
     tolerance: float = 0.03,
     min_duration: float = 0.25,
     max_height: float | None = None,
@@ -400,6 +387,8 @@ def stillness_contacts(
     joints : sequence of str, optional
         Default :func:`default_foot_joints`.  Any joint works (hands on a
         rail, a knee on the floor).
+    roles : mapping, optional
+        Joint-role overrides (:func:`mocaplab.roles.resolve_roles`).
     tolerance : float
         Radius in metres.  The paper sets it "slightly larger than the
         apparent error introduced by noise"; 3 cm suits CMU feet at 120 fps
@@ -414,7 +403,7 @@ def stillness_contacts(
     -------
     Contacts
     """
-    names, idx = _resolve(motion, joints)
+    names, idx = _resolve(motion, joints, roles)
     if not np.isfinite(tolerance) or tolerance <= 0:
         raise ValueError(f"Expected `tolerance` > 0 metres, got {tolerance!r}")
     window = max(2, _frames(min_duration, motion.fps, "min_duration"))

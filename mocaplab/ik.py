@@ -65,6 +65,8 @@ __all__ = [
     "limb_joints",
     "two_bone_deltas",
     "two_bone_ik",
+    "hinge_axes",
+    "reach_residual",
     "aim_deltas",
     "dls_ik",
     "reach",
@@ -200,6 +202,7 @@ def two_bone_deltas(
     *,
     pole: ArrayLike | None = None,
     bend_axis: ArrayLike | None = None,
+    hinge: ArrayLike | None = None,
 ) -> tuple[Array, Array]:
     """World-frame rotations that carry a two-bone limb's end to ``target``.
 
@@ -223,6 +226,15 @@ def two_bone_deltas(
         World axis about which to bend the middle joint when the limb is
         exactly straight (the bending plane is then undefined).  Default: an
         axis perpendicular to the limb, chosen from the world axes.
+    hinge : array_like, shape (..., 3), optional
+        World direction of the middle joint's hinge (a knee's flexion axis,
+        oriented so that a normal bend is a positive turn of the lower bone
+        about it, from ``upper - middle`` toward ``end - middle``).  With it
+        the limb never flips its bending direction: where the current pose
+        bends the other way (a knee hyperextended by a fraction of a degree),
+        the bend goes back through straight to the hinge's side instead of
+        bending further backwards; a straight limb bends about it.
+        :func:`hinge_axes` estimates it from a clip.
 
     Returns
     -------
@@ -265,6 +277,16 @@ def two_bone_deltas(
     beta_new = np.arccos(np.clip(cos_new, -1.0, 1.0))
     straight = sin_b <= 1e-9 * np.maximum(l1 * l2, _TINY)
     axis = cross / np.where(straight, 1.0, sin_b)[..., None]  # unit where not straight
+    if hinge is not None:
+        h = np.broadcast_to(np.asarray(hinge, dtype=float), shape)
+        if bend_axis is None:
+            bend_axis = h
+        # bending the wrong way: measure the bend about the hinge's side,
+        # as an interior angle beyond pi (through straight)
+        flip = (_dot(axis, h) < 0.0) & ~straight
+        if np.any(flip):
+            axis = np.where(flip[..., None], -axis, axis)
+            beta = np.where(flip, 2.0 * np.pi - beta, beta)
     if np.any(straight):
         if bend_axis is not None:
             fallback = np.broadcast_to(np.asarray(bend_axis, dtype=float), shape)
@@ -332,6 +354,45 @@ def aim_deltas(pivot: ArrayLike, tip: ArrayLike, target: ArrayLike, *, weight: A
     return q
 
 
+def hinge_axes(grot: Array, gpos: Array, limbs: Sequence[tuple[int, int, int]]) -> Array:
+    """Each limb's middle-joint hinge in that joint's local frame, shape (K, 3).
+
+    The bending axis ``(upper - middle) x (end - middle)`` of every frame,
+    taken into the middle joint's local frame and summed over the clip (so
+    frames bent well count most: the cross product's length is the sine of
+    the bend), then normalised.  A knee or elbow bends about one such axis
+    throughout a clip; frames bent the other way by noise do not flip it.
+    A limb straight on every frame gets a zero vector (no preference).
+
+    Parameters
+    ----------
+    grot, gpos : ndarray, shapes (F, J, 4) and (F, J, 3)
+        Forward kinematics of the clip.
+    limbs : sequence of (upper, middle, end) joint indices
+    """
+    out = np.zeros((len(limbs), 3))
+    for k, (u, m, e) in enumerate(limbs):
+        n = _cross(gpos[:, u] - gpos[:, m], gpos[:, e] - gpos[:, m])
+        local = quat.rotate(quat.inv(grot[:, m]), n).sum(axis=0)
+        length = float(np.linalg.norm(local))
+        if length > _TINY:
+            out[k] = local / length
+    return out
+
+
+def reach_residual(upper: ArrayLike, middle: ArrayLike, end: ArrayLike, target: ArrayLike) -> Array:
+    """How far ``target`` lies outside a two-bone limb's reach, metres, shape (...,).
+
+    Zero where the limb can reach it; else the distance by which it is
+    beyond full extension (or closer to the upper joint than ``|l1 - l2|``).
+    :func:`two_bone_ik` clamps such targets; this says by how much.
+    """
+    a, b, c, t = (np.asarray(x, dtype=float) for x in (upper, middle, end, target))
+    l1, l2 = _norm(a - b), _norm(c - b)
+    d = _norm(t - a)
+    return np.maximum(d - (l1 + l2), 0.0) + np.maximum(np.abs(l1 - l2) - d, 0.0)
+
+
 def two_bone_ik(
     rotations: ArrayLike,
     root_positions: ArrayLike,
@@ -345,7 +406,9 @@ def two_bone_ik(
     end_rotation: ArrayLike | None = None,
     translations: ArrayLike | None = None,
     fk: tuple[Array, Array] | None = None,
-) -> Array:
+    keep_bend: bool = True,
+    return_residual: bool = False,
+) -> Any:
     """Analytic limb IK on every frame: new local rotations.
 
     Parameters
@@ -378,13 +441,23 @@ def two_bone_ik(
     fk : (global_rotations, global_positions), optional
         Precomputed forward kinematics of ``rotations`` (saves a pass when
         several independent limbs are solved on the same pose).
+    keep_bend : bool
+        Keep the limb's bending direction: the hinge is estimated from
+        ``rotations`` over the whole clip (:func:`hinge_axes`), or is
+        ``bend_axis`` when given, so a knee near straight never bends
+        backwards.  ``False``: bend about the current bending plane of each
+        frame, whatever its side.
+    return_residual : bool
+        Also return, per frame, how far the target is out of reach
+        (:func:`reach_residual`, metres; 0 where it is reached).
 
     Returns
     -------
     ndarray, shape (F, J, 4)
         A new array of local rotations; only the upper and middle joints
         (and the end joint when ``end_rotation`` is given) differ from
-        ``rotations``.
+        ``rotations``.  With ``return_residual``, ``(rotations, residual)``
+        with ``residual`` of shape (F,).
 
     Examples
     --------
@@ -414,12 +487,21 @@ def two_bone_ik(
     else:
         grot, gpos = fk
     pole_w = None if pole is None else _per_frame(pole, n_frames, 3, "pole")
-    axis_w = None
+    axis_w = hinge_w = None
     if bend_axis is not None:
         axis_w = quat.rotate(grot[:, jm], np.asarray(bend_axis, dtype=float))
-    q_up, q_mid = two_bone_deltas(gpos[:, ju], gpos[:, jm], gpos[:, je], tgt, pole=pole_w, bend_axis=axis_w)
+    if keep_bend:
+        local = np.asarray(bend_axis, dtype=float) if bend_axis is not None else hinge_axes(grot, gpos, [(ju, jm, je)])[0]
+        if np.any(local):
+            hinge_w = quat.rotate(grot[:, jm], local)
+    q_up, q_mid = two_bone_deltas(
+        gpos[:, ju], gpos[:, jm], gpos[:, je], tgt, pole=pole_w, bend_axis=axis_w, hinge=hinge_w
+    )
     want = None if end_rotation is None else _per_frame(end_rotation, n_frames, 4, "end_rotation")
-    return _two_bone_locals(rot, grot, skeleton.parents, (ju, jm, je), q_up, q_mid, want)
+    out = _two_bone_locals(rot, grot, skeleton.parents, (ju, jm, je), q_up, q_mid, want)
+    if return_residual:
+        return out, reach_residual(gpos[:, ju], gpos[:, jm], gpos[:, je], tgt)
+    return out
 
 
 def _two_bone_locals(

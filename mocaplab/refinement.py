@@ -61,7 +61,7 @@ from scipy.ndimage import minimum_filter1d
 from . import kinematics, quat
 from .contacts import Contacts, foot_contacts
 from .displacement import DisplacementMap, displacement_between
-from .ik import _joint, _two_bone_locals, aim_deltas, dls_ik, limb_joints, two_bone_deltas, two_bone_ik
+from .ik import _joint, _two_bone_locals, aim_deltas, dls_ik, hinge_axes, limb_joints, two_bone_deltas, two_bone_ik
 from .motion import Motion, Skeleton, _owned
 
 __all__ = [
@@ -730,7 +730,9 @@ def _solve_goals(
             # does leg by leg, the same numbers)
             ju, jm, je = (np.array(j) for j in zip(*legs, strict=True))
             a, b, c = gpos[:, ju], gpos[:, jm], gpos[:, je]
-            q_up, q_mid = two_bone_deltas(a, b, c, np.stack(targets, axis=1))
+            # each knee bends about its own hinge over the clip, never backwards
+            hinge = quat.rotate(grot[:, jm], hinge_axes(grot, gpos, legs))
+            q_up, q_mid = two_bone_deltas(a, b, c, np.stack(targets, axis=1), hinge=hinge)
             rot = _two_bone_locals(rot, grot, sk.parents, (ju, jm, je), q_up, q_mid, grot[:, je])
             if toes:
                 # where the solve put the ankles (the lower leg turned by

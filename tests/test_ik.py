@@ -116,7 +116,7 @@ def test_default_swivel_keeps_the_bending_plane(rng):
     rot = _random_quats(rng, (n, sk.n_joints), 0.6)
     p0 = _positions(rot, root, sk)
     target = p0[:, 3] + rng.normal(scale=0.1, size=(n, 3))
-    new = ik.two_bone_ik(rot, root, sk, "ankle", target)
+    new = ik.two_bone_ik(rot, root, sk, "ankle", target, keep_bend=False)  # independent random poses: no clip-wide hinge
     p1 = _positions(new, root, sk)
     old_n = np.cross(p0[:, 2] - p0[:, 1], p0[:, 3] - p0[:, 1])
     new_n = np.cross(p1[:, 2] - p1[:, 1], p1[:, 3] - p1[:, 1])
@@ -255,3 +255,50 @@ def test_bad_inputs_raise_clear_errors(cmu):
         ik.dls_ik(walk.rotations, walk.root_positions, sk, ["RightArm"], "RightHand", np.zeros((2, 2, 3)))
     with pytest.raises(TypeError, match="apply only with `chain`"):
         ik.reach(walk, "RightHand", np.zeros(3), damping=0.1)
+
+
+def _knee_clip(angles_deg):
+    """The chain skeleton with its knee bent by the given angles about +X (negative: hyperextended)."""
+    sk = _chain_skeleton()
+    n = len(angles_deg)
+    rot = quat.identity((n, sk.n_joints))
+    rot[:, 2] = quat.from_axis_angle(np.array([1.0, 0, 0]), np.radians(angles_deg))
+    return sk, rot, np.zeros((n, 3))
+
+
+def _signed_knee(rot, root, sk):
+    p = _positions(rot, root, sk)
+    u, v = p[:, 1] - p[:, 2], p[:, 3] - p[:, 2]
+    cross = np.cross(u, v)
+    # the clip's bend is about +X in the knee frame: its sign tells the side
+    return np.degrees(np.pi - np.arctan2(np.linalg.norm(cross, axis=1), np.sum(u * v, axis=1))) * np.sign(cross[:, 0])
+
+
+def test_a_limb_never_flips_its_bending_direction():
+    # a walk-like knee: bent 30-40 degrees, but hyperextended by about 0.1 degree on one frame
+    sk, rot, root = _knee_clip([30.0, 40.0, -4.5, 35.0])  # the rest pose is bent 4.4 degrees
+    side = np.sign(_signed_knee(rot, root, sk)[0])
+    before = side * _signed_knee(rot, root, sk)
+    assert before[2] < 0 < before[0]
+    p0 = _positions(rot, root, sk)
+    target = p0[:, 3] + [0.0, 0.04, 0.0]  # raise the ankle: the knee must bend more
+    kept = side * _signed_knee(ik.two_bone_ik(rot, root, sk, "ankle", target), root, sk)
+    assert np.all(kept > 5.0), kept  # every frame bends forwards, the hyperextended one too
+    flipped = side * _signed_knee(ik.two_bone_ik(rot, root, sk, "ankle", target, keep_bend=False), root, sk)
+    assert flipped[2] < -5.0  # the old behaviour: bending further backwards
+    # the hinge estimate is close to the knee rotation axis
+    grot, gpos = fk(rot, root, sk.offsets, sk.parents)
+    assert abs(ik.hinge_axes(grot, gpos, [(1, 2, 3)])[0, 0]) > 0.98  # about +X (the bones are not coplanar)
+
+
+def test_unreachable_targets_are_reported():
+    sk, rot, root = _knee_clip([30.0, 30.0])
+    p0 = _positions(rot, root, sk)
+    full = np.linalg.norm(sk.offsets[2]) + np.linalg.norm(sk.offsets[3])
+    hip = p0[:, 1]
+    target = np.stack([hip[0] + [0, -0.5 * full, 0], hip[1] + [0, -(full + 0.07), 0]])
+    new, residual = ik.two_bone_ik(rot, root, sk, "ankle", target, return_residual=True)
+    assert residual[0] == 0.0 and residual[1] == pytest.approx(0.07, abs=1e-12)
+    reached = _positions(new, root, sk)[:, 3]
+    assert np.linalg.norm(reached[0] - target[0]) < 1e-9
+    assert np.linalg.norm(reached[1] - target[1]) == pytest.approx(0.07, abs=1e-9)

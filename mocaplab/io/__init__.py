@@ -2,6 +2,8 @@
 
 * :func:`load_bvh`, :func:`save_bvh`: Biovision Hierarchy.
 * :func:`load_asf_amc`: the CMU's native Acclaim skeleton/motion pair.
+* :func:`load`: any of them by extension, in metres and Y up (frame rate
+  snapped, optional Z-up conversion and joint roles).
 
 Every malformed file raises :class:`MocapFormatError` (a ``ValueError``).
 """
@@ -9,7 +11,12 @@ Every malformed file raises :class:`MocapFormatError` (a ``ValueError``).
 from .bvh import estimate_scale, load_bvh, save_bvh
 from .errors import MocapFormatError
 
-__all__ = ["MocapFormatError", "load_bvh", "save_bvh", "estimate_scale", "load_asf_amc"]
+# Imported eagerly, not through __getattr__: the function has the name of its
+# module, and a lazy lookup would find the submodule instead once anything had
+# imported ``mocaplab.io.load`` (the import system sets the package attribute).
+from .load import load
+
+__all__ = ["MocapFormatError", "load", "load_bvh", "save_bvh", "estimate_scale", "load_asf_amc"]
 
 
 def __getattr__(name: str):  # pragma: no cover - thin lazy import

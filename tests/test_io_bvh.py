@@ -468,3 +468,13 @@ def test_load_does_not_return_partial_motion_on_error(tmp_path):
     text = edit(CHAIN, 25, "1 2 3 90 0 0 0 0 90 0 0 oops")
     with pytest.raises(MocapFormatError):
         load_bvh(write(tmp_path, text), scale=0.01)
+
+
+def test_estimate_scale_leaves_out_a_reference_root():
+    # a figure 170 units tall whose pelvis sits 4000 units from a reference root at the origin
+    names = ["Reference", "Pelvis", "Knee", "Foot", "Head"]
+    offsets = [[0, 0, 0], [4000.0, 90, 0], [0, -45, 0], [0, -45, 0], [0, 80, 0]]
+    sk = Skeleton(names, [-1, 0, 1, 2, 1], offsets)
+    assert estimate_scale(sk) == (0.01, "centimetres")
+    # the same figure with the pelvis as the root
+    assert estimate_scale(Skeleton(names[1:], [-1, 0, 1, 0], offsets[1:])) == (0.01, "centimetres")

@@ -356,12 +356,17 @@ def estimate_scale(skeleton_in_file_units: Skeleton) -> tuple[float, str]:
     -----
     The extent of the rest pose (all rotations zero; joints and end sites) is
     its largest side along x, y or z; the unit making that extent closest to
-    1.7 m in ratio (``|log(extent * unit / 1.7)|`` smallest) wins.
+    1.7 m in ratio (``|log(extent * unit / 1.7)|`` smallest) wins.  A root
+    with a single child and no end site is a reference joint (often placed
+    at the origin while its child, the pelvis, sits at the first frame's
+    world position): it is left out of the extent.
     """
     sk = skeleton_in_file_units
     rest = Motion(sk, np.tile([0.0, 0.0, 0.0, 1.0], (1, sk.n_joints, 1)), sk.offsets[None, 0], 1.0)
+    reference_root = sk.n_joints > 3 and int(np.sum(sk.parents == 0)) == 1 and not np.any(sk.end_site_parents == 0)
     with np.errstate(all="ignore"):
-        pts = np.concatenate([rest.global_positions()[0], rest.end_site_positions()[0]])
+        joints = rest.global_positions()[0][1:] if reference_root else rest.global_positions()[0]
+        pts = np.concatenate([joints, rest.end_site_positions()[0]])
         extent = float(np.max(np.ptp(pts, axis=0)))
     scores = {}
     for unit, metres in CANDIDATE_UNITS.items():

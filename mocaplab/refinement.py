@@ -51,7 +51,7 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
 import numpy as np
@@ -994,10 +994,12 @@ def effector_goals(
 
 
 # ------------------------------------------------------------------ refine
-def _contacts_for(motion: Motion, contacts: Contacts | None, reference: Motion | None) -> Contacts:
+def _contacts_for(
+    motion: Motion, contacts: Contacts | None, reference: Motion | None, roles: Mapping[str, Any] | None = None
+) -> Contacts:
     if contacts is not None:
         return contacts
-    return foot_contacts(reference if reference is not None else motion)
+    return foot_contacts(reference if reference is not None else motion, roles=roles)
 
 
 def refine(
@@ -1012,6 +1014,7 @@ def refine(
     levels: int = 3,
     adjust_root: bool = True,
     dls_options: dict[str, Any] | None = None,
+    roles: Mapping[str, Any] | None = None,
 ) -> Motion:
     """Clean foot skate and enforce end-effector constraints (Kim et al. 2009 s4.3).
 
@@ -1039,6 +1042,10 @@ def refine(
         Lower the root where a leg cannot reach its plant.
     dls_options : dict, optional
         Options of :func:`~mocaplab.ik.dls_ik` for end effectors with a chain.
+    roles : mapping, optional
+        Joint-role overrides for the default foot contacts
+        (:func:`mocaplab.roles.resolve_roles`); the feet are the skeleton's
+        ankle and toe roles.
 
     Returns
     -------
@@ -1064,7 +1071,7 @@ def refine(
     targets = [_world_targets(ee, [motion], {}, k) for k, ee in enumerate(end_effectors)]
     return _refine_one(
         motion, end_effectors, targets, contacts=contacts, reference=reference, feet=feet, blend=blend,
-        spacing=spacing, levels=levels, adjust_root=adjust_root, dls_options=dls_options,
+        spacing=spacing, levels=levels, adjust_root=adjust_root, dls_options=dls_options, roles=roles,
     )
 
 
@@ -1081,10 +1088,11 @@ def _refine_one(
     levels: int,
     adjust_root: bool,
     dls_options: dict[str, Any] | None,
+    roles: Mapping[str, Any] | None = None,
 ) -> Motion:
     goals: list[Goal] = []
     if feet:
-        c = _contacts_for(motion, contacts, reference)
+        c = _contacts_for(motion, contacts, reference, roles)
         goals += foot_goals(motion, c, reference=reference, blend=blend)
     goals += effector_goals(motion, end_effectors, targets, blend=blend)
     return enforce_goals(
@@ -1209,12 +1217,13 @@ def refine_scene(
 
 
 def _options(options: dict[str, Any]) -> dict[str, Any]:
-    allowed = {"feet", "blend", "spacing", "levels", "adjust_root", "dls_options"}
+    allowed = {"feet", "blend", "spacing", "levels", "adjust_root", "dls_options", "roles"}
     unknown = set(options) - allowed
     if unknown:
         raise TypeError(f"Unknown refine options {sorted(unknown)}; allowed: {sorted(allowed)}")
     defaults: dict[str, Any] = {
         "feet": True, "blend": 0.1, "spacing": 0.25, "levels": 3, "adjust_root": True, "dls_options": None,
+        "roles": None,
     }
     defaults.update(options)
     return defaults

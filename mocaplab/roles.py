@@ -205,8 +205,7 @@ def _parse(name: str) -> tuple[Literal["left", "right"] | None, str, tuple[int, 
             if len(words) == 1:
                 break
             side: Literal["left", "right"] = "left" if lower[pos] in _LEFT_WORDS else "right"
-            rest = lower[:pos] + lower[pos + 1 :]
-            return side, "".join(rest), (words[pos][1], words[pos][2], words[pos][0])
+            return side, "".join(lower[:pos] + lower[pos + 1 :]), (words[pos][1], words[pos][2], words[pos][0])
     joined = "".join(lower)
     # a side glued to a known word: lfemur, rtibia, leftfoot, footleft
     for word, s in (("left", "left"), ("right", "right"), ("l", "left"), ("r", "right")):
@@ -519,9 +518,10 @@ def infer_roles(
         a, key = roles.get(f"{side}_ankle"), f"{side}_toe"
         if a is None or key in roles:
             continue
-        below = tree.descendants(a)
-        toes = [j for j in below if "toe" in kinds[j] and "ankle" not in kinds[j]] + [
-            j for j in below if "toe" in kinds[j]
+        under = tree.descendants(a)
+        # a toe word first (LeftToeBase), else a foot word below the ankle (SMPL left_foot)
+        toes = [j for j in under if "toe" in kinds[j] and "ankle" not in kinds[j]] or [
+            j for j in under if "toe" in kinds[j]
         ]
         if toes:
             roles[key] = min(toes, key=lambda j: len(tree.ancestors(j)))

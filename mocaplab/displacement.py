@@ -57,10 +57,24 @@ __all__ = [
     "fit_hierarchical",
     "displacement_between",
     "DisplacementMap",
+    "blend_ramp",
 ]
 
 Array = NDArray[np.float64]
 DEGREE = 3
+
+
+def blend_ramp(u: ArrayLike) -> NDArray[np.float64]:
+    """The one blend ramp of mocaplab: ``6u^5 - 15u^4 + 10u^3`` on [0, 1] (clipped outside).
+
+    Its first and second derivatives vanish at both ends, so a constraint,
+    a displacement or a fade blended in with it adds no velocity or
+    acceleration jump (the ZMP of physical touch-up depends on
+    accelerations).  Every blend in the package (constraint windows, foot
+    plants, flight windows, IK fades, pose transitions) uses it.
+    """
+    x: NDArray[np.float64] = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
+    return x * x * x * (x * (6.0 * x - 15.0) + 10.0)
 
 
 def uniform_knots(n_frames: int, spacing: float) -> Array:

@@ -59,6 +59,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import kinematics, quat
+from .displacement import blend_ramp
 from .motion import Motion, Skeleton
 
 __all__ = [
@@ -86,9 +87,8 @@ _POLE_FADE = (0.05, 0.15)
 
 
 def _ramp(x: Array, edges: tuple[float, float]) -> Array:
-    """Smoothstep from 0 (x <= edges[0]) to 1 (x >= edges[1])."""
-    u = np.clip((x - edges[0]) / (edges[1] - edges[0]), 0.0, 1.0)
-    return u * u * (3.0 - 2.0 * u)
+    """From 0 (x <= edges[0]) to 1 (x >= edges[1]) by :func:`~mocaplab.displacement.blend_ramp`."""
+    return blend_ramp((x - edges[0]) / (edges[1] - edges[0]))
 
 
 # --------------------------------------------------------------------- helpers

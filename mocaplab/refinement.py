@@ -55,12 +55,12 @@ from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 from scipy.ndimage import minimum_filter1d
 
 from . import kinematics, quat
 from .contacts import Contacts, foot_contacts
-from .displacement import DisplacementMap, displacement_between
+from .displacement import DisplacementMap, blend_ramp, displacement_between
 from .ik import _joint, _two_bone_locals, aim_deltas, dls_ik, hinge_axes, limb_joints, two_bone_deltas, two_bone_ik
 from .motion import Motion, Skeleton, _owned
 
@@ -89,17 +89,6 @@ JointRef = str | int
 
 
 # ----------------------------------------------------------------- blending
-def blend_ramp(u: ArrayLike) -> Array:
-    """The C2 ramp ``6u^5 - 15u^4 + 10u^3`` on [0, 1] (clipped outside).
-
-    Its first and second derivatives vanish at both ends, so a constraint
-    blended in with it adds no velocity or acceleration jump (the ZMP of
-    physical touch-up depends on accelerations).
-    """
-    x: Array = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
-    return x * x * x * (x * (6.0 * x - 15.0) + 10.0)
-
-
 def _check_intervals(intervals: Sequence[tuple[int, int]], n_frames: int) -> list[tuple[int, int]]:
     out = []
     for iv in intervals:

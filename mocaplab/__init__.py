@@ -12,25 +12,45 @@ documented once in :mod:`mocaplab.motion`.
 
 from __future__ import annotations
 
+import importlib
+from typing import Any
+
 from .motion import Motion, Skeleton, concatenate
 
 __version__ = "0.1.0"
 
-__all__ = ["Motion", "Skeleton", "concatenate", "load", "load_bvh", "save_bvh", "cmu", "refine", "__version__"]
+# One entry point per task, imported on first use so `import mocaplab` stays
+# cheap (as scipy does): name -> (module, attribute).
+_ENTRY_POINTS = {
+    "load": ("mocaplab.io", "load"),
+    "load_bvh": ("mocaplab.io", "load_bvh"),
+    "save_bvh": ("mocaplab.io", "save_bvh"),
+    "load_asf_amc": ("mocaplab.io", "load_asf_amc"),
+    "cmu": ("mocaplab.data", "cmu"),
+    "edit": ("mocaplab.editing", "edit"),
+    "SceneEditor": ("mocaplab.editing", "SceneEditor"),
+    "refine": ("mocaplab.refinement", "refine"),
+    "touch_up": ("mocaplab.physics", "touch_up"),
+    "extract": ("mocaplab.staggered", "extract"),
+}
+_SUBMODULES = (
+    "contacts", "data", "displacement", "editing", "ik", "io", "kinematics", "motion", "physics", "quat",
+    "refinement", "roles", "staggered",
+)
+
+__all__ = ["Motion", "Skeleton", "concatenate", *_ENTRY_POINTS, "__version__"]
 
 
-def __getattr__(name: str):
-    # light lazy entry points, so `import mocaplab` stays cheap
-    if name in ("load", "load_bvh", "save_bvh", "load_asf_amc"):
-        from . import io
-
-        return getattr(io, name)
-    if name == "cmu":
-        from .data import cmu
-
-        return cmu
-    if name == "refine":
-        from .refinement import refine
-
-        return refine
+def __getattr__(name: str) -> Any:
+    if name in _ENTRY_POINTS:
+        module, attr = _ENTRY_POINTS[name]
+        value = getattr(importlib.import_module(module), attr)
+        globals()[name] = value
+        return value
+    if name in _SUBMODULES:
+        return importlib.import_module(f"{__name__}.{name}")
     raise AttributeError(f"module 'mocaplab' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(__all__) | set(_SUBMODULES))

@@ -33,7 +33,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .motion import Motion
+from .motion import Motion, readonly
 from .roles import resolve_roles
 
 __all__ = [
@@ -86,8 +86,7 @@ class Contacts:
         if mask.dtype != np.bool_:
             if not np.all((mask == 0) | (mask == 1)):
                 raise ValueError(f"Expected a boolean `mask`, got dtype {mask.dtype} with values other than 0/1")
-        mask = np.array(mask, dtype=bool, copy=True)
-        mask.flags.writeable = False
+        mask = readonly(np.array(mask, dtype=bool, copy=True))
         fps = float(self.fps)
         if not np.isfinite(fps) or fps <= 0:
             raise ValueError(f"Expected `fps` > 0, got {self.fps!r}")

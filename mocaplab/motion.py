@@ -43,10 +43,30 @@ VALID_CHANNELS = frozenset(
 )
 
 
+def readonly(arr: NDArray[Any]) -> NDArray[Any]:
+    """A read-only view of ``arr`` that cannot be made writeable again.
+
+    The array and the array that owns its memory are made read-only in
+    place and a view is returned: numpy refuses ``flags.writeable = True``
+    on a view whose memory owner is read-only, so data handed out by a
+    frozen object stays frozen (a read-only array that owns its memory
+    could be switched back).  Use it only on fresh arrays nobody else
+    writes to.
+    """
+    owner = arr
+    while isinstance(owner.base, np.ndarray):
+        owner = owner.base
+    if owner.base is not None:  # memory owned by another kind of object: copy it
+        arr = owner = np.array(arr, copy=True)
+    owner.flags.writeable = False
+    arr.flags.writeable = False
+    view = arr.view()
+    view.flags.writeable = False
+    return view
+
+
 def _frozen(a: ArrayLike, dtype: Any = float) -> NDArray[Any]:
-    out = np.array(a, dtype=dtype, copy=True)
-    out.flags.writeable = False
-    return out
+    return readonly(np.array(a, dtype=dtype, copy=True))
 
 
 class _Owned:
@@ -84,8 +104,7 @@ def _take(value: Any, dtype: Any = float) -> tuple[NDArray[Any], bool]:
 def _freeze(arr: NDArray[Any], fresh: bool) -> NDArray[Any]:
     if not fresh or not arr.flags.c_contiguous and not arr.flags.f_contiguous:
         arr = np.array(arr, copy=True)
-    arr.flags.writeable = False
-    return arr
+    return readonly(arr)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -391,9 +410,7 @@ class Motion:
             self.skeleton.parents,
             translations=self.translations,
         )
-        grot.flags.writeable = False
-        gpos.flags.writeable = False
-        return grot, gpos
+        return readonly(grot), readonly(gpos)
 
     def global_positions(self) -> NDArray[np.float64]:
         """World joint positions, shape (F, J, 3), metres (read-only, cached)."""

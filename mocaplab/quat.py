@@ -82,6 +82,8 @@ def rotate(q: ArrayLike, v: ArrayLike) -> Array:
     """Rotate vectors ``v`` (..., 3) by unit quaternions ``q`` (..., 4)."""
     q = np.asarray(q, dtype=float)
     v = np.asarray(v, dtype=float)
+    if q.shape[-1:] != (4,) or v.shape[-1:] != (3,):
+        raise ValueError(f"Expected `q` of shape (..., 4) and `v` of shape (..., 3), got {q.shape} and {v.shape}")
     qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
     # t = 2 (u x v);  v' = v + w t + u x t

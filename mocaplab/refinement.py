@@ -62,7 +62,7 @@ from . import kinematics, quat
 from .contacts import Contacts, foot_contacts
 from .displacement import DisplacementMap, blend_ramp, displacement_between
 from .ik import _joint, _two_bone_locals, aim_deltas, dls_ik, hinge_axes, limb_joints, two_bone_deltas, two_bone_ik
-from .motion import Motion, Skeleton, _owned
+from .motion import Motion, Skeleton, _owned, readonly
 
 __all__ = [
     "Goal",
@@ -179,8 +179,7 @@ class Goal:
         k = np.ones(len(w)) if self.stiffness is None else np.array(self.stiffness, dtype=float)
         if k.shape != w.shape or np.any(k <= 0) or not np.all(np.isfinite(k)):
             raise ValueError(f"Expected positive finite Goal `stiffness` of shape {w.shape}, got shape {k.shape}")
-        k.flags.writeable = False
-        object.__setattr__(self, "stiffness", k)
+        object.__setattr__(self, "stiffness", readonly(k))
         if t.ndim != 2 or t.shape[1] != 3:
             raise ValueError(f"Expected Goal `targets` of shape (F, 3), got {t.shape}")
         if w.shape != (t.shape[0],):
@@ -193,10 +192,8 @@ class Goal:
             raise ValueError(f"Expected Goal `kind` 'limb', 'foot' or 'toe', got {self.kind!r}")
         if self.chain is not None and self.kind != "limb":
             raise ValueError("A Goal `chain` is allowed only with kind='limb'")
-        t.flags.writeable = False
-        w.flags.writeable = False
-        object.__setattr__(self, "targets", t)
-        object.__setattr__(self, "weights", w)
+        object.__setattr__(self, "targets", readonly(t))
+        object.__setattr__(self, "weights", readonly(w))
         if self.chain is not None:
             object.__setattr__(self, "chain", tuple(self.chain))
 
@@ -911,8 +908,7 @@ class EndEffector:
             t = np.array(self.target, dtype=float)
             if t.ndim not in (1, 2) or t.shape[-1] != 3:
                 raise ValueError(f"Expected EndEffector `target` of shape (3,) or (F, 3), got {t.shape}")
-            t.flags.writeable = False
-            object.__setattr__(self, "target", t)
+            object.__setattr__(self, "target", readonly(t))
 
     def intervals(self, n_frames: int) -> list[tuple[int, int]]:
         """The constrained frames as half-open intervals."""

@@ -41,3 +41,25 @@ def test_core_modules_import_no_ui_or_heavy_packages():
         assert expected in modules
     bad = sorted(loaded.intersection(FORBIDDEN))
     assert not bad, f"core modules imported {bad}"
+
+
+API_SCRIPT = r"""
+import json
+import mocaplab
+reached = {name: type(getattr(mocaplab, name)).__name__ for name in ("io", "editing", "physics", "staggered", "contacts", "data", "roles")}
+print(json.dumps({"dir": dir(mocaplab), "all": mocaplab.__all__, "reached": reached}))
+"""
+
+
+def test_the_api_is_discoverable_from_a_plain_import():
+    out = subprocess.run([sys.executable, "-c", API_SCRIPT], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    report = json.loads(out.stdout.strip().splitlines()[-1])
+    entry = ["load", "save_bvh", "cmu", "edit", "SceneEditor", "refine", "touch_up", "extract"]
+    assert set(entry) <= set(report["all"]) and set(entry) <= set(report["dir"])
+    assert all(kind == "module" for kind in report["reached"].values()), report["reached"]
+    assert "annotations" not in report["dir"] and not any(n.startswith("_") and n != "__version__" for n in report["dir"])
+    import mocaplab
+
+    for name in entry:
+        assert callable(getattr(mocaplab, name)), name

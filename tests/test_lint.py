@@ -1,4 +1,4 @@
-"""The code base stays lint-clean (ruff, configured in pyproject.toml)."""
+"""The code base stays lint-clean (ruff) and the core type-checks (mypy), both configured in pyproject.toml."""
 
 from __future__ import annotations
 
@@ -17,4 +17,13 @@ def test_ruff_is_clean() -> None:
     if not Path(ruff).exists():
         pytest.skip("ruff is not installed (pip install -e '.[dev]')")
     out = subprocess.run([ruff, "check", "--no-cache", "."], cwd=ROOT, capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_mypy_passes_on_the_core() -> None:
+    """The typed core (configured in pyproject.toml: ``files = ["mocaplab"]``) type-checks."""
+    mypy = shutil.which("mypy") or str(Path(sys.executable).parent / "mypy")
+    if not Path(mypy).exists():
+        pytest.skip("mypy is not installed (pip install -e '.[dev]')")
+    out = subprocess.run([mypy, "--no-incremental"], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stdout + out.stderr

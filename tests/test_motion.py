@@ -291,3 +291,32 @@ def test_concatenate_accepts_frame_rates_equal_to_file_precision(cmu):
     assert concatenate([walk, from_file]).n_frames == 20
     with pytest.raises(ValueError, match="fps"):
         concatenate([walk, walk.replace(fps=60.0)])
+
+
+def test_public_arrays_cannot_be_made_writeable_again(rng):
+    from mocaplab.contacts import Contacts
+    from mocaplab.refinement import Goal
+
+    m0 = random_motion(rng)
+    m = m0.replace(translations=np.broadcast_to(m0.skeleton.offsets, (m0.n_frames, m0.n_joints, 3)))
+    sk = m.skeleton
+    arrays = {
+        "rotations": m.rotations,
+        "root_positions": m.root_positions,
+        "translations": m.translations,
+        "offsets": sk.offsets,
+        "parents": sk.parents,
+        "end_site_parents": sk.end_site_parents,
+        "end_site_offsets": sk.end_site_offsets,
+        "global_positions": m.global_positions(),
+        "global_rotations": m.global_rotations(),
+        "contacts.mask": Contacts(("a",), np.zeros((4, 1), dtype=bool), 30.0).mask,
+    }
+    g = Goal(sk.names[2], np.zeros((m.n_frames, 3)), np.ones(m.n_frames))
+    arrays.update({"goal.targets": g.targets, "goal.weights": g.weights, "goal.stiffness": g.stiffness})
+    for name, a in arrays.items():
+        assert not a.flags.writeable, name
+        with pytest.raises(ValueError):
+            a.flags.writeable = True
+        with pytest.raises(ValueError):
+            a[...] = 0

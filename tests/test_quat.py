@@ -173,3 +173,10 @@ def test_functions_do_not_mutate_inputs(rng):
     v0 = v.copy()
     quat.mul(a, b), quat.inv(a), quat.rotate(a, v), quat.slerp(a, b, 0.3), quat.unroll(a), quat.log(a)
     assert np.array_equal(a, a0) and np.array_equal(b, b0) and np.array_equal(v, v0)
+
+
+def test_rotate_checks_shapes():
+    with pytest.raises(ValueError, match=r"Expected `q` of shape \(\.\.\., 4\) and `v` of shape \(\.\.\., 3\), got \(4,\) and \(4,\)"):
+        quat.rotate([0, 0, 0, 1.0], [1.0, 2, 3, 4])
+    with pytest.raises(ValueError, match="got"):
+        quat.rotate([0, 0, 1.0], [1.0, 2, 3])

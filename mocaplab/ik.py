@@ -181,16 +181,39 @@ def _check_rotations(rotations: ArrayLike, root_positions: ArrayLike, skeleton: 
 def limb_joints(skeleton: Skeleton, end: JointRef) -> tuple[int, int, int]:
     """The ``(upper, middle, end)`` joints of the limb ending at ``end``.
 
-    The middle joint is ``end``'s parent and the upper joint its grandparent:
-    ``limb_joints(sk, "LeftFoot")`` gives LeftUpLeg, LeftLeg, LeftFoot on the
-    CMU skeleton, ``"RightHand"`` gives RightArm, RightForeArm, RightHand.
+    When ``end`` is an ankle or a wrist of the skeleton's joint roles
+    (:attr:`~mocaplab.motion.Skeleton.roles`), the limb is that side's
+    hip, knee and ankle (shoulder, elbow and wrist), so helper joints in
+    between (twist bones, zero-length offsets) are carried rigidly.
+    Otherwise the middle joint is ``end``'s parent and the upper joint its
+    grandparent: ``limb_joints(sk, "LeftFoot")`` gives LeftUpLeg, LeftLeg,
+    LeftFoot on the CMU skeleton, ``"RightHand"`` gives RightArm,
+    RightForeArm, RightHand.
     """
     e = _joint(skeleton, end, "end")
+    roles = _roles_or_none(skeleton)
+    if roles is not None:
+        name = skeleton.names[e]
+        for side in ("left", "right"):
+            for parts in (("hip", "knee", "ankle"), ("shoulder", "elbow", "wrist")):
+                keys = [f"{side}_{p}" for p in parts]
+                if roles.get(keys[2]) == name and all(k in roles for k in keys):
+                    u, m, _ = roles.indices(*keys)
+                    return u, m, e
     m = int(skeleton.parents[e])
     u = int(skeleton.parents[m]) if m >= 0 else -1
     if m < 0 or u < 0:
         raise ValueError(f"Joint {skeleton.names[e]!r} needs a parent and a grandparent to be a limb end")
     return u, m, e
+
+
+def _roles_or_none(skeleton: Skeleton) -> Any:
+    from .roles import RolesError
+
+    try:
+        return skeleton.roles
+    except RolesError:
+        return None
 
 
 # ------------------------------------------------------------ two-bone kernel

@@ -302,3 +302,22 @@ def test_unreachable_targets_are_reported():
     reached = _positions(new, root, sk)[:, 3]
     assert np.linalg.norm(reached[0] - target[0]) < 1e-9
     assert np.linalg.norm(reached[1] - target[1]) == pytest.approx(0.07, abs=1e-9)
+
+
+def test_limb_joints_follow_the_roles_past_helper_joints():
+    # hip -> knee -> twist (zero length) -> ankle: the limb skips the twist bone
+    sk = Skeleton(
+        ["Hips", "UpperLeg_L", "LowerLeg_L", "LowerLegTwist_L", "Foot_L", "UpperLeg_R", "LowerLeg_R", "Foot_R", "Spine", "Head"],
+        [-1, 0, 1, 2, 3, 0, 5, 6, 0, 8],
+        [[0, 1, 0], [0.1, 0, 0], [0, -0.45, 0], [0, 0, 0], [0, -0.45, 0], [-0.1, 0, 0], [0, -0.45, 0], [0, -0.45, 0],
+         [0, 0.5, 0], [0, 0.2, 0]],
+    )
+    assert ik.limb_joints(sk, "Foot_L") == (1, 2, 4)
+    assert ik.limb_joints(sk, "Foot_R") == (5, 6, 7)
+    rot = quat.identity((2, sk.n_joints))
+    rot[:, 2] = quat.from_axis_angle(np.array([1.0, 0, 0]), 0.5)
+    root = np.array([[0, 1.0, 0]] * 2)
+    target = _positions(rot, root, sk)[:, 4] + [0, 0.05, 0.02]
+    new = ik.two_bone_ik(rot, root, sk, "Foot_L", target)
+    assert np.abs(_positions(new, root, sk)[:, 4] - target).max() < 1e-9
+    assert np.allclose(new[:, 3], rot[:, 3])  # the twist joint is carried rigidly

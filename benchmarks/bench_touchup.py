@@ -14,9 +14,11 @@ Xeon).  Here:
 4. for information, the full default schedule (ground and flight) on 1500
    frames of CMU 49_03 (jumps and hops).
 
-Each is timed with the default footplant step (``"plant"``: the refinement
-module's plant goals and IK layer) and with the analytic leg IK (``"ik"``,
-closest to the paper's choice of Kovar et al. 2002).  Figures are medians of
+Each is timed with the default footplant goals (``"plant"``: the refinement
+module's plant goals, one plant per contact) and with the ``"ik"`` goals
+(each planted joint back where the input has it, frame by frame, closest to
+the paper's choice of Kovar et al. 2002); both are met by the refinement
+module's IK layer.  Figures are medians of
 repeats, wall-clock and CPU time of this process (they differ when the machine
 is shared: other processes stretch the wall-clock time, so ratios are given
 for both); body, contacts and the bent input are built outside the timed

@@ -114,13 +114,12 @@ def interval_weights(n_frames: int, intervals: Sequence[tuple[int, int]], *, win
         raise ValueError(f"Expected `window` to be an integer >= 0 frames, got {window!r}")
     ivs = _check_intervals(intervals, n_frames)
     i = np.arange(n_frames, dtype=float)
-    out = np.zeros((len(ivs), n_frames))
+    if not ivs:
+        return np.zeros((0, n_frames))
+    ab = np.asarray(ivs, dtype=float)
+    a, b = ab[:, :1], ab[:, 1:]
     w = float(window) + 1.0
-    for k, (a, b) in enumerate(ivs):
-        rise = blend_ramp((i - (a - w)) / w)
-        fall = blend_ramp(((b - 1 + w) - i) / w)
-        out[k] = np.minimum(rise, fall)
-    return out
+    return np.minimum(blend_ramp((i - (a - w)) / w), blend_ramp(((b - 1 + w) - i) / w))
 
 
 def blend_weights(n_frames: int, intervals: Sequence[tuple[int, int]], *, window: int) -> Array:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_physics_body import LAYOUTS
 
 from mocaplab import quat
 from mocaplab.contacts import foot_contacts
@@ -89,6 +90,32 @@ def test_presets_on_the_cmu_skeleton(walk30):
     assert preset_mask(sk, "LeftLeg").sum() == 3
     with pytest.raises(KeyError, match="preset"):
         preset_mask(sk, "tail")
+
+
+def test_presets_follow_the_roles(cmu, walk30):
+    sk = walk30.skeleton
+    # the user says the CMU "LeftShoulder" joints are the upper arms: the arms preset grows by them
+    arms = preset_mask(sk, "arms", roles={"left_shoulder": "LeftShoulder", "right_shoulder": "RightShoulder"})
+    assert arms.sum() == 14 and arms[sk.index("LeftShoulder")] and not arms[sk.index("Spine1")]
+    state = start(walk30[:40], roles={"left_shoulder": "LeftShoulder", "right_shoulder": "RightShoulder"})
+    assert link_sets(sk, GROUND_SCHEDULE[2], roles=state.roles).s2_tops == (sk.index("LeftShoulder"), sk.index("RightShoulder"))
+    # the Daz skeleton: the upper body is the abdomen's subtree, the arms hang from the upper arms
+    salsa = cmu("60_10").skeleton
+    upper = preset_mask(salsa, "upper_body")
+    assert upper[salsa.index("abdomen")] and not upper[salsa.index("hip")] and not upper[salsa.index("lThigh")]
+    assert upper.sum() == 34
+    assert link_sets(salsa, GROUND_SCHEDULE[2]).s2_tops == (salsa.index("rShldr"), salsa.index("lShldr"))
+    # a skeleton without arms says what is missing
+    from mocaplab.motion import Skeleton
+    from mocaplab.roles import RolesError
+
+    stick = Skeleton(["Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "RightUpLeg", "RightLeg", "RightFoot", "Spine", "Neck", "Head"],
+                     [-1, 0, 1, 2, 0, 4, 5, 0, 7, 8],
+                     [[0, 1, 0], [0.1, 0, 0], [0, -0.45, 0], [0, -0.45, 0], [-0.1, 0, 0], [0, -0.45, 0], [0, -0.45, 0],
+                      [0, 0.2, 0], [0, 0.3, 0], [0, 0.1, 0]])
+    assert preset_mask(stick, "upper_body").sum() == 3
+    with pytest.raises(RolesError, match="left_shoulder.*'arms' preset"):
+        preset_mask(stick, "arms")
 
 
 def test_link_sets_shapes(walk30):
@@ -212,23 +239,33 @@ def test_step_function_and_session_agree_with_touch_up(walk30):
     assert s.index == 6 and s.current.iteration == 2
 
 
-def test_ik_footplants_put_planted_ankles_back(walk30):
-    from mocaplab.physics.touchup import _ik_footplants
+def test_ik_footplants_put_planted_feet_back(walk30):
+    """The "ik" goals: planted ankles and toes back where the input has them (the IK layer of refinement)."""
+    from mocaplab.physics.touchup import _footplant_fn, _posed
 
     c = foot_contacts(walk30)
     bent = bend(walk30, 2.0)
     moved = touch_up(bent, contacts=c, schedule=GROUND_SCHEDULE[0], iterations=1, footplants=None).final
-    fixed = _ik_footplants(moved, c, bent)
+    fixed = _footplant_fn("ik", c, bent)(_posed(moved)).motion
     sk = walk30.skeleton
     for ankle, toe in (("LeftFoot", "LeftToeBase"), ("RightFoot", "RightToeBase")):
         planted = c.of(ankle) | c.of(toe)
         inner = planted & np.roll(planted, 8) & np.roll(planted, -8)  # well inside a plant (weight 1)
+        for j in (sk.index(ankle), sk.index(toe)):
+            before = np.linalg.norm(moved.global_positions()[inner, j] - bent.global_positions()[inner, j], axis=1)
+            after = np.linalg.norm(fixed.global_positions()[inner, j] - bent.global_positions()[inner, j], axis=1)
+            assert before.max() > 5e-4 and after.max() < 1e-6
+        # the foot may keep a turn about its own axis (ankle to toe), no other
         j = sk.index(ankle)
-        before = np.linalg.norm(moved.global_positions()[inner, j] - bent.global_positions()[inner, j], axis=1)
-        after = np.linalg.norm(fixed.global_positions()[inner, j] - bent.global_positions()[inner, j], axis=1)
-        assert before.max() > 1e-3 and after.max() < 1e-6
-        same = np.abs(np.sum(fixed.global_rotations()[inner, j] * bent.global_rotations()[inner, j], axis=-1))
-        assert np.allclose(same, 1.0, atol=1e-9)
+        delta = quat.mul(fixed.global_rotations()[inner, j], quat.inv(bent.global_rotations()[inner, j]))
+        axis = quat.log(delta)
+        foot = bent.global_positions()[inner, sk.index(toe)] - bent.global_positions()[inner, j]
+        across = np.linalg.norm(np.cross(axis, foot / np.linalg.norm(foot, axis=1, keepdims=True)), axis=1)
+        assert across.max() < 1e-6
+    # frames far from any plant are left alone
+    free = ~np.convolve((c.of("LeftFoot") | c.of("LeftToeBase")).astype(float), np.ones(15), "same").astype(bool)
+    j = sk.index("LeftFoot")
+    assert free.any() and np.allclose(fixed.global_positions()[free, j], moved.global_positions()[free, j], atol=1e-12)
 
 
 def test_options_are_validated(walk30):
@@ -247,6 +284,25 @@ def test_options_are_validated(walk30):
     touch_up(walk30, iterations=1, footplants=fix)
     # only the first ground adjustment (lower body in S2) can move the feet
     assert len(seen) == 1 and seen[0] is walk30
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_touch_up_does_not_depend_on_names_or_a_static_root(cmu, layout):
+    """A renamed skeleton, an unnamed one and a static joint 0 above the pelvis give the same touch-up."""
+    convert, shift = LAYOUTS[layout]
+    for clip, radius in (("16_15", 2.0), ("16_05", 1.0)):  # a walk (ground schedule), a jump (and flight)
+        motion = bend(cmu(clip).resample(30)[:90], radius)
+        other = convert(motion)
+        h0, h1 = touch_up(motion, iterations=1), touch_up(other, iterations=1)  # no name given
+        assert len(h1) == len(h0) and h1.labels == h0.labels
+        assert np.allclose(h1.mean_zmp_distance, h0.mean_zmp_distance, atol=1e-6)
+        for m0, m1 in zip(h0.motions[1:], h1.motions[1:], strict=True):
+            g0, g1 = m0.global_positions(), m1.global_positions()[:, shift:]
+            assert np.abs(g1 - g0).max() < 1e-3, (clip, m1)
+        if layout == "static_root":  # the translation channels are carried through every step
+            assert all(m.translations is not None and np.array_equal(m.translations, other.translations) for m in h1.motions)
+        assert np.abs(h0.final.global_positions() - motion.global_positions()).max() > 0.01  # it did something
 
 
 # ------------------------------------------------------------------- claims

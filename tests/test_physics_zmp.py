@@ -175,6 +175,22 @@ def test_fit_masses_ignores_the_overall_scale(cmu):
     assert a.after == pytest.approx(b.after, rel=1e-6)
 
 
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_fit_masses_on_any_skeleton_layout(cmu):
+    from test_physics_body import game_studio, static_root
+
+    walk = cmu("16_15").resample(30)
+    ref = fit_masses(walk, max_iterations=20)
+    for other in (game_studio(walk), static_root(walk)):
+        fit = fit_masses(other, max_iterations=20)  # default body and contacts from the roles
+        assert fit.body.link_names == ref.body.link_names
+        assert np.allclose(fit.body.masses, ref.body.masses, rtol=1e-6)
+        assert fit.after == pytest.approx(ref.after, rel=1e-6)
+    # role overrides reach the default body: the neck one joint higher adds a middle-trunk link
+    moved = fit_masses(walk, max_iterations=5, roles={"neck": "Neck1"})
+    assert moved.body.n_links == ref.body.n_links + 1 and "middle_trunk_3" in moved.body.link_names
+
+
 def test_fit_masses_validates_its_inputs(cmu):
     walk = cmu("16_15")[:60]
     with pytest.raises(ValueError, match="at least one"):

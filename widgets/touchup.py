@@ -10,8 +10,9 @@ The widget is a thin view over :class:`mocaplab.physics.TouchUpSession`:
   ``mocaplab-touchup-step`` and the label with the mean ZMP distance the
   class ``mocaplab-touchup-mean``;
 * a **schedule table** edits each adjustment's link sets (joint names or
-  presets, comma separated), ``sigma`` (seconds), ``rho`` and stage; an
-  edit applies from the current step on;
+  presets, comma separated; presets come from the skeleton's joint roles,
+  so they work on any naming convention), ``sigma`` (seconds), ``rho`` and
+  stage; an edit applies from the current step on;
 * **Figure 8**: the ZMP's distance outside the support polygon on every
   frame, for the input and for the current step;
 * **Figure 9**: the mean distance after each step so far;
@@ -200,7 +201,9 @@ class TouchUpStepper:
         Keyword options of the viewer (``window_size``, ``backend`` ...).
     **options
         Options of :class:`mocaplab.physics.TouchUpSession` (``body``,
-        ``schedule``, ``contacts``, ``flight_window``, ``footplants``).
+        ``schedule``, ``contacts``, ``flight_window``, ``footplants``,
+        ``roles``: joint-role overrides for skeletons whose roles are not
+        inferred right).
 
     Attributes
     ----------
@@ -367,7 +370,7 @@ class TouchUpStepper:
         s = self.session
         frame = getattr(self.viewer, "frame", None) if getattr(self, "viewer", None) is not None else None
         middle = s.input.motion.n_frames // 2 if frame is None else frame
-        options = {"window_size": (640, 360), "frame": middle} | self.viewer_options
+        options: dict[str, Any] = {"window_size": (640, 360), "frame": middle} | self.viewer_options
         viewer = MotionViewer(
             [s.input.motion, s.current.motion], colors=[INPUT_COLOR, CURRENT_COLOR], labels=["input", "touched up"], **options
         )

@@ -19,31 +19,64 @@ clips (:func:`mocaplab.physics.fit_masses`); the table is the initial guess.
 
 Mapping onto skeletons (choices made here, the paper gives none)
 ---------------------------------------------------------------
-Links are found by joint names, for the CMU 31-joint skeleton of the BVH
-clips and the Daz skeleton of the CMU salsa clips.  A link centre is the
-midpoint of two skeleton points in the rest pose, expressed in the owner's
-frame:
+:meth:`Body.from_skeleton` maps the segments onto any humanoid skeleton
+through its joint roles (:mod:`mocaplab.roles`: pelvis, spine, neck, head,
+hips, knees, ankles, toes, shoulders, elbows, wrists), never through joint
+names.  A link is rigidly attached to one joint (its owner); its centre is
+the midpoint of two rest-pose points, expressed in the owner's frame:
 
-* limbs: the bone from the joint to its child (thigh ``LeftUpLeg`` to
-  ``LeftLeg``, foot from the ankle to the ball of the foot, hand from the
-  wrist to the knuckles);
-* lower trunk: owned by the root, centred between the hip-joint midpoint
-  and the root (de Leva puts it 61 % of the way from the navel down to the
-  hip joints);
-* middle trunk: CMU splits it over two vertebral bones, ``LowerBack`` and
-  ``Spine``, which get half of it each; Daz has one, ``abdomen``;
-* upper trunk: ``Spine1`` (CMU thorax) or ``chest`` (Daz) to the neck base;
-* head and neck: one link from the neck base to the top of the head (CMU,
-  owned by ``Neck1``) or to the eyes (Daz, owned by ``head``);
-* clavicles, toes, fingers and eyes carry no mass of their own.
+* **lower trunk** (link ``pelvis``): owned by the pelvis, centred between
+  the pelvis and the midpoint of the two hip joints (de Leva puts it 61 %
+  of the way from the navel down to the hip joints);
+* **middle and upper trunk**: over the bones of the chain from the first
+  spine joint to the neck (from the pelvis to the neck when the spine role
+  is empty; bones of zero length, helper joints, skipped).  The last bone
+  (the one ending at the neck) is the upper trunk (``upper_trunk``); the
+  middle trunk is shared equally by the bones below it (``middle_trunk``,
+  or ``middle_trunk_1`` ... ``middle_trunk_k``), each link owned by its
+  bone's lower joint.  A chain of a single bone carries both, the middle
+  trunk centred at a quarter of it and the upper trunk at three quarters.
+  Equal shares rather than shares by length: vertebral bones of captured
+  skeletons are of about equal length (CMU BVH: LowerBack-Spine and
+  Spine-Spine1, 12.1 cm each, halves of the middle trunk); CMU BVH thus gets
+  two middle-trunk links and Spine1-Neck as the upper trunk, Daz one
+  (abdomen-chest) and chest-neck;
+* **head and neck** (``head``): from the neck joint to the top of the head,
+  which is the head joint's end site, else the mean of its child joints
+  (Daz: the eyes), else :data:`HEAD_TOP` leg lengths beyond the head joint
+  along the neck-to-head direction; owned by the last joint of the
+  neck-to-head chain that lies at or below the link centre (CMU ``Neck1``,
+  Daz ``head``);
+* **arms**: upper arm from the shoulder to the elbow, forearm from the
+  elbow to the wrist, hand from the wrist to its far point: the last joint
+  of the longest chain of joints below the wrist (CMU ``LeftHandIndex1``,
+  Daz ``lIndex2``), else the wrist's end site, else :data:`HAND` forearm
+  lengths beyond the wrist;
+* **legs**: thigh from the hip to the knee, shank from the knee to the
+  ankle, foot from the ankle to the toe (the ball of the foot), or, when
+  there is no toe joint, to the toe tip below;
+* clavicles, helper joints, fingers and eyes carry no mass of their own.
+
+"Leg length" is the rest-pose hip-to-knee plus knee-to-ankle distance,
+averaged over both sides: the body's scale for the estimated points.
 
 Support-polygon points
 ---------------------
 A planted foot touches the ground at a heel point behind the ankle and at
-toe points (the ball and the toe tip); ``foot_width`` spreads the ball and
-heel points sideways (plus and minus half the width at the ball, a third at
-the heel).  A planted joint without foot geometry contributes its own
-position.
+toe points (the ball and the toe tip).  The heel point lies ``heel``
+metres behind the ankle, at the ankle's height, along the foot's
+horizontal forward direction (ankle to ball; the body's facing direction
+when that vanishes).  The toe tip is, in this order: the toe joint's end
+site or the mean of its child joints (zero-length ones do not count), else
+:data:`TOE_TIP` times the horizontal ankle-to-ball vector ahead of the
+ball.  Without a toe joint the tip is the ankle's end site or child, else
+:data:`FOOT_TIP` leg lengths ahead of and below the ankle, and the ball
+lies :data:`BALL` of the way from the ankle to the tip.  ``foot_width``
+spreads the ball and heel points sideways (plus and minus half the width
+at the ball, a third at the heel).  A planted joint without foot geometry
+contributes its own position.  On CMU BVH clips whose end sites have
+been zeroed, the estimated tips lie within 8 mm of the captured ones
+(tested).
 
 Conventions are those of :mod:`mocaplab.motion`: metres, seconds, Y up,
 ground y = 0, kilograms.
@@ -52,9 +85,11 @@ ground y = 0, kilograms.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+import itertools
+from collections.abc import Callable, Mapping, Sequence
 from functools import lru_cache
 from types import MappingProxyType
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -63,11 +98,17 @@ from scipy.ndimage import gaussian_filter1d
 
 from .. import quat
 from ..motion import Motion, Skeleton, mirror_name
+from ..roles import Roles, resolve_roles
 
 __all__ = [
     "DE_LEVA_MALE",
     "DEFAULT_TOTAL_MASS",
     "GRAVITY",
+    "HEAD_TOP",
+    "TOE_TIP",
+    "FOOT_TIP",
+    "BALL",
+    "HAND",
     "Body",
     "LinkSpec",
     "link_positions",
@@ -79,6 +120,13 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
+
+#: Roles the default body model needs (legs first).
+_NEEDED = tuple(f"{s}_{p}" for s in ("left", "right") for p in ("hip", "knee", "ankle")) + (
+    "pelvis",
+    "neck",
+    "head",
+) + tuple(f"{s}_{p}" for s in ("left", "right") for p in ("shoulder", "elbow", "wrist"))
 
 #: Gravity vector, metres per second squared (Y up).
 GRAVITY = np.array([0.0, -9.81, 0.0])
@@ -130,94 +178,30 @@ class LinkSpec:
     b: tuple[str, ...]
 
 
-def _limbs(side: str, names: Mapping[str, str]) -> list[LinkSpec]:
-    s = side
-    return [
-        LinkSpec(f"{s}_upper_arm", "upper_arm", 1.0, names["arm"], (names["arm"],), (names["forearm"],)),
-        LinkSpec(f"{s}_forearm", "forearm", 1.0, names["forearm"], (names["forearm"],), (names["hand"],)),
-        LinkSpec(f"{s}_hand", "hand", 1.0, names["hand"], (names["hand"],), (names["knuckles"],)),
-        LinkSpec(f"{s}_thigh", "thigh", 1.0, names["thigh"], (names["thigh"],), (names["shank"],)),
-        LinkSpec(f"{s}_shank", "shank", 1.0, names["shank"], (names["shank"],), (names["foot"],)),
-        LinkSpec(f"{s}_foot", "foot", 1.0, names["foot"], (names["foot"],), (names["ball"],)),
-    ]
+class _Link(NamedTuple):
+    """One link of a body being built: its centre is a rest-pose point."""
+
+    name: str
+    segment: str
+    share: float
+    owner: int
+    centre: Array
 
 
-def _cmu_links() -> list[LinkSpec]:
-    trunk = [
-        LinkSpec("pelvis", "lower_trunk", 1.0, "Hips", ("LeftUpLeg", "RightUpLeg"), ("Hips",)),
-        LinkSpec("lower_back", "middle_trunk", 0.5, "LowerBack", ("LowerBack",), ("Spine",)),
-        LinkSpec("upper_back", "middle_trunk", 0.5, "Spine", ("Spine",), ("Spine1",)),
-        LinkSpec("thorax", "upper_trunk", 1.0, "Spine1", ("Spine1",), ("Neck",)),
-        LinkSpec("head", "head_neck", 1.0, "Neck1", ("Neck",), ("Head:end",)),
-    ]
-    limbs = []
-    for side, p in (("left", "Left"), ("right", "Right")):
-        limbs += _limbs(
-            side,
-            {
-                "arm": f"{p}Arm",
-                "forearm": f"{p}ForeArm",
-                "hand": f"{p}Hand",
-                "knuckles": f"{p}HandIndex1",
-                "thigh": f"{p}UpLeg",
-                "shank": f"{p}Leg",
-                "foot": f"{p}Foot",
-                "ball": f"{p}ToeBase",
-            },
-        )
-    return trunk + limbs
+# Points a skeleton may lack, estimated from its rest pose (see the module
+# notes); the figures in brackets are those of the CMU BVH skeletons.
+#: Top of the head above the head joint, in leg lengths (0.110-0.125).
+HEAD_TOP = 0.115
+#: Toe tip ahead of the ball, in horizontal ankle-to-ball distances (0.515-0.521).
+TOE_TIP = 0.52
+#: Toe tip of a foot without a toe joint: ahead of and below the ankle, in leg lengths (0.21-0.23, 0.03-0.05).
+FOOT_TIP = (0.22, 0.04)
+#: Ball of a foot without a toe joint, as the fraction of the way from the ankle to the toe tip.
+BALL = 0.7
+#: Far point of a hand without finger joints or end site, beyond the wrist in forearm lengths (0.64).
+HAND = 0.64
 
-
-def _daz_links() -> list[LinkSpec]:
-    trunk = [
-        LinkSpec("pelvis", "lower_trunk", 1.0, "hip", ("lThigh", "rThigh"), ("hip",)),
-        LinkSpec("abdomen", "middle_trunk", 1.0, "abdomen", ("abdomen",), ("chest",)),
-        LinkSpec("thorax", "upper_trunk", 1.0, "chest", ("chest",), ("neck",)),
-        LinkSpec("head", "head_neck", 1.0, "head", ("neck",), ("leftEye", "rightEye")),
-    ]
-    limbs = []
-    for side, p in (("left", "l"), ("right", "r")):
-        limbs += _limbs(
-            side,
-            {
-                "arm": f"{p}Shldr",
-                "forearm": f"{p}ForeArm",
-                "hand": f"{p}Hand",
-                "knuckles": f"{p}Mid1",
-                "thigh": f"{p}Thigh",
-                "shank": f"{p}Shin",
-                "foot": f"{p}Foot",
-                "ball": f"{p}Foot:end",
-            },
-        )
-    return trunk + limbs
-
-
-# (ankle joint, ball/toe joint or None, toe-tip point) per foot and skeleton
-_FEET = {
-    "cmu": (("LeftFoot", "LeftToeBase", "LeftToeBase:end"), ("RightFoot", "RightToeBase", "RightToeBase:end")),
-    "daz": (("lFoot", None, "lFoot:end"), ("rFoot", None, "rFoot:end")),
-}
-_LINKS = {"cmu": _cmu_links, "daz": _daz_links}
-
-
-def _detect(skeleton: Skeleton) -> str:
-    names = set(skeleton.names)
-    missing: dict[str, list[str]] = {}
-    for kind, make in _LINKS.items():
-        needed = set()
-        for spec in make():
-            needed.add(spec.owner)
-            needed.update(p.split(":")[0] for p in spec.a + spec.b)
-        miss = sorted(needed - names)
-        if not miss:
-            return kind
-        missing[kind] = miss
-    raise ValueError(
-        "Could not map the skeleton onto a body model by joint names: "
-        + "; ".join(f"{k} skeleton lacks {v[:6]}" for k, v in missing.items())
-        + ". Build one with Body.from_links(skeleton, [LinkSpec(...), ...])."
-    )
+_UP = np.array([0.0, 1.0, 0.0])
 
 
 def _rest_points(skeleton: Skeleton) -> tuple[Array, Array]:
@@ -229,6 +213,12 @@ def _rest_points(skeleton: Skeleton) -> tuple[Array, Array]:
     return pos, ends
 
 
+def _zero_length(skeleton: Skeleton) -> float:
+    """Distances below this are zero (the tolerance of :mod:`mocaplab.roles`)."""
+    lengths = np.linalg.norm(skeleton.offsets, axis=-1)
+    return 1e-6 * max(float(lengths.max(initial=0.0)), 1e-12)
+
+
 def _point(skeleton: Skeleton, rest: tuple[Array, Array], spec: str) -> Array:
     joints, ends = rest
     if spec.endswith(":end"):
@@ -238,6 +228,165 @@ def _point(skeleton: Skeleton, rest: tuple[Array, Array], spec: str) -> Array:
             raise ValueError(f"Joint {spec[:-4]!r} has no end site (point {spec!r})")
         return ends[hits[0]]
     return joints[skeleton.index(spec)]
+
+
+def _beyond(skeleton: Skeleton, rest: tuple[Array, Array], j: int) -> Array | None:
+    """Where joint ``j``'s own bone ends: the mean of its end sites, else of its child joints.
+
+    Only points away from the joint count (zero-length end sites and helper
+    joints do not); None when there is none.
+    """
+    joints, ends = rest
+    eps = _zero_length(skeleton)
+    for cands in (ends[skeleton.end_site_parents == j], joints[skeleton.children(j)]):
+        cands = cands[np.linalg.norm(cands - joints[j], axis=-1) > eps]
+        if len(cands):
+            return np.asarray(cands.mean(axis=0))
+    return None
+
+
+def _unit(v: Array) -> Array | None:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-12 else None
+
+
+class _Frame(NamedTuple):
+    """Scale and directions of a skeleton's rest pose."""
+
+    leg: float  # mean leg length, hip to knee plus knee to ankle
+    forward: Array  # horizontal unit vector the body faces (left x up)
+
+
+def _body_frame(roles: Roles, joints: Array) -> _Frame:
+    def at(role: str) -> Array:
+        return joints[roles.index(role)]
+
+    leg = float(
+        np.mean([
+            np.linalg.norm(at(f"{s}_knee") - at(f"{s}_hip")) + np.linalg.norm(at(f"{s}_ankle") - at(f"{s}_knee"))
+            for s in ("left", "right")
+        ])
+    )
+    if not leg > 0:
+        raise ValueError(f"Expected legs of positive length in the rest pose, got {leg!r}")
+    forward = np.cross(at("left_hip") - at("right_hip"), _UP)
+    forward[1] = 0.0
+    unit = _unit(forward)
+    return _Frame(leg, np.array([0.0, 0.0, 1.0]) if unit is None else unit)
+
+
+def _knuckles(skeleton: Skeleton, rest: tuple[Array, Array], wrist: int, elbow: int) -> Array:
+    """Far point of the hand: the last joint of the longest chain of joints below the wrist.
+
+    Else the wrist's end site, else :data:`HAND` forearm lengths beyond the wrist.
+    """
+    joints = rest[0]
+    reach = {wrist: 0.0}
+    for k in range(wrist + 1, skeleton.n_joints):  # parents come first
+        p = int(skeleton.parents[k])
+        if p in reach:
+            reach[k] = reach[p] + float(np.linalg.norm(joints[k] - joints[p]))
+    far = max(reach, key=lambda k: reach[k])
+    if reach[far] > _zero_length(skeleton):
+        return np.asarray(joints[far])
+    tip = _beyond(skeleton, rest, wrist)
+    return tip if tip is not None else joints[wrist] + HAND * (joints[wrist] - joints[elbow])
+
+
+def _trunk_links(skeleton: Skeleton, roles: Roles, joints: Array) -> list[_Link]:
+    """Middle and upper trunk over the bones from the first spine joint (else the pelvis) to the neck."""
+    chain = roles.spine_indices() + [roles.index("neck")]
+    if len(chain) == 1:
+        chain = [roles.index("pelvis")] + chain
+    eps = _zero_length(skeleton)
+    bones = [(a, b) for a, b in itertools.pairwise(chain) if np.linalg.norm(joints[b] - joints[a]) > eps]
+    if not bones:
+        raise ValueError(
+            f"Expected a trunk of positive length from the pelvis {roles['pelvis']!r} to the neck {roles['neck']!r}, "
+            "got none; give the neck with roles={'neck': ...}"
+        )
+    if len(bones) == 1:
+        (a, b), = bones
+        pa, pb = joints[a], joints[b]
+        return [
+            _Link("middle_trunk", "middle_trunk", 1.0, a, pa + 0.25 * (pb - pa)),
+            _Link("upper_trunk", "upper_trunk", 1.0, a, pa + 0.75 * (pb - pa)),
+        ]
+    middle = bones[:-1]
+    names = ["middle_trunk"] if len(middle) == 1 else [f"middle_trunk_{k + 1}" for k in range(len(middle))]
+    links = [
+        _Link(name, "middle_trunk", 1.0 / len(middle), a, 0.5 * (joints[a] + joints[b]))
+        for name, (a, b) in zip(names, middle, strict=True)
+    ]
+    a, b = bones[-1]
+    return links + [_Link("upper_trunk", "upper_trunk", 1.0, a, 0.5 * (joints[a] + joints[b]))]
+
+
+def _head_link(skeleton: Skeleton, roles: Roles, rest: tuple[Array, Array], frame: _Frame) -> _Link:
+    """Head and neck from the neck to the top of the head, owned by the chain joint below its centre."""
+    joints = rest[0]
+    neck, head = roles.index("neck"), roles.index("head")
+    top = _beyond(skeleton, rest, head)
+    if top is None:
+        up = _unit(joints[head] - joints[neck])
+        if up is None:
+            up = _unit(joints[neck] - joints[roles.index("pelvis")])
+        top = joints[head] + HEAD_TOP * frame.leg * (_UP if up is None else up)
+    a = joints[neck]
+    chain = skeleton.chain(neck, head) if head != neck else [neck]
+    span = top - a
+    along = [float((joints[j] - a) @ span / max(float(span @ span), 1e-24)) for j in chain]
+    owner = [j for j, t in zip(chain, along, strict=True) if t <= 0.5][-1]
+    return _Link("head", "head_neck", 1.0, int(owner), 0.5 * (a + top))
+
+
+def _limb_links(skeleton: Skeleton, roles: Roles, rest: tuple[Array, Array], frame: _Frame) -> list[_Link]:
+    joints = rest[0]
+    links = []
+    for side in ("left", "right"):
+        shoulder, elbow, wrist = roles.indices(*(f"{side}_{p}" for p in ("shoulder", "elbow", "wrist")))
+        hip, knee, ankle = roles.indices(*(f"{side}_{p}" for p in ("hip", "knee", "ankle")))
+        toe = roles.get(f"{side}_toe")
+        _, ball, tip = _foot_points(skeleton, rest, ankle, None if toe is None else skeleton.index(toe), None, frame)
+        links += [
+            _Link(f"{side}_upper_arm", "upper_arm", 1.0, shoulder, 0.5 * (joints[shoulder] + joints[elbow])),
+            _Link(f"{side}_forearm", "forearm", 1.0, elbow, 0.5 * (joints[elbow] + joints[wrist])),
+            _Link(f"{side}_hand", "hand", 1.0, wrist, 0.5 * (joints[wrist] + _knuckles(skeleton, rest, wrist, elbow))),
+            _Link(f"{side}_thigh", "thigh", 1.0, hip, 0.5 * (joints[hip] + joints[knee])),
+            _Link(f"{side}_shank", "shank", 1.0, knee, 0.5 * (joints[knee] + joints[ankle])),
+            _Link(f"{side}_foot", "foot", 1.0, ankle, 0.5 * (joints[ankle] + (ball if toe is not None else tip))),
+        ]
+    return links
+
+
+def _foot_points(
+    skeleton: Skeleton,
+    rest: tuple[Array, Array],
+    ankle: int,
+    toe: int | None,
+    tip: Array | None,
+    frame: _Frame | Callable[[], _Frame],
+) -> tuple[Array, Array, Array]:
+    """Ankle, ball and toe tip of one foot in the rest pose (see the module notes).
+
+    ``tip`` overrides the toe tip; ``frame`` (or a function giving it) is
+    needed only when a point must be estimated.
+    """
+    joints = rest[0]
+    pa = joints[ankle]
+    if toe is not None:
+        ball = joints[toe]
+        if tip is None:
+            tip = _beyond(skeleton, rest, toe)
+        if tip is None:
+            tip = ball + TOE_TIP * (ball - pa) * [1.0, 0.0, 1.0]
+        return pa, ball, tip
+    if tip is None:
+        tip = _beyond(skeleton, rest, ankle)
+    if tip is None:
+        f = frame() if callable(frame) else frame
+        tip = pa + f.leg * (FOOT_TIP[0] * f.forward - FOOT_TIP[1] * _UP)
+    return pa, pa + BALL * (tip - pa), tip
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -257,12 +406,13 @@ class Body:
         Link masses, kilograms, all > 0.
     point_joints : tuple of str, length P
         For each support-polygon point, the contact joint it belongs to
-        (``"LeftFoot"`` for heel points, ``"LeftToeBase"`` for toe points).
+        (the ankle for heel points, the toe for toe points: ``"LeftFoot"`` and
+        ``"LeftToeBase"`` on the CMU skeleton).
     point_owners : array_like of int, shape (P,)
     point_offsets : array_like, shape (P, 3)
         Support point in its owner's local frame.
 
-    Use :meth:`from_skeleton` to build one from a CMU or Daz skeleton.
+    Use :meth:`from_skeleton` to build one from any humanoid skeleton (by its joint roles).
 
     Examples
     --------
@@ -317,16 +467,20 @@ class Body:
         cls,
         skeleton: Skeleton | Motion,
         *,
+        roles: Mapping[str, Any] | None = None,
         total_mass: float = DEFAULT_TOTAL_MASS,
         table: Mapping[str, float] = DE_LEVA_MALE,
         foot_width: float = 0.09,
         heel: float = 0.05,
     ) -> Body:
-        """The default body of a CMU or Daz skeleton (found by joint names).
+        """The default body of any humanoid skeleton, mapped from its joint roles.
 
         Parameters
         ----------
         skeleton : Skeleton or Motion
+        roles : mapping of role names to joint names, optional
+            Overrides of the inferred joint roles
+            (:func:`mocaplab.roles.resolve_roles`).
         total_mass : float
             Body mass in kilograms; the table's percentages are scaled to it.
         table : mapping of str to float
@@ -340,13 +494,33 @@ class Body:
         Returns
         -------
         Body
+            Links ``pelvis``, ``middle_trunk`` (or ``middle_trunk_1`` ...
+            ``middle_trunk_k``), ``upper_trunk``, ``head``, and per side
+            ``upper_arm``, ``forearm``, ``hand``, ``thigh``, ``shank``,
+            ``foot`` (``left_thigh`` ...); heel and toe support points.
+
+        Raises
+        ------
+        RolesError
+            When the skeleton lacks a role the model needs (pelvis, neck,
+            head, the legs' hip, knee and ankle, the arms' shoulder, elbow
+            and wrist), naming it and the ``roles=`` that supplies it.
         """
         sk = getattr(skeleton, "skeleton", skeleton)
         if not isinstance(sk, Skeleton):
             raise TypeError(f"Expected `skeleton` to be a Skeleton or Motion, got {type(skeleton).__name__}")
-        kind = _detect(sk)
-        body = cls.from_links(sk, _LINKS[kind](), total_mass=total_mass, table=table)
-        return body.with_feet(sk, _FEET[kind], foot_width=foot_width, heel=heel)
+        r = resolve_roles(sk, roles)
+        r.require(*_NEEDED, purpose="the body model (Body.from_skeleton)")
+        rest = _rest_points(sk)
+        frame = _body_frame(r, rest[0])
+        pelvis = r.index("pelvis")
+        hips = rest[0][r.indices("left_hip", "right_hip")].mean(axis=0)
+        links = [_Link("pelvis", "lower_trunk", 1.0, pelvis, 0.5 * (hips + rest[0][pelvis]))]
+        links += _trunk_links(sk, r, rest[0])
+        links.append(_head_link(sk, r, rest, frame))
+        links += _limb_links(sk, r, rest, frame)
+        body = cls._assemble(sk, rest, links, total_mass=total_mass, table=table)
+        return body.with_feet(sk, r.feet(), roles=r, foot_width=foot_width, heel=heel)
 
     @classmethod
     def from_links(
@@ -362,28 +536,42 @@ class Body:
         Masses are ``total_mass * table[segment] / 100 * share``; they are not
         renormalised, so a partial mapping has less than ``total_mass``.
         """
-        if not np.isfinite(total_mass) or total_mass <= 0:
-            raise ValueError(f"Expected `total_mass` > 0 kilograms, got {total_mass!r}")
         rest = _rest_points(skeleton)
-        owners, offsets, masses, names = [], [], [], []
+        out = []
         for spec in links:
-            if spec.segment not in table:
-                raise KeyError(f"Segment {spec.segment!r} of link {spec.name!r} is not in the mass table {sorted(table)}")
-            j = skeleton.index(spec.owner)
             a = np.mean([_point(skeleton, rest, p) for p in spec.a], axis=0)
             b = np.mean([_point(skeleton, rest, p) for p in spec.b], axis=0)
-            owners.append(j)
-            # rest rotations are identities: a rest vector is the local offset
-            offsets.append(0.5 * (a + b) - rest[0][j])
-            masses.append(total_mass * table[spec.segment] / 100.0 * spec.share)
-            names.append(spec.name)
-        return cls(skeleton.names, tuple(names), np.array(owners), np.array(offsets), np.array(masses))
+            out.append(_Link(spec.name, spec.segment, spec.share, skeleton.index(spec.owner), 0.5 * (a + b)))
+        return cls._assemble(skeleton, rest, out, total_mass=total_mass, table=table)
+
+    @classmethod
+    def _assemble(
+        cls,
+        skeleton: Skeleton,
+        rest: tuple[Array, Array],
+        links: Sequence[_Link],
+        *,
+        total_mass: float,
+        table: Mapping[str, float],
+    ) -> Body:
+        """The body of links whose centres are rest-pose points (the one builder behind the others)."""
+        if not np.isfinite(total_mass) or total_mass <= 0:
+            raise ValueError(f"Expected `total_mass` > 0 kilograms, got {total_mass!r}")
+        for link in links:
+            if link.segment not in table:
+                raise KeyError(f"Segment {link.segment!r} of link {link.name!r} is not in the mass table {sorted(table)}")
+        owners = np.array([link.owner for link in links], dtype=np.int64)
+        # rest rotations are identities: a rest vector is the local offset
+        offsets = np.array([link.centre - rest[0][link.owner] for link in links]).reshape(-1, 3)
+        masses = np.array([total_mass * table[link.segment] / 100.0 * link.share for link in links])
+        return cls(skeleton.names, tuple(link.name for link in links), owners, offsets, masses)
 
     def with_feet(
         self,
         skeleton: Skeleton,
-        feet: Sequence[tuple[str, str | None, str]],
+        feet: Sequence[tuple[str, str | None] | tuple[str, str | None, str | None]] | None = None,
         *,
+        roles: Mapping[str, Any] | None = None,
         foot_width: float = 0.09,
         heel: float = 0.05,
     ) -> Body:
@@ -392,8 +580,13 @@ class Body:
         Parameters
         ----------
         skeleton : Skeleton
-        feet : sequence of (ankle, toe joint or None, toe-tip point)
-            The toe-tip point is a joint name or ``"Joint:end"``.
+        feet : sequence of (ankle, toe joint or None[, toe-tip point or None]), optional
+            Joint names; default the feet of the joint roles
+            (:meth:`mocaplab.roles.Roles.feet`).  A toe-tip point is a joint
+            name or ``"Joint:end"``; without one it is found or estimated
+            (see the module notes).
+        roles : mapping of role names to joint names, optional
+            Role overrides, used for the feet and for estimated points.
         foot_width, heel : float
             See :meth:`from_skeleton`.
         """
@@ -402,38 +595,51 @@ class Body:
         if not np.isfinite(heel) or heel < 0:
             raise ValueError(f"Expected `heel` >= 0 metres, got {heel!r}")
         rest = _rest_points(skeleton)
+
+        def frame() -> _Frame:
+            r = resolve_roles(skeleton, roles)
+            r.require(*_NEEDED[:6], purpose="estimating the toe tips of feet without toe joints or end sites")
+            return _body_frame(r, rest[0])
+
+        if feet is None:
+            feet = resolve_roles(skeleton, roles).feet()
+            if not feet:
+                resolve_roles(skeleton, roles).require("left_ankle", "right_ankle", purpose="the feet of the body model")
         pj: list[str] = []
         po: list[int] = []
         pof: list[Array] = []
-        up = np.array([0.0, 1.0, 0.0])
-        for ankle, toe, tip in feet:
+        for foot in feet:
+            ankle, toe = foot[0], foot[1]
+            tip_spec = foot[2] if len(foot) > 2 else None
             ja = skeleton.index(ankle)
-            pa = rest[0][ja]
-            ptip = _point(skeleton, rest, tip)
-            ball = rest[0][skeleton.index(toe)] if toe is not None else pa + 0.7 * (ptip - pa)
-            fwd = ball - pa
-            fwd[1] = 0.0
-            norm = np.linalg.norm(fwd)
-            fwd = fwd / norm if norm > 1e-9 else np.array([0.0, 0.0, 1.0])
-            side = np.cross(up, fwd)
+            jt = None if toe is None else skeleton.index(toe)
+            given = None if tip_spec is None else _point(skeleton, rest, tip_spec)
+            pa, ball, ptip = _foot_points(skeleton, rest, ja, jt, given, frame)
+            fwd = (ball - pa) * [1.0, 0.0, 1.0]
+            unit = _unit(fwd)
+            fwd = unit if unit is not None else frame().forward
+            side = np.cross(_UP, fwd)
             heel_pt = pa - heel * fwd
             hw = foot_width / 3.0
             for s in (-hw, hw) if hw > 0 else (0.0,):
                 pj.append(ankle)
                 po.append(ja)
                 pof.append(heel_pt + s * side - pa)
-            owner = skeleton.index(toe) if toe is not None else ja
+            owner = ja if jt is None else jt
             base = rest[0][owner]
             bw = foot_width / 2.0
             for s in (-bw, bw) if bw > 0 else (0.0,):
-                pj.append(toe if toe is not None else ankle)
+                pj.append(skeleton.names[owner])
                 po.append(owner)
                 pof.append(ball + s * side - base)
-            pj.append(toe if toe is not None else ankle)
+            pj.append(skeleton.names[owner])
             po.append(owner)
             pof.append(ptip - base)
         return dataclasses.replace(
-            self, point_joints=tuple(pj), point_owners=np.array(po, dtype=np.int64), point_offsets=np.array(pof)
+            self,
+            point_joints=tuple(pj),
+            point_owners=np.array(po, dtype=np.int64),
+            point_offsets=np.array(pof).reshape(-1, 3),
         )
 
     def with_masses(self, masses: ArrayLike) -> Body:

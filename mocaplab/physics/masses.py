@@ -30,14 +30,15 @@ Choices made here, where the paper leaves them open
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import OptimizeResult, minimize
 
 from ..motion import Motion
+from ..roles import resolve_roles
 from .body import GRAVITY, Body, link_positions, paper_width, smoothed_derivatives
 from .zmp import _check_contacts, default_contacts, polygon_distance
 
@@ -139,6 +140,7 @@ def fit_masses(
     regularization: float = 0.01,
     smoothing: float = 0.005,
     max_iterations: int = 200,
+    roles: Mapping[str, Any] | None = None,
 ) -> MassFit:
     """Fit link masses so the ZMP stays in the support polygon (equation 5).
 
@@ -162,6 +164,9 @@ def fit_masses(
         the plain distance.  ``before``/``after`` report the plain distance.
     max_iterations : int
         Iteration cap of the conjugate-gradient solver.
+    roles : mapping of role names to joint names, optional
+        Role overrides (:func:`mocaplab.roles.resolve_roles`) for the
+        default body and contacts (the clips share one skeleton).
 
     Returns
     -------
@@ -182,9 +187,10 @@ def fit_masses(
     for k, m in enumerate(clips):
         if not isinstance(m, Motion):
             raise TypeError(f"Expected Motion objects in `motions`, got {type(m).__name__} at position {k}")
-    body = Body.from_skeleton(clips[0].skeleton) if body is None else body
+    known = resolve_roles(clips[0], roles) if body is None or contacts is None else None
+    body = Body.from_skeleton(clips[0].skeleton, roles=known) if body is None else body
     if contacts is None:
-        cons = [default_contacts(m) for m in clips]
+        cons = [default_contacts(m, roles=known) for m in clips]
     elif hasattr(contacts, "mask"):
         cons = [contacts]  # type: ignore[list-item]
     else:

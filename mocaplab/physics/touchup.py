@@ -29,16 +29,22 @@ Choices made where the paper leaves them open
 ---------------------------------------------
 * Link sets are given by joint names (each name means the joint and its
   descendants) or presets ``"lower_body"``, ``"upper_body"``, ``"arms"``,
-  ``"all"``; S3 overrides S2 and S1 is everything else.  One rotation angle
-  is shared by all parts of S2 (e.g. both arms), each turning about its own
-  top joint.
+  ``"all"``, found from the joint roles of any skeleton (see
+  :func:`preset_mask`; ``roles=`` overrides them); S3 overrides S2 and S1
+  is everything else.  One rotation angle is shared by all parts of S2
+  (e.g. both arms), each turning about its own top joint.
 * Rotation centre: the top joint of the S2 part when it has a parent in S1
-  (the S1/S2 boundary, e.g. ``LowerBack`` with the legs in S1).  When S2
-  holds the root (then S1 holds no planted foot in any sensible split), it
-  is the ZMP's projection on the ground on ground frames; in flight it is
-  the S1/S2 boundary joint, or the centre of mass when S1 is empty.  On
-  ground frames, S1 parts hanging below a root-holding S2 are carried like
-  S3.
+  (the S1/S2 boundary, e.g. the first spine joint with the legs in S1).
+  When S2 holds the root (then S1 holds no planted foot in any sensible
+  split), it is the ZMP's projection on the ground on ground frames; in
+  flight it is the S1/S2 boundary joint, or the centre of mass when S1 is
+  empty.  On ground frames, S1 parts hanging below a root-holding S2 are
+  carried like S3.
+* The part holding the root turns about the travelling joint (the pelvis,
+  :attr:`mocaplab.motion.Motion.path_joint`) and its displacement is the
+  smoothed displacement of that joint, whether or not it is joint 0: a
+  skeleton with a static reference joint above the pelvis is touched up
+  exactly like the same skeleton without it.
 * The per-frame ground angle is clamped to +-0.35 rad (20 degrees), a guard
   against frames with absurd accelerations.
 * Kernel widths and windows are stored in seconds: the paper's 40/20/10 and
@@ -69,22 +75,27 @@ Choices made where the paper leaves them open
 * Footplants are re-enforced after every step that can move a contact
   joint (an adjustment of the upper body or the arms leaves the feet
   alone), per frame like the paper's choice (Kovar et al. 2002, "because
-  of its efficiency"):
+  of its efficiency").  There is one correction layer: footplants are
+  goals (:class:`mocaplab.refinement.Goal`), built once from the input's
+  contacts in :func:`start`, and met after each step by the refinement
+  module's IK layer (:func:`mocaplab.refinement.solve_goals`: two-bone IK
+  of the legs, then each foot turned about its ankle toward its toe goal)
+  without root lowering.  The options differ in the goals only:
 
-  - ``"plant"`` (what ``"auto"`` picks): the refinement module's plant goals
-    (:func:`mocaplab.refinement.foot_goals`, one plant position per contact
-    interval of the input, blended in and out over 0.05 s, shorter than
-    refine's default so that corrections leak little into flight frames)
-    met by its IK layer (:func:`mocaplab.refinement.solve_goals`) without root
-    lowering;
+  - ``"plant"`` (what ``"auto"`` picks): the plant goals of
+    :func:`mocaplab.refinement.foot_goals`, one plant position per contact
+    interval of the input, blended in and out over 0.05 s (shorter than
+    refine's default, so that corrections leak little into flight frames);
+  - ``"ik"``: each planted joint back where the input motion had it, frame
+    by frame (targets the input's positions, weights
+    :func:`mocaplab.refinement.blend_weights` over 0.2 s around the frames
+    where its foot is planted); the ankle's orientation is the IK layer's
+    (the foot keeps its turn about the ankle-to-toe axis);
   - ``"refine"``: the full :func:`mocaplab.refinement.refine`, which also
     lowers the root where a leg cannot reach and smooths the corrections
     with a displacement map; both leak into flight frames and bend the
     ballistic centre-of-mass path again (on the CMU hops of 49_03 the fitted
     gravity of a short flight drops by about 15 %), so it is not the default;
-  - ``"ik"``: an analytic two-bone leg IK that puts each planted ankle back
-    where the input motion had it, frame by frame (blended over 0.2 s);
-    the fastest, and the fallback when the refinement module is missing;
   - ``None`` skips the step.
 
 * Speed: the forward kinematics of the current motion travel with the
@@ -110,16 +121,19 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from functools import lru_cache
-from typing import TYPE_CHECKING, Literal, NamedTuple
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import distance_transform_edt, gaussian_filter1d
+from scipy.ndimage import gaussian_filter1d
 
 from .. import quat
+from ..contacts import intervals_from_mask
 from ..motion import Motion, Skeleton, _owned
+from ..refinement import Goal, _solve_goals, blend_weights, foot_goals, refine
+from ..roles import Roles, RolesError, resolve_roles
 from .body import GRAVITY, Body, link_positions, paper_width, smoothed_derivatives
 from .zmp import Balance, _check_contacts, _rebalance, balance, default_contacts
 
@@ -149,7 +163,7 @@ Footplants = Literal["auto", "plant", "refine", "ik"] | Callable[[Motion, "Conta
 
 #: Largest per-frame ground rotation, radians.
 MAX_GROUND_ANGLE = 0.35
-#: Blend length of the IK footplant fallback, seconds.
+#: Blend window of the ``"ik"`` footplant goals on each side of a plant, seconds.
 FOOT_BLEND = 0.2
 #: Blend window of the plant goals on each side of a contact, seconds (short,
 #: so that plant corrections leak little into flight frames).
@@ -276,8 +290,6 @@ def _as_schedule(schedule: str | Adjustment | Sequence[Adjustment], contacts: Co
 # ======================================================================
 # link sets
 # ======================================================================
-_UPPER_ROOTS = ("LowerBack", "abdomen", "lowerback", "Spine", "spine", "Spine0")
-_ARM_ROOTS = (("LeftArm", "RightArm"), ("lShldr", "rShldr"), ("lhumerus", "rhumerus"), ("LeftUpperArm", "RightUpperArm"))
 PRESETS = ("lower_body", "upper_body", "arms", "all")
 
 
@@ -290,30 +302,48 @@ def _subtree(skeleton: Skeleton, j: int) -> NDArray[np.bool_]:
     return mask
 
 
-def preset_mask(skeleton: Skeleton, name: str) -> NDArray[np.bool_]:
+def preset_mask(skeleton: Skeleton, name: str, *, roles: Mapping[str, Any] | None = None) -> NDArray[np.bool_]:
     """Joints of a preset (or of a joint's subtree), shape (J,) bool.
 
-    ``"upper_body"`` is the subtree of the first spine joint (``LowerBack``
-    on CMU, ``abdomen`` on Daz), ``"lower_body"`` everything else (root,
-    pelvis, legs), ``"arms"`` the subtrees of both upper arms, ``"all"``
-    every joint.  Any other string must be a joint name: that joint and its
-    descendants.
+    Presets come from the joint roles (:mod:`mocaplab.roles`):
+    ``"upper_body"`` is the subtree of the joint above the pelvis on the way
+    to the neck (the first spine joint, or the neck when the spine role is
+    empty: ``LowerBack`` on CMU, ``abdomen`` on Daz), ``"lower_body"``
+    everything else (the root, the pelvis, the legs, and a static reference
+    joint above the pelvis if there is one), ``"arms"`` the subtrees of
+    both upper-arm joints (the ``shoulder`` roles), ``"all"`` every joint.
+    Any other string must be a joint name: that joint and its descendants.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    name : str
+    roles : mapping of role names to joint names, optional
+        Role overrides (:func:`mocaplab.roles.resolve_roles`).
     """
-    names = set(skeleton.names)
     if name == "all":
         return np.ones(skeleton.n_joints, dtype=bool)
     if name in ("upper_body", "lower_body"):
-        root = next((r for r in _UPPER_ROOTS if r in names), None)
-        if root is None:
-            raise ValueError(f"Could not find the spine joint for {name!r} (tried {list(_UPPER_ROOTS)}); give joint names")
-        upper = _subtree(skeleton, skeleton.index(root))
+        r = resolve_roles(skeleton, roles)
+        r.require("pelvis", "neck", purpose=f"the {name!r} preset")
+        pelvis, neck = r.index("pelvis"), r.index("neck")
+        try:
+            chain = skeleton.chain(pelvis, neck)
+        except ValueError:
+            chain = []
+        if len(chain) < 2:
+            raise RolesError(
+                f"The {name!r} preset needs the neck {r['neck']!r} below the pelvis {r['pelvis']!r}; "
+                "give the roles with roles={'pelvis': ..., 'neck': ...} or name the joints"
+            )
+        upper = _subtree(skeleton, chain[1])
         return upper if name == "upper_body" else ~upper
     if name == "arms":
-        pair = next((p for p in _ARM_ROOTS if all(a in names for a in p)), None)
-        if pair is None:
-            raise ValueError(f"Could not find the upper-arm joints for 'arms' (tried {list(_ARM_ROOTS)}); give joint names")
-        return _subtree(skeleton, skeleton.index(pair[0])) | _subtree(skeleton, skeleton.index(pair[1]))
-    if name not in names:
+        r = resolve_roles(skeleton, roles)
+        r.require("left_shoulder", "right_shoulder", purpose="the 'arms' preset")
+        left, right = r.indices("left_shoulder", "right_shoulder")
+        return _subtree(skeleton, left) | _subtree(skeleton, right)
+    if name not in skeleton.names:
         raise KeyError(f"{name!r} is neither a preset {list(PRESETS)} nor a joint; joints are {list(skeleton.names)}")
     return _subtree(skeleton, skeleton.index(name))
 
@@ -351,24 +381,29 @@ class LinkSets:
         return [skeleton.names[j] for j in np.flatnonzero(self.roles == role)]
 
 
-def link_sets(skeleton: Skeleton, adjustment: Adjustment) -> LinkSets:
+def link_sets(skeleton: Skeleton, adjustment: Adjustment, *, roles: Mapping[str, Any] | None = None) -> LinkSets:
     """Resolve an adjustment's S1/S2/S3 on a skeleton and check its shape.
 
+    ``roles`` overrides joint roles for the presets (see :func:`preset_mask`).
     Raises ValueError when S3 does not hang below S2, when S2 hangs below S3,
     or when an S1 part hangs below an S2 part that does not hold the root.
-    Results are cached per skeleton and link sets.
+    Results are cached per skeleton, roles and link sets.
     """
-    return _link_sets(skeleton, adjustment.s2, adjustment.s3)
+    r = resolve_roles(skeleton, roles)
+    return _link_sets(skeleton, adjustment.s2, adjustment.s3, tuple(r.items()))
 
 
 @lru_cache(maxsize=128)
-def _link_sets(skeleton: Skeleton, s2: tuple[str, ...], s3: tuple[str, ...]) -> LinkSets:
+def _link_sets(
+    skeleton: Skeleton, s2: tuple[str, ...], s3: tuple[str, ...], role_items: tuple[tuple[str, Any], ...]
+) -> LinkSets:
     n = skeleton.n_joints
+    known = Roles(skeleton.names, dict(role_items))
     roles = np.ones(n, dtype=np.int64)
     for name in s2:
-        roles[preset_mask(skeleton, name)] = 2
+        roles[preset_mask(skeleton, name, roles=known)] = 2
     for name in s3:
-        roles[preset_mask(skeleton, name)] = 3
+        roles[preset_mask(skeleton, name, roles=known)] = 3
     if not np.any(roles == 2):
         raise ValueError(f"S2 ({'+'.join(s2)}) is empty on this skeleton (S3 covers it)")
     parents = skeleton.parents
@@ -538,16 +573,19 @@ def _left_matrix(q: Array) -> Array:
     return q[..., _INDEX] * _SIGN
 
 
-def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None) -> _Posed:
+def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None, pivot: int = 0) -> _Posed:
     """Rotate every S2 part by the world rotation vectors ``omega`` (F, 3).
 
     S2 tops are pre-rotated in world space (expressed locally by conjugating
     with the parent's global rotation), carried tops are counter-rotated so
-    their global orientation is unchanged, and the root moves by
-    ``root_delta`` when it belongs to S2.  The new global transforms follow
-    in closed form: an S2 part moves rigidly about its pivot, a carried part
-    translates with its top joint, S1 stays.  All parts share the rotation,
-    so each of these is one vectorised operation over all parts.
+    their global orientation is unchanged.  The part holding the root turns
+    about joint ``pivot`` (the travelling joint, :func:`_root_pivot`), which
+    moves by ``root_delta`` (F, 3); joint 0's position and rotation are
+    changed so that the part moves rigidly that way.  The new global
+    transforms follow in closed form: an S2 part moves rigidly about its
+    pivot, a carried part translates with its top joint, S1 stays.  All
+    parts share the rotation, so each of these is one vectorised operation
+    over all parts.
     """
     motion, grot, gpos = posed
     lay = _apply_layout(sets)
@@ -561,14 +599,22 @@ def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None
     rot = np.array(motion.rotations, copy=True)
     root = motion.root_positions
     # pivot of each part, before and after the move
-    pivot = gpos[:, list(sets.s2_tops)]  # (F, parts, 3)
-    moved = pivot
+    pivots = gpos[:, list(sets.s2_tops)]  # (F, parts, 3)
+    moved = pivots
     if sets.s2_tops[0] == 0:
         rot[:, 0] = quat.mul(q, rot[:, 0])
-        if root_delta is not None:
-            root = root + root_delta
-            moved = pivot.copy()
-            moved[:, 0] += root_delta
+        if pivot != 0:
+            pivots = pivots.copy()
+            pivots[:, 0] = gpos[:, pivot]
+        if root_delta is not None or pivot != 0:
+            moved = pivots.copy()
+            if root_delta is not None:
+                moved[:, 0] += root_delta
+            # joint 0 turns about the pivot and moves with it
+            if pivot == 0 and root_delta is not None:
+                root = root + root_delta
+            else:
+                root = moved[:, 0] + quat.rotate(q, gpos[:, 0] - pivots[:, 0])
     tops = lay["tops"]
     if tops.size:
         rot[:, tops] = quat.mul(quat.inv(grot[:, parents[tops]]), grot[:, tops] @ lq)
@@ -576,11 +622,11 @@ def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None
     new_gpos = np.array(gpos, copy=True)
     rigid, part = lay["rigid"], lay["rigid_part"]
     new_grot[:, rigid] = grot[:, rigid] @ lq
-    new_gpos[:, rigid] = moved[:, part] + (gpos[:, rigid] - pivot[:, part]) @ rq
+    new_gpos[:, rigid] = moved[:, part] + (gpos[:, rigid] - pivots[:, part]) @ rq
     carried = lay["carried"]
     if carried.size:
         cp = lay["carried_part"]
-        shift = moved[:, cp] + (gpos[:, carried] - pivot[:, cp]) @ rq - gpos[:, carried]
+        shift = moved[:, cp] + (gpos[:, carried] - pivots[:, cp]) @ rq - gpos[:, carried]
         new_gpos[:, lay["below"]] += shift[:, lay["below_slot"]]
         # inv(q) g: the transposed matrix
         rot[:, carried] = quat.mul(quat.inv(grot[:, parents[carried]]), grot[:, carried] @ lq.transpose(0, 2, 1))
@@ -693,18 +739,31 @@ def _ground_rotation(
     return omega, root_centre
 
 
-def _ground_step(posed: _Posed, body: Body, adj: Adjustment, bal: Balance) -> _Posed:
+def _root_pivot(sets: LinkSets, path_joint: int) -> int:
+    """The joint the S2 part holding the root turns about and carries along (see :func:`_apply`).
+
+    The travelling joint (:attr:`mocaplab.motion.Motion.path_joint`, the
+    pelvis) when it is a rotated joint of that part, else joint 0; so a
+    static reference joint above the pelvis gives the same touch-up as a
+    skeleton whose root is the pelvis.
+    """
+    if sets.s2_tops and sets.s2_tops[0] == 0 and sets.part[path_joint] == 0 and sets.roles[path_joint] == 2:
+        return int(path_joint)
+    return 0
+
+
+def _ground_step(posed: _Posed, body: Body, adj: Adjustment, sets: LinkSets, bal: Balance, path_joint: int) -> _Posed:
     motion = posed.motion
-    sets = link_sets(motion.skeleton, adj)
     omega, centre = _ground_rotation(motion, body, sets, bal, np.ones(motion.n_frames), posed.gpos)
     omega *= adj.rho
     root_delta = None
+    pivot = _root_pivot(sets, path_joint)
     if 0 in sets.s2_tops:
-        p = motion.root_positions
+        p = posed.gpos[:, pivot]
         root_delta = np.where(np.any(omega != 0, axis=1)[:, None], _rotate_about(omega, centre, p) - p, 0.0)
         root_delta = _smooth(root_delta, adj.width(motion.fps))
     omega = _smooth(omega, adj.width(motion.fps))
-    return _apply(posed, sets, omega, root_delta)
+    return _apply(posed, sets, omega, root_delta, pivot)
 
 
 # ======================================================================
@@ -737,12 +796,14 @@ def _flight_step(
     posed: _Posed,
     body: Body,
     adj: Adjustment,
+    sets: LinkSets,
     stages: list[tuple[int, int]],
     flight_w: Array,
     window: int,
+    path_joint: int,
 ) -> _Posed:
     motion = posed.motion
-    sets = link_sets(motion.skeleton, adj)
+    pivot = _root_pivot(sets, path_joint)
     if len(sets.s2_tops) != 1:
         names = [motion.skeleton.names[t] for t in sets.s2_tops]
         raise ValueError(f"A flight adjustment needs S2 to be one connected part, got parts at {names}")
@@ -773,9 +834,9 @@ def _flight_step(
     phi = _hold_into_windows(phi, stages, flight_w, window) * adj.rho
     root_delta = None
     if 0 in sets.s2_tops:
-        p = motion.root_positions
+        p = posed.gpos[:, pivot]
         root_delta = _smooth(_rotate_about(phi, centre, p) - p, width)
-    out = _apply(posed, sets, _smooth(phi, width), root_delta)
+    out = _apply(posed, sets, _smooth(phi, width), root_delta, pivot)
 
     # ---- 3.4.2 parabolic centre of mass, on the adjusted motion
     r = link_positions(out.motion, body, fk=out[1:])
@@ -806,115 +867,48 @@ def _flight_step(
     rot = _hold_into_windows(np.where(flight[:, None], rot, 0.0), stages, flight_w, window) * adj.rho
     root_delta = None
     if 0 in sets.s2_tops:
-        p = out.motion.root_positions
+        p = out.gpos[:, pivot]
         root_delta = _smooth(_rotate_about(rot, centre, p) - p, width)
-    return _apply(out, sets, _smooth(rot, width), root_delta)
+    return _apply(out, sets, _smooth(rot, width), root_delta, pivot)
 
 
 # ======================================================================
 # footplants
 # ======================================================================
-def _feet(skeleton: Skeleton, contacts: Contacts) -> list[tuple[int, list[int]]]:
-    """Ankle joint and the contact columns that plant it (its own and its toes')."""
-    out: dict[int, list[int]] = {}
-    names = skeleton.names
-    for k, name in enumerate(contacts.joints):
-        j = skeleton.index(name)
-        p = int(skeleton.parents[j])
-        ankle = p if p >= 0 and names[p] in contacts.joints else j
-        out.setdefault(ankle, []).append(k)
-    return list(out.items())
+def _reference_goals(reference: Motion, contacts: Contacts, *, blend: float) -> list[Goal]:
+    """Goals that put each planted joint back where ``reference`` has it, frame by frame.
 
-
-def _ik_footplants(motion: Motion, contacts: Contacts, reference: Motion) -> Motion:
-    """Put planted ankles back where ``reference`` has them (two-bone leg IK).
-
-    On planted frames the ankle's position and global orientation are those
-    of ``reference``; the correction fades out over :data:`FOOT_BLEND`
-    seconds around each plant.
+    One goal per contact joint (a ``"toe"`` goal when its parent is a
+    contact joint too, else a ``"foot"`` goal), targets the joint's
+    positions in ``reference``, weights 1 while its foot is planted (its
+    ankle or its toe) blended to 0 over ``blend`` seconds on each side
+    (:func:`mocaplab.refinement.blend_weights`).
     """
-    return _ik_posed(_posed(motion), contacts, reference).motion
-
-
-def _ik_posed(posed: _Posed, contacts: Contacts, reference: Motion) -> _Posed:
-    """:func:`_ik_footplants` on a motion with known kinematics, updating them for the legs only.
-
-    All legs are solved in one batched call of the analytic two-bone kernel
-    (:func:`mocaplab.ik.two_bone_deltas`, the kernel of
-    :func:`~mocaplab.ik.two_bone_ik`, with the same defaults: the knee keeps
-    its swivel plane, the ankle gets the wanted global orientation), and
-    only the legs' transforms are recomputed.
-    """
-    from ..ik import limb_joints, two_bone_deltas
-
-    motion, grot, gpos = posed
+    sk = reference.skeleton
+    names = tuple(contacts.joints)
     mask = np.asarray(contacts.mask, dtype=bool)
-    ramp = max(1, int(round(FOOT_BLEND * motion.fps)))
-    sk = motion.skeleton
-    ref_pos, ref_rot = reference.global_positions(), reference.global_rotations()
-    limbs, targets, wants = [], [], []
-    for ankle, cols in _feet(sk, contacts):
-        planted = mask[:, cols].any(axis=1)
-        if not planted.any():
+    feet: dict[str, list[int]] = {}  # ankle -> its contact columns (its own and its toes')
+    for k, name in enumerate(names):
+        p = int(sk.parents[sk.index(name)])
+        feet.setdefault(sk.names[p] if p >= 0 and sk.names[p] in names else name, []).append(k)
+    window = int(round(blend * reference.fps))
+    pos = reference.global_positions()
+    goals = []
+    for ankle, cols in feet.items():
+        planted = intervals_from_mask(mask[:, cols].any(axis=1))
+        if not planted:
             continue
-        dist, (nearest,) = distance_transform_edt(~planted, return_indices=True)
-        w = np.where(dist <= ramp, 0.5 * (1.0 + np.cos(np.pi * dist / (ramp + 1))), 0.0)
-        err = (ref_pos[:, ankle] - gpos[:, ankle])[nearest]
-        targets.append(gpos[:, ankle] + w[:, None] * err)
-        wants.append(quat.slerp(grot[:, ankle], ref_rot[nearest, ankle], w))
-        limbs.append(limb_joints(sk, ankle))
-    if not limbs:
-        return posed
-    up, mid, end = (np.array(j) for j in zip(*limbs, strict=True))
-    q_up, q_mid = two_bone_deltas(gpos[:, up], gpos[:, mid], gpos[:, end], np.stack(targets, axis=1))
-    rot = np.array(motion.rotations, copy=True)
-    parents = sk.parents
-    g_pu, g_pm, g_pe = grot[:, parents[up]], grot[:, parents[mid]], grot[:, parents[end]]
-    # a world rotation q on joint j is the local L' = inv(G_p) q G_p L
-    rot[:, up] = quat.mul(quat.inv(g_pu), quat.mul(q_up, quat.mul(g_pu, rot[:, up])))
-    rot[:, mid] = quat.mul(quat.inv(g_pm), quat.mul(q_mid, quat.mul(g_pm, rot[:, mid])))
-    # the ankle's parent turned with the limb: new global q_up q_mid G_pe
-    rot[:, end] = quat.mul(quat.inv(quat.mul(q_up, quat.mul(q_mid, g_pe))), np.stack(wants, axis=1))
-    new = motion.replace(rotations=rot)
-    return _Posed(new, *_refresh_fk(new, grot, gpos, sorted(set(up.tolist()))))
-
-
-def _refresh_fk(motion: Motion, grot: Array, gpos: Array, tops: Sequence[int]) -> tuple[Array, Array]:
-    """Global transforms with those of the subtrees of ``tops`` recomputed from ``motion``.
-
-    One vectorised step per depth level (both legs at once).
-    """
-    sk = motion.skeleton
-    grot, gpos = np.array(grot, copy=True), np.array(gpos, copy=True)
-    for level in _subtree_levels(sk, tuple(sorted({int(t) for t in tops}))):
-        p = sk.parents[level]
-        local = sk.offsets[level] if motion.translations is None else motion.translations[:, level]
-        grot[:, level] = quat.mul(grot[:, p], motion.rotations[:, level])
-        gpos[:, level] = gpos[:, p] + quat.rotate(grot[:, p], local)
-    return grot, gpos
-
-
-@lru_cache(maxsize=64)
-def _subtree_levels(skeleton: Skeleton, tops: tuple[int, ...]) -> tuple[NDArray[np.int64], ...]:
-    """Joints of the subtrees of ``tops``, grouped by depth, shallowest first."""
-    inside = np.zeros(skeleton.n_joints, dtype=bool)
-    for t in tops:
-        inside |= _subtree(skeleton, t)
-    depth = np.zeros(skeleton.n_joints, dtype=np.int64)
-    for j in range(1, skeleton.n_joints):
-        depth[j] = depth[skeleton.parents[j]] + 1
-    levels = []
-    for d in np.unique(depth[inside]):
-        level = np.flatnonzero(inside & (depth == d))
-        level.flags.writeable = False
-        levels.append(level)
-    return tuple(levels)
+        weights = blend_weights(reference.n_frames, planted, window=window)
+        for k in cols:
+            kind: Literal["foot", "toe"] = "foot" if names[k] == ankle else "toe"
+            goals.append(Goal(names[k], pos[:, sk.index(names[k])], weights, kind=kind))
+    return goals
 
 
 def _footplant_fn(
     footplants: Footplants, contacts: Contacts, reference: Motion
 ) -> Callable[[_Posed], _Posed] | None:
-    """The footplant step of a touch-up, built once."""
+    """The footplant step of a touch-up, built once: goals met by the refinement module's IK layer."""
     if footplants is None:
         return None
     if callable(footplants):
@@ -922,15 +916,12 @@ def _footplant_fn(
         return lambda p: _posed(fn(p.motion, contacts, reference))
     if footplants not in ("auto", "plant", "refine", "ik"):
         raise ValueError(f"Expected `footplants` 'auto', 'plant', 'refine', 'ik', a callable or None, got {footplants!r}")
-    if footplants == "auto":
-        footplants = "plant"
-    if footplants == "ik":
-        return lambda p: _ik_posed(p, contacts, reference)
-    from ..refinement import _solve_goals, foot_goals, refine
-
     if footplants == "refine":
         return lambda p: _posed(refine(p.motion, contacts=contacts, reference=reference))
-    goals = foot_goals(reference, contacts, reference=reference, blend=PLANT_BLEND)
+    if footplants == "ik":
+        goals = _reference_goals(reference, contacts, blend=FOOT_BLEND)
+    else:  # "plant", "auto"
+        goals = foot_goals(reference, contacts, reference=reference, blend=PLANT_BLEND)
 
     def plant(p: _Posed) -> _Posed:
         # solve_goals without root lowering; it turns the legs' joints only
@@ -979,6 +970,12 @@ class TouchUpState:
         Global rotations and positions of :attr:`motion`, computed by the
         touch-up (the same values as ``motion.global_rotations()`` and
         ``motion.global_positions()``, without recomputing them).
+    roles : Roles or None
+        Joint roles of the skeleton (with the overrides given to
+        :func:`start`); the presets are resolved with them.
+    path_joint : int
+        The travelling joint (the pelvis): the part of S2 holding the root
+        turns about it (:attr:`mocaplab.motion.Motion.path_joint`).
     """
 
     motion: Motion
@@ -993,6 +990,8 @@ class TouchUpState:
     footplants: Footplants = "auto"
     fix: Callable[[_Posed], _Posed] | None = None
     kinematics: tuple[Array, Array] | None = None
+    roles: Roles | None = None
+    path_joint: int = 0
 
     @property
     def next_adjustment(self) -> Adjustment:
@@ -1018,7 +1017,7 @@ class TouchUpState:
         """The same state with another schedule (applied from the next step on; link sets checked)."""
         sched = _as_schedule(schedule, self.contacts)
         for adj in sched:
-            link_sets(self.motion.skeleton, adj)
+            link_sets(self.motion.skeleton, adj, roles=self.roles)
         return dataclasses.replace(self, schedule=sched)
 
 
@@ -1030,26 +1029,30 @@ def start(
     contacts: Contacts | None = None,
     flight_window: float = 0.5,
     footplants: Footplants = "auto",
+    roles: Mapping[str, Any] | None = None,
 ) -> TouchUpState:
     """The initial state of a touch-up (no step done).  See :func:`touch_up`."""
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
-    body = Body.from_skeleton(motion.skeleton) if body is None else body
+    known = resolve_roles(motion, roles)
+    body = Body.from_skeleton(motion.skeleton, roles=known) if body is None else body
     if not isinstance(body, Body):
         raise TypeError(f"Expected `body` to be a Body, got {type(body).__name__}")
     body.check(motion)
-    contacts = default_contacts(motion) if contacts is None else contacts
+    contacts = default_contacts(motion, roles=known) if contacts is None else contacts
     _check_contacts(contacts, motion)
     if not (np.isfinite(flight_window) and flight_window >= 0):
         raise ValueError(f"Expected `flight_window` >= 0 seconds, got {flight_window!r}")
     fix = _footplant_fn(footplants, contacts, motion)
     sched = _as_schedule(schedule, contacts)
     for adj in sched:
-        link_sets(motion.skeleton, adj)  # validate the link sets early
+        link_sets(motion.skeleton, adj, roles=known)  # validate the link sets early
     posed = _posed(motion)
     bal = balance(motion, body, contacts=contacts, fk=posed[1:])
+    path = known.index("pelvis") if "pelvis" in known else motion.path_joint
     return TouchUpState(
-        motion, motion, body, contacts, sched, 0, bal, "input", float(flight_window), footplants, fix, posed[1:]
+        motion, motion, body, contacts, sched, 0, bal, "input", float(flight_window), footplants, fix, posed[1:],
+        known, int(path),
     )
 
 
@@ -1060,14 +1063,16 @@ def step(state: TouchUpState) -> TouchUpState:
     adj = state.next_adjustment
     motion, body, contacts = state.motion, state.body, state.contacts
     posed = _Posed(motion, *state.kinematics) if state.kinematics is not None else _posed(motion)
+    sets = link_sets(motion.skeleton, adj, roles=state.roles)
     if adj.stage == "ground":
-        new = _ground_step(posed, body, adj, state.balance)
+        new = _ground_step(posed, body, adj, sets, state.balance, state.path_joint)
     elif stages := flight_stages(contacts):
         window = int(round(state.flight_window * motion.fps))
-        new = _flight_step(posed, body, adj, stages, _flight_weights(motion.n_frames, stages, window), window)
+        weights = _flight_weights(motion.n_frames, stages, window)
+        new = _flight_step(posed, body, adj, sets, stages, weights, window, state.path_joint)
     else:
         new = posed
-    if state.fix is not None and new is not posed and _moves_contacts(motion.skeleton, adj, contacts):
+    if state.fix is not None and new is not posed and _moves_contacts(motion.skeleton, sets, contacts):
         new = state.fix(new)
     if new is posed:
         bal = state.balance
@@ -1080,9 +1085,8 @@ def step(state: TouchUpState) -> TouchUpState:
     )
 
 
-def _moves_contacts(skeleton: Skeleton, adj: Adjustment, contacts: Contacts) -> bool:
-    """Whether the adjustment can move a contact joint (else footplants need no repair)."""
-    sets = link_sets(skeleton, adj)
+def _moves_contacts(skeleton: Skeleton, sets: LinkSets, contacts: Contacts) -> bool:
+    """Whether an adjustment's link sets can move a contact joint (else footplants need no repair)."""
     return any(sets.part[skeleton.index(name)] >= 0 for name in contacts.joints)
 
 
@@ -1135,6 +1139,7 @@ def touch_up(
     iterations: int = 3,
     flight_window: float = 0.5,
     footplants: Footplants = "auto",
+    roles: Mapping[str, Any] | None = None,
 ) -> TouchUpHistory:
     """Physically touch up a motion (Shin et al. 2003).
 
@@ -1162,6 +1167,10 @@ def touch_up(
     footplants : "auto", "plant", "refine", "ik", callable or None
         Re-enforcement of the footplants after each step (see the module
         notes); a callable gets ``(motion, contacts, reference)``.
+    roles : mapping of role names to joint names, optional
+        Overrides of the inferred joint roles
+        (:func:`mocaplab.roles.resolve_roles`), used for the default body,
+        the default contacts, the presets and the travelling joint.
 
     Returns
     -------
@@ -1171,7 +1180,8 @@ def touch_up(
     if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
         raise ValueError(f"Expected `iterations` to be an integer >= 0, got {iterations!r}")
     state = start(
-        motion, body=body, schedule=schedule, contacts=contacts, flight_window=flight_window, footplants=footplants
+        motion, body=body, schedule=schedule, contacts=contacts, flight_window=flight_window, footplants=footplants,
+        roles=roles,
     )
     states = [state]
     for _ in range(int(iterations) * len(state.schedule)):
@@ -1197,7 +1207,7 @@ class TouchUpSession:
     motion : Motion
     **options
         As for :func:`start` (``body``, ``schedule``, ``contacts``,
-        ``flight_window``, ``footplants``).
+        ``flight_window``, ``footplants``, ``roles``).
     """
 
     def __init__(self, motion: Motion, **options: object) -> None:

@@ -33,10 +33,10 @@ iteration in the millisecond range.  Tests check that both agree.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from functools import cached_property, lru_cache
 from itertools import combinations, combinations_with_replacement
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -44,6 +44,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from .. import quat
 from ..motion import Motion
+from ..roles import resolve_roles
 from .body import GRAVITY, Body, _positions_and_accelerations, paper_width
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -321,11 +322,11 @@ def signed_distance(point: ArrayLike, polygon: ArrayLike) -> float:
 
 
 # --------------------------------------------------------------- per clip
-def default_contacts(motion: Motion) -> Contacts:
-    """Foot contacts of ``motion`` by :func:`mocaplab.contacts.foot_contacts`."""
+def default_contacts(motion: Motion, *, roles: Mapping[str, Any] | None = None) -> Contacts:
+    """Foot contacts of ``motion`` by :func:`mocaplab.contacts.foot_contacts` (ankles and toes from the roles)."""
     from ..contacts import foot_contacts
 
-    return foot_contacts(motion)
+    return foot_contacts(motion, roles=roles)
 
 
 def _check_contacts(contacts: Contacts, motion: Motion) -> None:
@@ -406,6 +407,7 @@ def balance(
     contacts: Contacts | None = None,
     width: float | None = None,
     fk: tuple[Array, Array] | None = None,
+    roles: Mapping[str, Any] | None = None,
 ) -> Balance:
     """ZMP (equation 4), support polygons and distances of a clip.
 
@@ -421,13 +423,18 @@ def balance(
         30 fps, scaled to the clip's rate).
     fk : (global_rotations, global_positions), optional
         The motion's forward kinematics when already at hand.
+    roles : mapping of role names to joint names, optional
+        Role overrides (:func:`mocaplab.roles.resolve_roles`) for the
+        default body and contacts.
 
     Returns
     -------
     Balance
     """
-    body = Body.from_skeleton(motion.skeleton) if body is None else body
-    contacts = default_contacts(motion) if contacts is None else contacts
+    if body is None or contacts is None:
+        known = resolve_roles(motion, roles)
+        body = Body.from_skeleton(motion.skeleton, roles=known) if body is None else body
+        contacts = default_contacts(motion, roles=known) if contacts is None else contacts
     _check_contacts(contacts, motion)
     w = paper_width(5.0, motion.fps) if width is None else float(width)
     body.check(motion)
@@ -522,9 +529,18 @@ def _point_layout(body: Body, owners: NDArray[np.int64], offsets: Array) -> tupl
     return cache[key][:2]
 
 
-def zmp_distance(motion: Motion, body: Body | None = None, *, contacts: Contacts | None = None) -> Array:
-    """Distance of the ZMP outside the support polygon, shape (F,); 0 inside, NaN in flight."""
-    return balance(motion, body, contacts=contacts).distance
+def zmp_distance(
+    motion: Motion,
+    body: Body | None = None,
+    *,
+    contacts: Contacts | None = None,
+    roles: Mapping[str, Any] | None = None,
+) -> Array:
+    """Distance of the ZMP outside the support polygon, shape (F,); 0 inside, NaN in flight.
+
+    Options as for :func:`balance`.
+    """
+    return balance(motion, body, contacts=contacts, roles=roles).distance
 
 
 def _ensure_sequence(motions: Motion | Sequence[Motion]) -> list[Motion]:

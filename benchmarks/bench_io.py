@@ -6,7 +6,9 @@ Work timed, on CMU 49_03 (1504 frames, 31 joints, 96 channels):
 * pybvh (a benchmark-only dependency): ``pybvh.read_bvh_file(path)`` then
   ``.joint_positions()`` (its warnings silenced);
 * for information: ``load_asf_amc`` of the same clip from the Acclaim files,
-  with forward kinematics.
+  with forward kinematics; and ``data.cmu`` of the clip from the mirror, which
+  reads the file once, checks its sha256 and parses those bytes on every call
+  (the price of the integrity check over a bare ``load_bvh``).
 
 The two BVH readers are run alternately in the same process; the medians of
 the repeats and their ratio are printed (the target is mocaplab at least 2x
@@ -77,6 +79,12 @@ def main() -> None:
     def acclaim() -> np.ndarray:
         return load_asf_amc(mirror / str(entry["asf"]), mirror / str(entry["amc"])).global_positions()
 
+    def verified() -> None:
+        data.cmu(TRIAL)
+
+    def bare() -> None:
+        load_bvh(bvh_path, scale=scale)
+
     # same answer first (pybvh in file units, ours in metres)
     a, b = ours(), np.asarray(theirs())
     if b.shape == a.shape:
@@ -91,6 +99,12 @@ def main() -> None:
         ours_t += _time(ours, 1)
         theirs_t += _time(theirs, 1)
     acclaim_t = _time(acclaim, max(5, args.repeats // 3))
+    os.environ.setdefault("MOCAPLAB_DATA_DIR", str(mirror))
+    verified_t: list[float] = []
+    bare_t: list[float] = []
+    for _ in range(max(5, args.repeats // 3)):
+        verified_t += _time(verified, 1)
+        bare_t += _time(bare, 1)
 
     m_ours = statistics.median(ours_t) * 1e3
     m_theirs = statistics.median(theirs_t) * 1e3
@@ -99,6 +113,8 @@ def main() -> None:
     print(f"  pybvh read + positions : {m_theirs:7.2f} ms  (min {min(theirs_t) * 1e3:.2f})")
     print(f"  ratio pybvh / mocaplab : {m_theirs / m_ours:7.2f}x  (target >= 2x; ratio of minima {min(theirs_t) / min(ours_t):.2f}x)")
     print(f"  mocaplab load_asf_amc + FK (same clip, Acclaim files): {statistics.median(acclaim_t) * 1e3:.2f} ms")
+    m_verified, m_bare = statistics.median(verified_t) * 1e3, statistics.median(bare_t) * 1e3
+    print(f"  data.cmu (sha256 + load, every call) : {m_verified:7.2f} ms  vs load_bvh {m_bare:.2f} ms ({m_verified / m_bare:.2f}x)")
 
 
 if __name__ == "__main__":

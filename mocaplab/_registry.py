@@ -3,11 +3,20 @@
 Each entry: description, frames, frame rate, metres per file unit, the mirror
 path and sha256 of the BVH, and the original CMU ASF/AMC addresses with the
 sha256 of their text with line endings normalised to LF.
+
+Facts about the whole database (any trial, registered or not) sit beside the
+table: its size, its unit and where the CMU site serves its files.
 """
 
 from __future__ import annotations
 
+#: Metres per CMU Acclaim length unit (``:units length 0.45``: 1/0.45 inch).
 CMU_UNIT_M = 0.0254 / 0.45
+#: Subjects of the CMU database, numbered 1 to 144 (2,605 trials in all).
+CMU_SUBJECTS = 144
+CMU_TRIALS = 2605
+#: Where the CMU site serves ``<SS>/<SS>.asf`` and ``<SS>/<SS_TT>.amc``.
+CMU_URL = "http://mocap.cs.cmu.edu/subjects"
 
 CLIPS: dict[str, dict[str, object]] = {
     '16_15': {

@@ -1,25 +1,56 @@
 """CMU Graphics Lab motion capture clips, by trial id.
 
 >>> walk = cmu("16_15")            # doctest: +SKIP
+>>> other = cmu("35_01")           # any trial of the CMU database  # doctest: +SKIP
+
+Which trials
+------------
+Any of the 2,605 trials of the CMU database (144 subjects): a trial id is
+``"SS_TT"`` as CMU names its files, the subject from ``01`` to ``144`` (two
+digits, three from 100) and the trial number in two digits (``"02_01"``,
+``"16_15"``, ``"127_04"``); anything else is a ``ValueError``
+(:func:`parse_trial`).  :func:`clips` lists the *registry*: the 17 clips
+the lessons use, whose bytes are verified by sha256 and whose frame rate and
+unit are known.  Other trials are read at CMU's 120 fps in metres, checked
+only by parsing them, and an :class:`UnverifiedDataWarning` says so once per
+trial and process.
 
 Where the files come from
 -------------------------
 1. **A local mirror** named by the environment variable ``MOCAPLAB_DATA_DIR``,
    laid out like the project's data folder (``bvh/<SS_TT>.bvh``,
    ``asfamc/<SS>/<SS>.asf``, ``asfamc/<SS>/<SS_TT>.amc``,
-   ``pair_salsa_daz/<SS_TT>.bvh``).  Used with no network at all.  The BVH
-   files are read (fast); set ``source="asfamc"`` to read the Acclaim pair.
-2. **The CMU site**, when no mirror is set: the original ASF/AMC files are
-   downloaded once with :mod:`pooch` into a user cache
-   (``MOCAPLAB_CACHE_DIR`` or the OS cache folder) and read from there.
+   ``pair_salsa_daz/<SS_TT>.bvh``).  Used with no network at all; it serves
+   every trial it holds, registry or not.  A registry clip is read from its
+   BVH (fast); another trial from its BVH if the mirror has one, else from
+   its Acclaim pair; ``source="asfamc"`` reads the Acclaim pair.
+2. **A web server**, when no mirror is set: the ASF/AMC pair is downloaded
+   once with :mod:`pooch` into a user cache (``MOCAPLAB_CACHE_DIR`` or the
+   OS cache folder) and read from there.  The files are fetched from
+   ``{base}/{SS}/{SS}.asf`` and ``{base}/{SS}/{SS_TT}.amc``, the layout of
+   the CMU site, where ``base`` is ``MOCAPLAB_CMU_URL`` (default
+   :data:`DEFAULT_CMU_URL`, ``http://mocap.cs.cmu.edu/subjects``): a course
+   can serve its own copy of those files from any web server.  Long
+   downloads show pooch's progress bar when ``tqdm`` is installed.
 
 Checking the bytes
 ------------------
-Mirror BVH files are checked against the sha256 recorded in the registry.
-The Acclaim files served by CMU may differ from other copies only in their
-line endings (CRLF versus LF), so a downloaded or mirrored ASF/AMC file is
-checked by the sha256 of its text **after converting CRLF to LF**; pooch's
-own byte hash is not used for them.  A mismatch raises :class:`DataError`.
+Each call reads each file once, checks those bytes and parses the same
+bytes; nothing is remembered between calls, so a file changed after a first
+load is checked again.
+
+* Registry clips: a BVH by the sha256 of its bytes; an Acclaim file by the
+  sha256 of its text **after converting CRLF to LF** (the files CMU serves
+  may differ from other copies only in their line endings, so pooch's own
+  byte hash is not used).  The ASF of another trial is verified the same way
+  when its subject has a registry clip (one skeleton file per subject).
+* Other files: they must parse (:class:`~mocaplab.io.MocapFormatError`
+  otherwise), and the warning above names them.
+* A downloaded file that fails its check (hash or parse) is removed from the
+  cache and fetched once more; if the new copy fails too it is removed as
+  well and a :class:`DataError` names the file, its address and what was
+  wrong.  Mirror files are never removed: a mismatch there is a
+  :class:`DataError` naming the file.
 
 The data was obtained from mocap.cs.cmu.edu; the database was created with
 funding from NSF EIA-0196217 (see :data:`ACKNOWLEDGMENT`).
@@ -28,27 +59,51 @@ funding from NSF EIA-0196217 (see :data:`ACKNOWLEDGMENT`).
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import os
+import re
+import warnings
 from pathlib import Path
 from typing import Literal
 
-from ._registry import CLIPS
+from ._registry import CLIPS, CMU_SUBJECTS, CMU_UNIT_M, CMU_URL
 from .motion import Motion
 
-__all__ = ["cmu", "clips", "describe", "mirror_dir", "DataError", "ACKNOWLEDGMENT", "ENV_VAR"]
+__all__ = [
+    "cmu",
+    "clips",
+    "describe",
+    "mirror_dir",
+    "download_base",
+    "parse_trial",
+    "DataError",
+    "UnverifiedDataWarning",
+    "ACKNOWLEDGMENT",
+    "ENV_VAR",
+    "CACHE_ENV_VAR",
+    "URL_ENV_VAR",
+    "DEFAULT_CMU_URL",
+]
 
 ENV_VAR = "MOCAPLAB_DATA_DIR"
 CACHE_ENV_VAR = "MOCAPLAB_CACHE_DIR"
+URL_ENV_VAR = "MOCAPLAB_CMU_URL"
+#: Where the CMU site serves ``<SS>/<SS>.asf`` and ``<SS>/<SS_TT>.amc``.
+DEFAULT_CMU_URL = CMU_URL
+#: The frame rate of the CMU captures, used for trials outside the registry.
+CMU_FPS = 120.0
 ACKNOWLEDGMENT = (
     "The data used in this project was obtained from mocap.cs.cmu.edu. "
     "The database was created with funding from NSF EIA-0196217."
 )
 
-_verified: set[str] = set()
-
 
 class DataError(RuntimeError):
     """A clip could not be found, fetched or verified."""
+
+
+class UnverifiedDataWarning(UserWarning):
+    """A clip was read from files that no registry hash vouches for (they were only parsed)."""
 
 
 def clips() -> list[str]:
@@ -57,15 +112,68 @@ def clips() -> list[str]:
 
 
 def describe(trial: str) -> dict[str, object]:
-    """Registry entry of a clip (description, frames, fps, scale, files)."""
-    return dict(_entry(trial))
+    """Registry entry of a clip (description, frames, fps, scale, files).
 
-
-def _entry(trial: str) -> dict[str, object]:
+    Raises
+    ------
+    KeyError
+        For a trial that is not in the registry (:func:`cmu` still loads any
+        CMU trial).
+    """
     try:
-        return CLIPS[trial]
+        return dict(CLIPS[trial])
     except KeyError:
-        raise KeyError(f"Unknown CMU clip {trial!r}; known clips are {clips()}") from None
+        raise KeyError(
+            f"CMU clip {trial!r} is not in the registry; registry clips are {clips()} "
+            "(cmu() loads any other CMU trial, unverified)"
+        ) from None
+
+
+def parse_trial(trial: str) -> tuple[str, str]:
+    """The subject folder and the trial id of a CMU trial id, checked.
+
+    Parameters
+    ----------
+    trial : str
+        ``"SS_TT"``: subject ``01`` to ``144`` (two digits, three from 100),
+        trial number in two digits, ``01`` to ``99``.
+
+    Returns
+    -------
+    subject : str
+        As in the CMU paths, e.g. ``"02"`` or ``"127"``.
+    trial : str
+
+    Raises
+    ------
+    ValueError
+        For any other string, with the padded form when that is what was meant.
+    TypeError
+        For a ``trial`` that is not a str.
+
+    Examples
+    --------
+    >>> parse_trial("02_01")
+    ('02', '02_01')
+    """
+    if not isinstance(trial, str):
+        raise TypeError(f"Expected `trial` to be a str such as '16_15', got {type(trial).__name__}")
+    m = re.fullmatch(r"([0-9]{1,3})_([0-9]{1,3})", trial)
+    if m is not None:
+        subject, number = int(m.group(1)), int(m.group(2))
+        canonical = f"{subject:02d}_{number:02d}"
+        if 1 <= subject <= CMU_SUBJECTS and 1 <= number <= 99:
+            if canonical == trial:
+                return m.group(1), trial
+            hint = f"; did you mean {canonical!r}?"
+        else:
+            hint = f" (subject {subject} is not in 1..{CMU_SUBJECTS})" if not 1 <= subject <= CMU_SUBJECTS else ""
+    else:
+        hint = ""
+    raise ValueError(
+        f"Expected `trial` as 'SS_TT': a CMU subject from 01 to {CMU_SUBJECTS} and a two-digit trial number, "
+        f"as CMU names its files (e.g. '16_15', '02_01', '127_04'), got {trial!r}{hint}"
+    )
 
 
 def mirror_dir() -> Path | None:
@@ -74,21 +182,38 @@ def mirror_dir() -> Path | None:
     return Path(value).expanduser() if value else None
 
 
-def _sha256(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
+def download_base() -> str:
+    """Where trials are downloaded from: ``MOCAPLAB_CMU_URL``, default :data:`DEFAULT_CMU_URL` (no trailing ``/``).
+
+    Raises
+    ------
+    DataError
+        When the variable is set to something that is not a URL.
+    """
+    value = os.environ.get(URL_ENV_VAR, "").strip() or DEFAULT_CMU_URL
+    if "://" not in value:
+        raise DataError(
+            f"{URL_ENV_VAR}={value!r} is not a URL; expected the address of a folder laid out like "
+            f"{DEFAULT_CMU_URL} (<SS>/<SS>.asf, <SS>/<SS_TT>.amc), e.g. 'https://example.org/cmu/subjects'"
+        )
+    return value.rstrip("/")
 
 
-def _check(path: Path, expected: str, *, normalise_newlines: bool) -> None:
-    key = f"{path}:{expected}"
-    if key in _verified:
-        return
-    data = path.read_bytes()
-    if normalise_newlines:
-        data = data.replace(b"\r\n", b"\n")
-    got = _sha256(data)
-    if got != expected:
-        raise DataError(f"{path}: sha256 {got} does not match the registry's {expected}; the file is damaged or not the CMU clip")
-    _verified.add(key)
+def _sha256(raw: bytes, *, normalise_newlines: bool) -> str:
+    return hashlib.sha256(raw.replace(b"\r\n", b"\n") if normalise_newlines else raw).hexdigest()
+
+
+def _asf_sha256(subject: str) -> str | None:
+    """The registry's hash of subject ``subject``'s ASF, if one of its clips is registered."""
+    rel = f"asfamc/{subject}/{subject}.asf"
+    return next((str(e["asf_sha256_lf"]) for e in CLIPS.values() if e.get("asf") == rel), None)
+
+
+def _read(path: Path) -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise DataError(f"{path}: could not be read ({exc.strerror or exc})") from exc
 
 
 def _mirror_file(root: Path, rel: str) -> Path:
@@ -101,75 +226,238 @@ def _mirror_file(root: Path, rel: str) -> Path:
     return path
 
 
-def _download(url: str, expected_lf: str) -> Path:
-    try:
-        import pooch
-    except ImportError:  # pragma: no cover - pooch is a declared dependency
-        raise DataError("Downloading CMU clips needs the 'pooch' package: pip install pooch") from None
-    cache = os.environ.get(CACHE_ENV_VAR) or pooch.os_cache("mocaplab")
-    subject = url.rstrip("/").split("/")[-2]
-    try:
-        fname = pooch.retrieve(url, known_hash=None, path=Path(cache) / subject, progressbar=False)
-    except Exception as exc:
+def _verify(path: Path, raw: bytes, expected: str, *, normalise_newlines: bool) -> None:
+    got = _sha256(raw, normalise_newlines=normalise_newlines)
+    if got != expected:
         raise DataError(
-            f"Could not download {url} ({exc}). Without a network, set {ENV_VAR} to a local "
-            "mirror of the clips (see the README, 'Data')."
-        ) from exc
-    path = Path(fname)
-    _check(path, expected_lf, normalise_newlines=True)
-    return path
+            f"{path}: sha256 {got} does not match the registry's {expected}; the file is damaged or not the CMU "
+            "clip (replace it with a good copy)"
+        )
+
+
+def _warn_unverified(trial: str, files: list[str]) -> None:
+    # stacklevel=1: the warning's place is this line, so Python's default
+    # filter shows it once per trial and process (not once per calling cell)
+    warnings.warn(
+        f"CMU trial {trial} is not in mocaplab's registry: {' and '.join(files)} "
+        f"{'was' if len(files) == 1 else 'were'} checked only by parsing, not against a known sha256 "
+        "(the registry's clips, data.clips(), are verified)",
+        UnverifiedDataWarning,
+        stacklevel=1,
+    )
 
 
 def cmu(trial: str, *, source: Literal["auto", "bvh", "asfamc"] = "auto") -> Motion:
-    """Load a CMU clip as a :class:`~mocaplab.motion.Motion` in metres.
+    """Load a CMU trial as a :class:`~mocaplab.motion.Motion` in metres.
 
     Parameters
     ----------
     trial : str
-        CMU trial id ``"<subject>_<trial>"``, e.g. ``"16_15"`` (see :func:`clips`).
+        CMU trial id ``"SS_TT"``, e.g. ``"16_15"``: a registry clip (see
+        :func:`clips`) or any other trial of the database (see the module
+        notes and :func:`parse_trial`).
     source : {"auto", "bvh", "asfamc"}
-        ``"auto"`` reads the mirror's BVH when a mirror is set and downloads
-        the ASF/AMC otherwise.
+        ``"auto"``: with a mirror, a registry clip's BVH, another trial's BVH
+        if the mirror has it, else its ASF/AMC; without one, download the
+        ASF/AMC.
+
+    Returns
+    -------
+    Motion
+        Named ``trial``.  Registry clips get the registry's frame rate and
+        unit; other trials CMU's 120 fps and the ASF unit (a mirror BVH of
+        another trial: the CMU unit, 1/0.45 inch, and its header's rate).
+
+    Raises
+    ------
+    ValueError
+        For a malformed trial id or ``source``.
+    DataError
+        For a clip that is not in the mirror, cannot be downloaded, fails its
+        hash or does not parse (see the module notes).
+
+    Warns
+    -----
+    UnverifiedDataWarning
+        For a trial outside the registry, once per trial and process.
 
     Notes
     -----
-    Frame rate and units come from the registry (metres; 120 fps for the
-    CMU clips).  The salsa pair (``"60_10"``, ``"61_10"``) exists only as BVH in the mirror
-    (a third-party conversion with another skeleton, in centimetres); its
-    header says 120 fps but the clips are 60 fps, which is what is used, and
-    its artificial T-pose frame 0 is dropped.
+    The salsa pair (``"60_10"``, ``"61_10"``) exists in the registry only as
+    BVH in the mirror (a third-party conversion with another skeleton, in
+    centimetres); its header says 120 fps but the clips are 60 fps, which is
+    what is used, and its artificial T-pose frame 0 is dropped.
     """
-    entry = _entry(trial)
-    root = mirror_dir()
-    is_pair = "asf" not in entry
-    if source == "auto":
-        source = "bvh" if (root is not None or is_pair) else "asfamc"
-    if source not in ("bvh", "asfamc"):
+    subject, trial = parse_trial(trial)
+    if source not in ("auto", "bvh", "asfamc"):
         raise ValueError(f"Expected source 'auto', 'bvh' or 'asfamc', got {source!r}")
-    from . import io
-
+    entry = CLIPS.get(trial)
+    root = mirror_dir()
+    is_pair = entry is not None and "asf" not in entry
+    if source == "auto":
+        if root is None:
+            source = "bvh" if is_pair else "asfamc"
+        elif entry is not None:
+            source = "bvh"
+        elif (root / "bvh" / f"{trial}.bvh").is_file():
+            source = "bvh"
+        elif (root / "asfamc" / subject / f"{trial}.amc").is_file():
+            source = "asfamc"
+        else:
+            raise DataError(
+                f"{ENV_VAR}={root} is set but trial {trial} is not in it: neither bvh/{trial}.bvh nor "
+                f"asfamc/{subject}/{trial}.amc (with asfamc/{subject}/{subject}.asf). Add the files, or unset "
+                f"{ENV_VAR} to download the trial from {download_base()}."
+            )
     if source == "bvh":
         if root is None:
             raise DataError(
                 f"Clip {trial} as BVH needs a local mirror: set {ENV_VAR} to a folder laid out like the "
                 "project's data folder (see the README, 'Data'), or use source='asfamc' to download "
-                "the original files from mocap.cs.cmu.edu."
+                f"the original files from {download_base()}."
             )
-        path = _mirror_file(root, str(entry["bvh"]))
-        _check(path, str(entry["bvh_sha256"]), normalise_newlines=False)
-        motion = io.load_bvh(path, scale=float(entry["scale"]), name=trial)  # type: ignore[arg-type]
-        if is_pair:
-            motion = motion[1:]
-        # the registry's rate: BVH headers round it (0.008333333 s) or get it wrong (salsa)
-        return motion.replace(fps=float(entry["fps"]))  # type: ignore[arg-type]
+        return _mirror_bvh(root, trial, entry)
     if is_pair:
         raise DataError(f"Clip {trial} has no ASF/AMC files in the registry; use source='bvh' with a mirror")
     if root is not None:
-        asf = _mirror_file(root, str(entry["asf"]))
-        amc = _mirror_file(root, str(entry["amc"]))
-        _check(asf, str(entry["asf_sha256_lf"]), normalise_newlines=True)
-        _check(amc, str(entry["amc_sha256_lf"]), normalise_newlines=True)
-    else:
-        asf = _download(str(entry["asf_url"]), str(entry["asf_sha256_lf"]))
-        amc = _download(str(entry["amc_url"]), str(entry["amc_sha256_lf"]))
-    return io.load_asf_amc(asf, amc, name=trial, fps=float(entry["fps"]))  # type: ignore[arg-type]
+        return _mirror_acclaim(root, subject, trial, entry)
+    return _download_acclaim(subject, trial, entry)
+
+
+def _mirror_bvh(root: Path, trial: str, entry: dict[str, object] | None) -> Motion:
+    from .io import MocapFormatError, load
+    from .io.bvh import load_bvh_bytes
+
+    if entry is None:
+        path = _mirror_file(root, f"bvh/{trial}.bvh")
+        try:
+            motion = load(path, scale=CMU_UNIT_M, name=trial)  # the mirror's bvh/ is in CMU units
+        except MocapFormatError as err:
+            raise DataError(f"{path}: trial {trial} in the mirror is not a readable BVH file ({err})") from err
+        _warn_unverified(trial, [f"bvh/{trial}.bvh"])
+        return motion
+    path = _mirror_file(root, str(entry["bvh"]))
+    raw = _read(path)
+    _verify(path, raw, str(entry["bvh_sha256"]), normalise_newlines=False)
+    motion = load_bvh_bytes(raw, str(path), scale=float(entry["scale"]), name=trial)  # type: ignore[arg-type]
+    if "asf" not in entry:  # the salsa pair: drop the artificial T-pose frame
+        motion = motion[1:]
+    # the registry's rate: BVH headers round it (0.008333333 s) or get it wrong (salsa)
+    return motion.replace(fps=float(entry["fps"]))  # type: ignore[arg-type]
+
+
+def _acclaim_hashes(subject: str, entry: dict[str, object] | None) -> dict[str, str | None]:
+    return {
+        "asf": _asf_sha256(subject),
+        "amc": None if entry is None else str(entry["amc_sha256_lf"]),
+    }
+
+
+def _mirror_acclaim(root: Path, subject: str, trial: str, entry: dict[str, object] | None) -> Motion:
+    from .io import MocapFormatError
+    from .io.asfamc import load_asf_amc_bytes
+
+    rel = {"asf": f"asfamc/{subject}/{subject}.asf", "amc": f"asfamc/{subject}/{trial}.amc"}
+    paths = {k: _mirror_file(root, r) for k, r in rel.items()}
+    raws = {k: _read(p) for k, p in paths.items()}
+    expected = _acclaim_hashes(subject, entry)
+    for k, digest in expected.items():
+        if digest is not None:
+            _verify(paths[k], raws[k], digest, normalise_newlines=True)
+    fps = CMU_FPS if entry is None else float(entry["fps"])  # type: ignore[arg-type]
+    try:
+        motion = load_asf_amc_bytes(
+            raws["asf"], str(paths["asf"]), raws["amc"], str(paths["amc"]), name=trial, fps=fps
+        )
+    except MocapFormatError as err:
+        raise DataError(f"{err.path}: trial {trial} in the mirror does not parse ({err})") from err
+    unverified = [rel[k] for k, digest in expected.items() if digest is None]
+    if unverified:
+        _warn_unverified(trial, unverified)
+    return motion
+
+
+def _cache_dir(subject: str) -> Path:
+    import pooch
+
+    return Path(os.environ.get(CACHE_ENV_VAR) or pooch.os_cache("mocaplab")) / subject
+
+
+def _progressbar() -> bool:
+    """Whether pooch can show a progress bar: it needs ``tqdm``, an optional package."""
+    return importlib.util.find_spec("tqdm") is not None
+
+
+def _retrieve(url: str, folder: Path, trial: str) -> Path:
+    import pooch
+
+    try:
+        fname = pooch.retrieve(url, known_hash=None, path=folder, progressbar=_progressbar())
+    except Exception as exc:
+        known = "" if trial in CLIPS else f" Is {trial} a CMU trial? The trials of a subject are listed on the CMU site."
+        raise DataError(
+            f"Could not download {url} ({exc}).{known} Without a network, set {ENV_VAR} to a local "
+            f"mirror of the clips (see the README, 'Data'); to use another server, set {URL_ENV_VAR}."
+        ) from exc
+    return Path(fname)
+
+
+def _remove(path: Path) -> str:
+    """Delete a cached file; says how that went, for error messages."""
+    try:
+        path.unlink()
+    except FileNotFoundError:
+        return "removed"
+    except OSError as exc:
+        return f"could not be removed ({exc.strerror or exc}): delete it by hand"
+    return "removed"
+
+
+def _download_acclaim(subject: str, trial: str, entry: dict[str, object] | None) -> Motion:
+    try:
+        import pooch  # noqa: F401
+    except ImportError:  # pragma: no cover - pooch is a declared dependency
+        raise DataError("Downloading CMU clips needs the 'pooch' package: pip install pooch") from None
+    from .io import MocapFormatError
+    from .io.asfamc import load_asf_amc_bytes
+
+    base = download_base()
+    urls = {"asf": f"{base}/{subject}/{subject}.asf", "amc": f"{base}/{subject}/{trial}.amc"}
+    names = {"asf": f"{subject}.asf", "amc": f"{trial}.amc"}
+    expected = _acclaim_hashes(subject, entry)
+    fps = CMU_FPS if entry is None else float(entry["fps"])  # type: ignore[arg-type]
+    folder = _cache_dir(subject)
+    fetched_again: set[str] = set()
+    while True:
+        paths = {k: _retrieve(url, folder, trial) for k, url in urls.items()}
+        raws = {k: _read(p) for k, p in paths.items()}
+        problem: tuple[str, str] | None = None
+        for k, digest in expected.items():
+            if digest is None:
+                continue
+            got = _sha256(raws[k], normalise_newlines=True)
+            if got != digest:
+                problem = (k, f"its sha256 (of the text with LF line endings) is {got}, not the registry's {digest}")
+                break
+        if problem is None:
+            try:
+                motion = load_asf_amc_bytes(
+                    raws["asf"], str(paths["asf"]), raws["amc"], str(paths["amc"]), name=trial, fps=fps
+                )
+            except MocapFormatError as err:
+                k = "asf" if err.path == str(paths["asf"]) else "amc"
+                problem = (k, f"it does not parse ({err})")
+            else:
+                unverified = [names[k] for k, digest in expected.items() if digest is None]
+                if unverified:
+                    _warn_unverified(trial, unverified)
+                return motion
+        k, why = problem
+        removed = _remove(paths[k])
+        if k in fetched_again:
+            raise DataError(
+                f"{paths[k]}: {names[k]} downloaded from {urls[k]} failed its check: {why}. The cached copy failed "
+                f"first, was removed and downloaded again, and the new copy fails too; it was {removed}. The server "
+                f"holds a damaged or different file: check {URL_ENV_VAR} (now {base!r}) or try again later."
+            )
+        fetched_again.add(k)

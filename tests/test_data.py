@@ -2,14 +2,23 @@
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import importlib.machinery
+import os
 import shutil
+import sys
+import threading
+import types
+import warnings
+from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from mocaplab import data
-from mocaplab.io import load_bvh
+from mocaplab.io import load_asf_amc, load_bvh
 
 CMU_UNIT = 0.0254 / 0.45
 
@@ -37,9 +46,9 @@ def test_registry_lists_the_clips():
     assert data.describe("49_03")["frames"] == 1504
 
 
-def test_unknown_clip():
-    with pytest.raises(KeyError, match="Unknown CMU clip '99_99'; known clips are"):
-        data.cmu("99_99")
+def test_describe_knows_only_the_registry():
+    with pytest.raises(KeyError, match=r"CMU clip '35_01' is not in the registry; registry clips are \['16_15'"):
+        data.describe("35_01")
 
 
 def test_bad_source(mocap_dir):
@@ -134,6 +143,7 @@ def test_no_mirror_and_no_network_says_how_to_get_the_data(monkeypatch, tmp_path
         raise OSError("network is unreachable")
 
     monkeypatch.delenv(data.ENV_VAR, raising=False)
+    monkeypatch.delenv(data.URL_ENV_VAR, raising=False)
     monkeypatch.setenv(data.CACHE_ENV_VAR, str(tmp_path))
     monkeypatch.setattr(pooch, "retrieve", offline)
     with pytest.raises(data.DataError, match="Could not download http://mocap.cs.cmu.edu/subjects/16/16.asf") as info:
@@ -154,7 +164,380 @@ def test_downloaded_files_are_checked_and_read(mocap_dir, monkeypatch, tmp_path)
         return str(dst)
 
     monkeypatch.delenv(data.ENV_VAR, raising=False)
+    monkeypatch.delenv(data.URL_ENV_VAR, raising=False)
     monkeypatch.setenv(data.CACHE_ENV_VAR, str(tmp_path))
     monkeypatch.setattr(pooch, "retrieve", fake_retrieve)
     m = data.cmu("16_35")  # auto: no mirror, so the Acclaim files are fetched
     assert m.skeleton.names[0] == "root" and m.n_frames == data.describe("16_35")["frames"]
+
+
+# ------------------------------------------------------ trial ids (issue 17)
+
+
+@pytest.mark.parametrize(
+    ("trial", "expected"),
+    [("02_01", ("02", "02_01")), ("16_15", ("16", "16_15")), ("127_04", ("127", "127_04")), ("144_01", ("144", "144_01"))],
+)
+def test_trial_ids(trial, expected):
+    assert data.parse_trial(trial) == expected
+
+
+@pytest.mark.parametrize(
+    ("trial", "hint"),
+    [
+        ("145_01", " (subject 145 is not in 1..144)"),
+        ("00_01", " (subject 0 is not in 1..144)"),
+        ("16_00", ""),
+        ("16_100", ""),
+        ("2_1", "; did you mean '02_01'?"),
+        ("016_15", "; did you mean '16_15'?"),
+        ("16_1", "; did you mean '16_01'?"),
+        ("16-15", ""),
+        ("16_15 ", ""),
+        ("", ""),
+        ("abc", ""),
+        ("\u0661\u0666_\u0661\u0665", ""),  # Arabic-Indic digits
+        ("9" * 5000 + "_01", ""),
+    ],
+)
+def test_malformed_trial_ids(trial, hint):
+    message = (
+        "Expected `trial` as 'SS_TT': a CMU subject from 01 to 144 and a two-digit trial number, "
+        f"as CMU names its files (e.g. '16_15', '02_01', '127_04'), got {trial!r}{hint}"
+    )
+    with pytest.raises(ValueError) as info:
+        data.cmu(trial)
+    assert str(info.value) == message
+
+
+@pytest.mark.parametrize("trial", [1615, None, ("16", "15")])
+def test_trial_id_must_be_a_string(trial):
+    with pytest.raises(TypeError, match=f"Expected `trial` to be a str such as '16_15', got {type(trial).__name__}"):
+        data.cmu(trial)  # type: ignore[arg-type]
+
+
+def test_registry_addresses_follow_the_cmu_layout():
+    """The download base plus <SS>/<SS>.asf and <SS>/<SS_TT>.amc gives the registry's own CMU addresses."""
+    assert data.DEFAULT_CMU_URL == "http://mocap.cs.cmu.edu/subjects"
+    for trial in data.clips():
+        entry = data.describe(trial)
+        if "asf" in entry:
+            subject = trial.split("_")[0]
+            assert entry["asf_url"] == f"{data.DEFAULT_CMU_URL}/{subject}/{subject}.asf"
+            assert entry["amc_url"] == f"{data.DEFAULT_CMU_URL}/{subject}/{trial}.amc"
+            assert entry["asf"] == f"asfamc/{subject}/{subject}.asf" and entry["amc"] == f"asfamc/{subject}/{trial}.amc"
+
+
+def test_download_base(monkeypatch):
+    monkeypatch.delenv(data.URL_ENV_VAR, raising=False)
+    assert data.download_base() == data.DEFAULT_CMU_URL
+    monkeypatch.setenv(data.URL_ENV_VAR, "https://example.org/course/cmu/")
+    assert data.download_base() == "https://example.org/course/cmu"
+    monkeypatch.setenv(data.URL_ENV_VAR, "example.org/cmu")
+    with pytest.raises(data.DataError, match=r"MOCAPLAB_CMU_URL='example.org/cmu' is not a URL"):
+        data.download_base()
+
+
+# ------------------------------------------ integrity on every load (issue 17)
+
+
+_opened: list[list[str]] = []  # the audit hook below records into the last list while a test watches
+
+
+def _audit(event: str, args: tuple) -> None:
+    if event != "open" or not _opened or not isinstance(args[0], (str, bytes, Path)):
+        return
+    path, mode, flags = args
+    writes = any(c in mode for c in "wax+") if isinstance(mode, str) else bool(flags & (os.O_WRONLY | os.O_RDWR))
+    if not writes:
+        _opened[-1].append(os.fsdecode(path) if isinstance(path, bytes) else str(path))
+
+
+@pytest.fixture
+def opened():
+    """The paths opened for reading while the fixture is active (an audit hook sees every open)."""
+    if not getattr(sys, "_mocaplab_test_audit", False):
+        sys.addaudithook(_audit)  # hooks cannot be removed: it records only while a list is pushed
+        sys._mocaplab_test_audit = True  # type: ignore[attr-defined]
+    record: list[str] = []
+    _opened.append(record)
+    yield record
+    _opened.remove(record)
+
+
+def test_each_file_is_read_once_and_checked_on_every_load(mocap_dir, tmp_path, monkeypatch, opened):
+    """The bytes hashed are the bytes parsed, and a file changed after its first load is caught."""
+    path = copy_into(mocap_dir, tmp_path, "bvh/16_35.bvh")
+    monkeypatch.setenv(data.ENV_VAR, str(tmp_path))
+    first = data.cmu("16_35")
+    assert opened.count(str(path)) == 1
+    data.cmu("16_35")
+    assert opened.count(str(path)) == 2  # read (and hashed) again
+    raw = path.read_bytes()
+    i = raw.rindex(b"1")
+    path.write_bytes(raw[:i] + b"2" + raw[i + 1 :])
+    with pytest.raises(data.DataError, match=r"16_35.bvh: sha256 [0-9a-f]{64} does not match the registry's"):
+        data.cmu("16_35")
+    path.write_bytes(raw)
+    assert np.array_equal(data.cmu("16_35").rotations, first.rotations)
+
+
+def test_acclaim_files_changed_after_a_first_load_are_caught(mocap_dir, tmp_path, monkeypatch, opened):
+    asf = copy_into(mocap_dir, tmp_path, "asfamc/16/16.asf")
+    amc = copy_into(mocap_dir, tmp_path, "asfamc/16/16_35.amc")
+    monkeypatch.setenv(data.ENV_VAR, str(tmp_path))
+    data.cmu("16_35", source="asfamc")
+    assert (opened.count(str(asf)), opened.count(str(amc))) == (1, 1)
+    amc.write_bytes(amc.read_bytes().replace(b"root ", b"root 1", 1))
+    with pytest.raises(data.DataError, match=r"16_35.amc: sha256 .* does not match the registry's"):
+        data.cmu("16_35", source="asfamc")
+
+
+# --------------------------------------------- the whole database (issue 17)
+
+
+class _Server(types.SimpleNamespace):
+    """A web server on 127.0.0.1 serving ``root`` laid out like the CMU site."""
+
+    def put(self, mocap_dir: Path, rel: str, as_name: str | None = None, transform=None) -> Path:
+        """Copy a mirror file (``asfamc/<SS>/<file>``) into the served folder, optionally renamed or changed."""
+        src = mocap_dir / rel
+        name = as_name or src.name
+        subject = name.split(".")[0].split("_")[0]
+        dst = self.root / subject / name
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        raw = src.read_bytes()
+        dst.write_bytes(transform(raw) if transform else raw)
+        return dst
+
+    def requests(self, name: str) -> int:
+        return sum(p.endswith("/" + name) for p in self.log)
+
+
+@pytest.fixture
+def server(tmp_path, monkeypatch):
+    """``MOCAPLAB_CMU_URL`` pointing at a local HTTP server in a thread; no mirror; a fresh cache."""
+    root = tmp_path / "www" / "subjects"
+    root.mkdir(parents=True)
+    log: list[str] = []
+
+    class Handler(SimpleHTTPRequestHandler):
+        def do_GET(self):  # noqa: N802 - http.server's name
+            log.append(self.path)
+            super().do_GET()
+
+        def log_message(self, format, *args):  # noqa: A002 - http.server's signature
+            pass
+
+    httpd = ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(Handler, directory=str(tmp_path / "www")))
+    thread = threading.Thread(target=httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
+    thread.start()
+    url = f"http://127.0.0.1:{httpd.server_address[1]}/subjects"
+    monkeypatch.delenv(data.ENV_VAR, raising=False)
+    monkeypatch.setenv(data.URL_ENV_VAR, url)
+    monkeypatch.setenv(data.CACHE_ENV_VAR, str(tmp_path / "cache"))
+    monkeypatch.setenv("NO_PROXY", "127.0.0.1")
+    monkeypatch.setenv("no_proxy", "127.0.0.1")
+    try:
+        yield _Server(root=root, url=url, log=log, cache=tmp_path / "cache")
+    finally:
+        httpd.shutdown()
+        httpd.server_close()
+        thread.join(timeout=10)
+
+
+def crlf(raw: bytes) -> bytes:
+    return raw.replace(b"\r\n", b"\n").replace(b"\n", b"\r\n")
+
+
+def damage(raw: bytes) -> bytes:
+    return raw.replace(b"root ", b"root 1", 1)
+
+
+def cached(server: _Server, name: str) -> Path:
+    (path,) = [p for p in server.cache.rglob("*") if p.name.endswith("-" + name)]
+    return path
+
+
+def unverified_warnings(caught) -> list[str]:
+    return [str(w.message) for w in caught if issubclass(w.category, data.UnverifiedDataWarning)]
+
+
+def test_registry_clip_from_a_course_server(mocap_dir, server):
+    """End to end over HTTP: fetched once into the cache, hash-verified, the same motion as the local files."""
+    server.put(mocap_dir, "asfamc/16/16.asf", transform=crlf)  # CMU serves CRLF
+    server.put(mocap_dir, "asfamc/16/16_35.amc", transform=crlf)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no unverified warning for a registry clip
+        m = data.cmu("16_35")
+    ref = load_asf_amc(mocap_dir / "asfamc/16/16.asf", mocap_dir / "asfamc/16/16_35.amc")
+    assert m.name == "16_35" and m.n_frames == data.describe("16_35")["frames"] and m.fps == 120.0
+    assert np.array_equal(m.global_positions(), ref.global_positions())
+    assert (server.requests("16.asf"), server.requests("16_35.amc")) == (1, 1)
+    assert cached(server, "16_35.amc").parent == server.cache / "16"
+    data.cmu("16_35")  # from the cache, checked again
+    assert (server.requests("16.asf"), server.requests("16_35.amc")) == (1, 1)
+
+
+def test_any_cmu_trial_is_downloaded_and_marked_unverified_once(mocap_dir, server):
+    # copies of real files under other trial names: 16_02 (subject 16 has registry clips, so its
+    # ASF is verified) and 35_01 (no registry clip of subject 35: both files only parsed)
+    server.put(mocap_dir, "asfamc/16/16.asf")
+    server.put(mocap_dir, "asfamc/16/16_35.amc", as_name="16_02.amc")
+    server.put(mocap_dir, "asfamc/16/16.asf", as_name="35.asf")
+    server.put(mocap_dir, "asfamc/16/16_35.amc", as_name="35_01.amc")
+    assert "16_02" not in data.clips() and "35_01" not in data.clips()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("default")  # Python's default: each distinct warning once
+        a = data.cmu("16_02")
+        b = data.cmu("35_01")
+        data.cmu("16_02")
+        data.cmu("35_01")
+    assert unverified_warnings(caught) == [
+        "CMU trial 16_02 is not in mocaplab's registry: 16_02.amc was checked only by parsing, not against a "
+        "known sha256 (the registry's clips, data.clips(), are verified)",
+        "CMU trial 35_01 is not in mocaplab's registry: 35.asf and 35_01.amc were checked only by parsing, not "
+        "against a known sha256 (the registry's clips, data.clips(), are verified)",
+    ]
+    ref = load_asf_amc(mocap_dir / "asfamc/16/16.asf", mocap_dir / "asfamc/16/16_35.amc")
+    for m, name in ((a, "16_02"), (b, "35_01")):
+        assert m.name == name and m.fps == 120.0
+        assert np.array_equal(m.global_positions(), ref.global_positions())
+    assert server.requests("16.asf") == 1 and server.requests("35.asf") == 1
+
+
+def test_a_corrupt_cached_file_is_removed_and_fetched_again(mocap_dir, server):
+    server.put(mocap_dir, "asfamc/16/16.asf")
+    server.put(mocap_dir, "asfamc/16/16_35.amc")
+    server.put(mocap_dir, "asfamc/16/16_35.amc", as_name="16_02.amc")
+    data.cmu("16_35")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", data.UnverifiedDataWarning)
+        data.cmu("16_02")
+    good = cached(server, "16_35.amc").read_bytes()
+    cached(server, "16_35.amc").write_bytes(damage(good))  # a hash mismatch
+    cached(server, "16_02.amc").write_bytes(b"<html>disk full</html>\n")  # does not parse
+    m = data.cmu("16_35")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", data.UnverifiedDataWarning)
+        other = data.cmu("16_02")
+    assert cached(server, "16_35.amc").read_bytes() == good
+    assert server.requests("16_35.amc") == 2 and server.requests("16_02.amc") == 2 and server.requests("16.asf") == 1
+    assert m.n_frames == other.n_frames == data.describe("16_35")["frames"]
+
+
+def test_a_file_damaged_on_the_server_is_a_data_error(mocap_dir, server):
+    server.put(mocap_dir, "asfamc/16/16.asf")
+    server.put(mocap_dir, "asfamc/16/16_35.amc", transform=damage)
+    with pytest.raises(data.DataError) as info:
+        data.cmu("16_35")
+    message = str(info.value)
+    url = f"{server.url}/16/16_35.amc"
+    got = hashlib.sha256(damage((mocap_dir / "asfamc/16/16_35.amc").read_bytes())).hexdigest()
+    assert message.startswith(str(server.cache / "16") + "/")
+    assert message.split(": ", 1)[1] == (
+        f"16_35.amc downloaded from {url} failed its check: its sha256 (of the text with LF line endings) is "
+        f"{got}, not the registry's {data.describe('16_35')['amc_sha256_lf']}. The cached copy failed first, was "
+        "removed and downloaded again, and the new copy fails too; it was removed. The server holds a damaged or "
+        f"different file: check MOCAPLAB_CMU_URL (now {server.url!r}) or try again later."
+    )
+    assert server.requests("16_35.amc") == 2
+    assert not list(server.cache.rglob("*16_35.amc"))  # nothing damaged left in the cache
+
+
+def test_an_unparsable_download_is_a_data_error(mocap_dir, server):
+    server.put(mocap_dir, "asfamc/16/16.asf", as_name="35.asf")
+    (server.root / "35" / "35_01.amc").write_text("<html><body>Moved</body></html>\n")
+    with pytest.raises(
+        data.DataError, match=r"35_01.amc downloaded from .* failed its check: it does not parse \(.*35_01.amc, line 1: expected"
+    ):
+        data.cmu("35_01")
+    assert server.requests("35_01.amc") == 2
+
+
+def test_a_damaged_file_that_cannot_be_removed_says_to_delete_it(mocap_dir, server, monkeypatch):
+    server.put(mocap_dir, "asfamc/16/16.asf")
+    server.put(mocap_dir, "asfamc/16/16_35.amc", transform=damage)
+
+    def refuse(self, missing_ok=False):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(Path, "unlink", refuse)
+    with pytest.raises(data.DataError, match=r"it was could not be removed \(Permission denied\): delete it by hand"):
+        data.cmu("16_35")
+
+
+def test_a_trial_the_server_does_not_have(server):
+    with pytest.raises(data.DataError) as info:
+        data.cmu("16_99")
+    assert str(info.value).startswith(f"Could not download {server.url}/16/16.asf (404 Client Error")
+    assert "Is 16_99 a CMU trial?" in str(info.value)
+
+
+def test_downloads_show_a_progress_bar_when_tqdm_is_installed(monkeypatch, tmp_path):
+    pooch = pytest.importorskip("pooch")
+    calls = []
+
+    def fake_retrieve(url, known_hash, path, progressbar):
+        calls.append(progressbar)
+        raise OSError("offline")
+
+    monkeypatch.delenv(data.ENV_VAR, raising=False)
+    monkeypatch.setenv(data.CACHE_ENV_VAR, str(tmp_path))
+    monkeypatch.setattr(pooch, "retrieve", fake_retrieve)
+    monkeypatch.setitem(sys.modules, "tqdm", None)  # not importable
+    with pytest.raises(data.DataError):
+        data.cmu("16_15")
+    fake = types.ModuleType("tqdm")
+    fake.__spec__ = importlib.machinery.ModuleSpec("tqdm", None)
+    monkeypatch.setitem(sys.modules, "tqdm", fake)
+    with pytest.raises(data.DataError):
+        data.cmu("16_15")
+    assert calls == [False, True]
+
+
+# ----------------------------------------- the mirror serves any trial it holds
+
+
+def test_mirror_serves_an_unregistered_acclaim_trial(mocap_dir, tmp_path, monkeypatch):
+    copy_into(mocap_dir, tmp_path, "asfamc/16/16.asf")
+    shutil.copyfile(mocap_dir / "asfamc/16/16_35.amc", tmp_path / "asfamc/16/16_02.amc")
+    monkeypatch.setenv(data.ENV_VAR, str(tmp_path))
+    with pytest.warns(data.UnverifiedDataWarning, match="CMU trial 16_02 is not in mocaplab's registry: asfamc/16/16_02.amc was checked"):
+        m = data.cmu("16_02")
+    assert m.name == "16_02" and m.fps == 120.0 and m.skeleton.names[0] == "root"
+    assert m.n_frames == data.describe("16_35")["frames"]
+
+
+def test_mirror_serves_an_unregistered_bvh_trial(mocap_dir, tmp_path, monkeypatch):
+    (tmp_path / "bvh").mkdir()
+    shutil.copyfile(mocap_dir / "bvh/16_35.bvh", tmp_path / "bvh/16_02.bvh")
+    monkeypatch.setenv(data.ENV_VAR, str(tmp_path))
+    with pytest.warns(data.UnverifiedDataWarning, match="bvh/16_02.bvh was checked only by parsing"):
+        m = data.cmu("16_02")
+    ref = load_bvh(mocap_dir / "bvh/16_35.bvh", scale=CMU_UNIT)
+    assert m.name == "16_02" and m.fps == 120.0
+    assert np.array_equal(m.global_positions(), ref.global_positions())
+
+
+def test_mirror_without_an_unregistered_trial(tmp_path, monkeypatch):
+    monkeypatch.setenv(data.ENV_VAR, str(tmp_path))
+    monkeypatch.delenv(data.URL_ENV_VAR, raising=False)
+    with pytest.raises(data.DataError) as info:
+        data.cmu("35_01")
+    assert str(info.value) == (
+        f"MOCAPLAB_DATA_DIR={tmp_path} is set but trial 35_01 is not in it: neither bvh/35_01.bvh nor "
+        "asfamc/35/35_01.amc (with asfamc/35/35.asf). Add the files, or unset MOCAPLAB_DATA_DIR to download "
+        "the trial from http://mocap.cs.cmu.edu/subjects."
+    )
+
+
+def test_mirror_trial_that_does_not_parse(mocap_dir, tmp_path, monkeypatch):
+    copy_into(mocap_dir, tmp_path, "asfamc/16/16.asf")
+    (tmp_path / "asfamc/16/16_02.amc").write_text("1\nroot 0 0 0\n")
+    monkeypatch.setenv(data.ENV_VAR, str(tmp_path))
+    with pytest.raises(
+        data.DataError, match=r"16_02.amc: trial 16_02 in the mirror does not parse \(.*expected 6 value\(s\) for bone 'root', got 3"
+    ):
+        data.cmu("16_02")
+    assert (tmp_path / "asfamc/16/16_02.amc").exists()  # the mirror is never changed

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -9,7 +11,8 @@ import pytest
 
 from mocaplab import data
 from mocaplab.io import MocapFormatError, load_asf_amc, load_bvh
-from mocaplab.io.asfamc import CMU_BVH_NAMES
+from mocaplab.io.asfamc import CMU_BVH_NAMES, parse_asf
+from mocaplab.io.bvh import MAX_INTEGER_DIGITS
 
 DATA = Path(__file__).parent / "data"
 ASF = (DATA / "tiny.asf").read_text()
@@ -116,7 +119,7 @@ def test_explicit_scale_and_fps():
     m = load_asf_amc(DATA / "tiny.asf", DATA / "tiny.amc", scale=1.0, fps=30.0, name="t")
     assert m.fps == 30.0 and m.name == "t"
     assert np.allclose(m.global_positions()[1, 2], [-9, 2, 3])
-    with pytest.raises(ValueError, match="Expected `fps` > 0"):
+    with pytest.raises(ValueError, match=r"Expected `fps` from 0.1 to 10000 frames per second, got 0"):
         load_asf_amc(DATA / "tiny.asf", DATA / "tiny.amc", fps=0)
     with pytest.raises(ValueError, match="Expected `scale` > 0"):
         load_asf_amc(DATA / "tiny.asf", DATA / "tiny.amc", scale=-1.0)
@@ -339,3 +342,154 @@ def test_amc_truncated_frame(tmp_path):
 def test_amc_binary_garbage(tmp_path):
     asf, amc = write(tmp_path, amc=AMC.encode() + b"\xc3\x28\xa0\xa1")
     assert_error(asf, amc, amc, AMC.count("\n") + 1, "expected UTF-8 or ASCII text, got undecodable byte 0xc3")
+
+
+# ------------------------------------------ bounds and paths (issue 17)
+
+
+@pytest.mark.parametrize("fps", [0, -1.0, 0.09, 10001.0, 1e5, 1e300, float("nan"), float("inf"), True, "120"])
+def test_fps_outside_the_plausible_range(fps):
+    with pytest.raises(ValueError) as info:
+        load_asf_amc(DATA / "tiny.asf", DATA / "tiny.amc", fps=fps)
+    assert str(info.value) == f"Expected `fps` from 0.1 to 10000 frames per second, got {fps!r}"
+
+
+@pytest.mark.parametrize("fps", [0.1, 10000.0, 60])
+def test_fps_range_is_inclusive(fps):
+    assert load_asf_amc(DATA / "tiny.asf", DATA / "tiny.amc", fps=fps).fps == fps
+
+
+@pytest.mark.parametrize("digits", [MAX_INTEGER_DIGITS + 1, 4301, 100_000])
+@pytest.mark.parametrize("frame", [1, 2])
+def test_amc_frame_numbers_are_bounded_before_conversion(tmp_path, digits, frame):
+    line = 4 if frame == 1 else 8
+    text = edit(AMC, line, "9" * digits)
+    asf, amc = write(tmp_path, amc=text)
+    assert_error(asf, amc, amc, line, f"expected a frame number of at most {MAX_INTEGER_DIGITS} digits, got {digits} digits")
+
+
+@pytest.mark.parametrize("regular", [True, False], ids=["one-table reader", "line-by-line reader"])
+def test_amc_root_overflow_is_blamed_on_the_amc_line(tmp_path, regular):
+    text = AMC.replace("root 1 2 3 0 0 90", "root 1 1e308 3 0 0 90")
+    if not regular:  # a comment sends the file to the line-by-line reader
+        text = text.replace("\n2\n", "\n# comment\n2\n")
+    asf, amc = write(tmp_path, amc=text)
+    with pytest.raises(MocapFormatError) as info:
+        load_asf_amc(asf, amc, scale=10.0)
+    line = line_of(text, "1e308")
+    assert str(info.value) == f"{amc}, line {line}: expected root translation values that stay finite in metres (scale 10), got an overflow"
+
+
+def test_amc_root_overflow_kept_from_an_earlier_frame_names_that_line(tmp_path):
+    # not fully specified: frame 2 has no root line and keeps frame 1's overflowing value
+    text = AMC.replace(":FULLY-SPECIFIED\n", "").replace("root 0 0 0 0 0 0", "root 0 1e308 0 0 0 0")
+    text = text.replace("root 1 2 3 0 0 90\n", "")
+    asf, amc = write(tmp_path, amc=text)
+    with pytest.raises(MocapFormatError) as info:
+        load_asf_amc(asf, amc, scale=10.0)
+    assert (info.value.path, info.value.line) == (str(amc), line_of(text, "1e308"))
+
+
+def test_asf_length_overflow_is_blamed_on_the_bone(tmp_path):
+    text = ASF.replace("length 5", "length 1e308")
+    asf, amc = write(tmp_path, asf=text)
+    with pytest.raises(MocapFormatError) as info:
+        load_asf_amc(asf, amc, scale=10.0)
+    begin = line_of(text, "id 2") - 1
+    assert str(info.value) == (
+        f"{asf}, line {begin}: expected bone 'arm' direction * length values that stay finite in metres (scale 10), "
+        "got an overflow"
+    )
+
+
+def _symlink(link: Path, target: Path) -> Path:
+    try:
+        link.symlink_to(target)
+    except (OSError, NotImplementedError):  # pragma: no cover - no symlinks on this system
+        pytest.skip("symbolic links are not available")
+    return link
+
+
+def bad_paths(tmp_path: Path, ext: str) -> dict[str, tuple[Path, str]]:
+    """Paths that cannot be read, each with the 'got' part of its error."""
+    loop_a, loop_b = tmp_path / f"loop_a{ext}", tmp_path / f"loop_b{ext}"
+    _symlink(loop_a, loop_b)
+    _symlink(loop_b, loop_a)
+    gone = tmp_path / f"gone{ext}"
+    (tmp_path / "folder").mkdir()
+    cases = {
+        "missing": (tmp_path / f"missing{ext}", "no such file"),
+        "dangling symlink": (_symlink(tmp_path / f"dangling{ext}", gone), f"a dangling symbolic link (to {str(gone)!r})"),
+        "symlink loop": (loop_a, "a symbolic link loop"),
+        "directory": (tmp_path / "folder", "a directory"),
+    }
+    if hasattr(os, "mkfifo"):
+        os.mkfifo(tmp_path / f"pipe{ext}")
+        cases["named pipe"] = (tmp_path / f"pipe{ext}", "not a regular file (a device, pipe or socket)")
+    return cases
+
+
+@pytest.mark.timeout(20)  # a named pipe must not block the reader
+@pytest.mark.parametrize("which", ["asf", "amc"])
+def test_every_path_problem_is_a_format_error_naming_the_path(tmp_path, which):
+    what = {"asf": "an ASF file", "amc": "an AMC file"}[which]
+    for case, (path, got) in bad_paths(tmp_path, "." + which).items():
+        args = (path, DATA / "tiny.amc") if which == "asf" else (DATA / "tiny.asf", path)
+        with pytest.raises(MocapFormatError) as info:
+            load_asf_amc(*args)
+        assert str(info.value) == f"{path}: expected {what}, got {got}", case
+        assert (info.value.path, info.value.line) == (str(path), 0)
+    with pytest.raises(MocapFormatError) as info:
+        load_asf_amc(*(("", DATA / "tiny.amc") if which == "asf" else (DATA / "tiny.asf", "")))
+    assert str(info.value) == f"'': expected a path to {what}, got an empty path"
+
+
+def test_path_types():
+    m = load_asf_amc(os.fsencode(DATA / "tiny.asf"), os.fsencode(DATA / "tiny.amc"))
+    assert m.name == "tiny"
+    with pytest.raises(TypeError, match="Expected `asf_path` to be a str or os.PathLike, got int"):
+        load_asf_amc(3, DATA / "tiny.amc")  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="Expected `amc_path` to be a str or os.PathLike, got NoneType"):
+        load_asf_amc(DATA / "tiny.asf", None)  # type: ignore[arg-type]
+
+
+def big_asf(n: int, *, chain: bool) -> str:
+    """An ASF of ``n`` bones, each 0.01 inch long with three rotation dofs, as a chain or a star."""
+    rows = [":version 1.10", ":name big", ":units", "  length 1.0", "  angle deg", ":root",
+            "   order TX TY TZ RX RY RZ", "   axis XYZ", "   position 0 0 0", "   orientation 0 0 0", ":bonedata"]
+    for i in range(n):
+        rows += ["  begin", f"     id {i + 1}", f"     name b{i}", "     direction 0 1 0", "     length 0.01",
+                 "     axis 0 0 45 XYZ", "    dof rx ry rz", "    limits (-180.0 180.0)", "  end"]
+    rows += [":hierarchy", "  begin"]
+    if chain:
+        rows += ["    root b0"] + [f"    b{i} b{i + 1}" for i in range(n - 1)]
+    else:
+        rows += ["    root " + " ".join(f"b{i}" for i in range(n))]
+    return "\n".join(rows + ["  end", ""])
+
+
+@pytest.mark.parametrize("chain", [True, False], ids=["chain", "star"])
+def test_twenty_thousand_bones_parse_in_linear_time(tmp_path, chain):
+    """The bone-to-root check once rebuilt a set per bone: 17 s for 20,000 bones.
+
+    Timed in CPU seconds of this process (so other load on the machine
+    matters little); the linear reader takes about 0.5 s here, the quadratic
+    one took 17-36 s, so the 2 s bound is generous both ways.
+    """
+    n = 20_000
+    asf = tmp_path / "big.asf"
+    asf.write_text(big_asf(n, chain=chain))
+    start = time.process_time()
+    parsed = parse_asf(asf)
+    elapsed = time.process_time() - start
+    assert len(parsed.order) == n + 1 and parsed.parents[1] == 0
+    assert parsed.parents[-1] == (n - 1 if chain else 0)
+    assert elapsed < 2.0, f"parse_asf took {elapsed:.2f} s of CPU for {n} bones"
+    amc = tmp_path / "big.amc"
+    amc.write_text(":DEGREES\n1\nroot 0 0 0 0 0 0\n")  # not fully specified: the bones stay at zero
+    m = load_asf_amc(asf, amc)
+    assert m.n_joints == n + 1 and m.n_frames == 1
+    # a child starts where its parent bone ends, 0.01 inch up; bones of the root start at the root
+    up = np.array([0.0, 0.01 * INCH, 0.0])
+    assert np.allclose(m.skeleton.offsets[2:], up if chain else 0.0, rtol=0, atol=1e-15)
+    assert len(m.skeleton.end_site_parents) == (1 if chain else n)

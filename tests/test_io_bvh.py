@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import re
+import tracemalloc
 import warnings
 from pathlib import Path
 
@@ -12,6 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from mocaplab import quat
 from mocaplab.io import MocapFormatError, estimate_scale, load_bvh, save_bvh
+from mocaplab.io.bvh import FPS_RANGE, MAX_INDENT, MAX_INTEGER_DIGITS
 from mocaplab.motion import Motion, Skeleton
 
 DATA = Path(__file__).parent / "data"
@@ -478,3 +481,220 @@ def test_estimate_scale_leaves_out_a_reference_root():
     assert estimate_scale(sk) == (0.01, "centimetres")
     # the same figure with the pelvis as the root
     assert estimate_scale(Skeleton(names[1:], [-1, 0, 1, 0], offsets[1:])) == (0.01, "centimetres")
+
+
+# ------------------------------------------ bounds and paths (issue 17)
+
+
+def test_frame_count_is_checked_against_the_rows_before_allocating(tmp_path):
+    """'Frames: 1000000000' over two rows: the truncated-file error, allocating only what the file holds."""
+    path = write(tmp_path, edit(CHAIN, 22, "Frames: 1000000000"))
+    tracemalloc.start()
+    try:
+        assert_format_error(
+            path, 25, "expected 1000000000 frame row(s) as declared by 'Frames:', got 2 (truncated file?)"
+        )
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20_000_000  # bytes; the header alone used to ask for 89 GiB
+    most = "9" * MAX_INTEGER_DIGITS
+    assert_format_error(
+        write(tmp_path, edit(CHAIN, 22, f"Frames: {most}")),
+        25,
+        f"expected {most} frame row(s) as declared by 'Frames:', got 2 (truncated file?)",
+    )
+
+
+@pytest.mark.parametrize("digits", [MAX_INTEGER_DIGITS + 1, 21, 4301, 100_000])
+def test_header_integers_are_bounded_before_conversion(tmp_path, digits):
+    big = "1" + "0" * (digits - 1)  # 21 digits: 1e20 written out
+    assert_format_error(
+        write(tmp_path, edit(CHAIN, 22, f"Frames: {big}")),
+        22,
+        f"expected a frame count of at most {MAX_INTEGER_DIGITS} digits, got {digits} digits",
+    )
+    assert_format_error(
+        write(tmp_path, edit(CHAIN, 9, f"    CHANNELS {big} Zrotation Yrotation Xrotation")),
+        9,
+        f"expected a channel count between 0 and 6, got a {digits}-digit number",
+    )
+
+
+@pytest.mark.parametrize("value", ["1e-300", "0.00001", "0.0000999", "1e300", "10.5", "86400"])
+def test_implausible_frame_time_is_rejected_at_its_line(tmp_path, value):
+    fps = 1.0 / float(value)
+    assert_format_error(
+        write(tmp_path, edit(CHAIN, 23, f"Frame Time: {value}")),
+        23,
+        f"expected a Frame Time from 0.0001 to 10 s (0.1 to 10000 frames per second), got {value} ({fps:.6g} fps)",
+    )
+
+
+@pytest.mark.parametrize("value", ["0.0001", "10", "0.008333333", "1e-4", "0.04"])
+def test_frame_time_range_is_inclusive(tmp_path, value):
+    m = load_bvh(write(tmp_path, edit(CHAIN, 23, f"Frame Time: {value}")), scale=0.01)
+    assert m.fps == 1.0 / float(value) and FPS_RANGE[0] <= m.fps <= FPS_RANGE[1]
+
+
+def _symlink(link: Path, target: Path) -> Path:
+    try:
+        link.symlink_to(target)
+    except (OSError, NotImplementedError):  # pragma: no cover - no symlinks on this system
+        pytest.skip("symbolic links are not available")
+    return link
+
+
+def bad_paths(tmp_path: Path) -> dict[str, tuple[Path, str]]:
+    """Paths that cannot be read, each with the 'got' part of its error."""
+    regular = tmp_path / "regular.bvh"
+    regular.write_text(CHAIN)
+    loop_a, loop_b = tmp_path / "loop_a.bvh", tmp_path / "loop_b.bvh"
+    _symlink(loop_a, loop_b)
+    _symlink(loop_b, loop_a)
+    gone = tmp_path / "gone.bvh"
+    (tmp_path / "folder").mkdir()
+    cases = {
+        "missing": (tmp_path / "missing.bvh", "no such file"),
+        "dangling symlink": (_symlink(tmp_path / "dangling.bvh", gone), f"a dangling symbolic link (to {str(gone)!r})"),
+        "symlink loop": (loop_a, "a symbolic link loop"),
+        "directory": (tmp_path / "folder", "a directory"),
+        "symlink to a directory": (_symlink(tmp_path / "to_folder", tmp_path / "folder"), "a directory"),
+        "file as a folder": (regular / "x.bvh", "no such file (a folder in the path is a file)"),
+    }
+    if hasattr(os, "mkfifo"):
+        os.mkfifo(tmp_path / "pipe.bvh")
+        cases["named pipe"] = (tmp_path / "pipe.bvh", "not a regular file (a device, pipe or socket)")
+    if os.path.exists(os.devnull) and not os.path.isfile(os.devnull):
+        cases["device"] = (Path(os.devnull), "not a regular file (a device, pipe or socket)")
+    return cases
+
+
+@pytest.mark.timeout(20)  # a named pipe must not block the reader
+def test_every_path_problem_is_a_format_error_naming_the_path(tmp_path):
+    for case, (path, got) in bad_paths(tmp_path).items():
+        with pytest.raises(MocapFormatError) as info:
+            load_bvh(path, scale=0.01)
+        assert str(info.value) == f"{path}: expected a BVH file, got {got}", case
+        assert (info.value.path, info.value.line) == (str(path), 0)
+        assert isinstance(info.value, ValueError)
+
+
+def test_empty_path():
+    for empty in ("", b""):
+        with pytest.raises(MocapFormatError) as info:
+            load_bvh(empty, scale=0.01)
+        assert str(info.value) == "'': expected a path to a BVH file, got an empty path"
+
+
+def test_path_types(tmp_path):
+    """str and PathLike as given, bytes decoded with os.fsdecode, anything else a TypeError."""
+    (tmp_path / "ok.bvh").write_text(CHAIN)
+    m = load_bvh(os.fsencode(tmp_path / "ok.bvh"), scale=0.01)
+    assert m.name == "ok"
+    save_bvh(m, os.fsencode(tmp_path / "back.bvh"))
+    back = load_bvh(str(tmp_path / "back.bvh"), scale=0.01)
+    assert back.name == "back" and max_position_error(m, back) < 1e-8
+    for bad in (3, None, ["ok.bvh"]):
+        with pytest.raises(TypeError, match=f"Expected `path` to be a str or os.PathLike, got {type(bad).__name__}"):
+            load_bvh(bad, scale=0.01)  # type: ignore[arg-type]
+        with pytest.raises(TypeError, match="Expected `path` to be a str or os.PathLike"):
+            save_bvh(m, bad)  # type: ignore[arg-type]
+
+
+def small_motion(rng: np.random.Generator, names=("root", "mid", "tip"), fps: float = 30.0) -> Motion:
+    sk = Skeleton(
+        list(names), [-1, 0, 1], [[0.1, 0.9, 0], [0, 0.4, 0.05], [0, 0.3, 0]], end_site_parents=[2],
+        end_site_offsets=[[0, 0.1, 0]],
+    )
+    rot = Rotation.random(3 * 4, random_state=rng).as_quat().reshape(4, 3, 4)
+    return Motion(sk, rot, rng.normal(size=(4, 3)), fps)
+
+
+@pytest.mark.parametrize(
+    ("bad", "why"),
+    [
+        ("a\x00b", "it holds the control character '\\x00'"),
+        ("a\tb", "it holds the control character '\\t'"),
+        ("line\nbreak", "it holds the control character '\\n'"),
+        ("bell\x07", "it holds the control character '\\x07'"),
+        ("a\u00a0b", "it has leading, trailing or repeated whitespace, or whitespace other than a space"),
+        ("a\u2028b", "it has leading, trailing or repeated whitespace, or whitespace other than a space"),
+        ("two  spaces", "it has leading, trailing or repeated whitespace, or whitespace other than a space"),
+        (" lead", "it has leading, trailing or repeated whitespace, or whitespace other than a space"),
+        ("\ud800", "it is not valid Unicode text (it holds a lone surrogate)"),
+        ("x }", "its word '}' is a BVH keyword or brace"),
+        ("{", "its word '{' is a BVH keyword or brace"),
+        ("End", "its word 'End' is a BVH keyword or brace"),
+        ("", "it is empty"),
+    ],
+)
+def test_write_refuses_a_name_it_cannot_give_back_naming_the_joint(tmp_path, rng, bad, why):
+    m = small_motion(rng, names=("root", bad, "tip"))
+    with pytest.raises(ValueError) as info:
+        save_bvh(m, tmp_path / "n.bvh")
+    assert str(info.value) == f"Joint 1 name {bad!r} cannot be written to a BVH file: {why}; rename the joint"
+    assert not (tmp_path / "n.bvh").exists()  # checked before the file is opened
+
+
+@pytest.mark.parametrize("scale", [1e300, 1e-3, 1.0, 1e-300])
+def test_write_at_any_scale_reads_back(tmp_path, rng, scale):
+    """Lengths keep their significant digits whatever the unit (scale 1e300 used to write zeros)."""
+    m = small_motion(rng)
+    save_bvh(m, tmp_path / "s.bvh", scale=scale)
+    back = load_bvh(tmp_path / "s.bvh", scale=scale)
+    assert max_position_error(m, back) < 1e-6
+    assert np.allclose(back.skeleton.offsets, m.skeleton.offsets, rtol=1e-6, atol=0)
+
+
+def test_write_refuses_a_scale_that_overflows_the_file_units(tmp_path, rng):
+    with pytest.raises(ValueError) as info:
+        save_bvh(small_motion(rng), tmp_path / "o.bvh", scale=1e-310)
+    assert str(info.value) == (
+        "Expected `scale` to keep every length finite in file units, got 1e-310: "
+        "the motion's lengths divided by it overflow; pass a larger scale"
+    )
+    assert not (tmp_path / "o.bvh").exists()
+
+
+@pytest.mark.parametrize("fps", [1e-3, 0.09, 10001.0, 1e6])
+def test_write_refuses_a_frame_rate_load_bvh_would_reject(tmp_path, rng, fps):
+    with pytest.raises(ValueError) as info:
+        save_bvh(small_motion(rng, fps=fps), tmp_path / "f.bvh")
+    assert str(info.value) == (
+        f"Expected `motion.fps` from 0.1 to 10000 frames per second (the rates load_bvh reads), got {fps!r}"
+    )
+
+
+@pytest.mark.parametrize("fps", [0.1, 10000.0])
+def test_write_then_read_at_the_ends_of_the_frame_rate_range(tmp_path, rng, fps):
+    save_bvh(small_motion(rng, fps=fps), tmp_path / "f.bvh")
+    assert load_bvh(tmp_path / "f.bvh", scale=0.01).fps == fps
+
+
+@pytest.mark.parametrize("precision", [-1, 18, 2.5, True, "6"])
+def test_write_refuses_a_bad_precision(tmp_path, rng, precision):
+    with pytest.raises(ValueError, match=re.escape(f"Expected `precision` to be an integer from 0 to 17 (decimals), got {precision!r}")):
+        save_bvh(small_motion(rng), tmp_path / "p.bvh", precision=precision)
+
+
+def test_deep_skeleton_is_written_with_bounded_indentation(tmp_path):
+    """A 20,000-joint chain: hierarchy lines of bounded width (tabs per level made it 1 GB), read back the same."""
+    n = 20_000
+    sk = Skeleton(
+        [f"j{i}" for i in range(n)], np.arange(-1, n - 1), np.tile([0.0, 0.01, 0.0], (n, 1)),
+        end_site_parents=[n - 1], end_site_offsets=[[0.0, 0.01, 0.0]],
+    )
+    m = Motion(sk, quat.identity((1, n)), np.zeros((1, 3)), 30.0)
+    path = tmp_path / "deep.bvh"
+    save_bvh(m, path)
+    lines = path.read_text().split("\n")
+    hierarchy = lines[: lines.index("MOTION")]
+    assert max(len(s) - len(s.lstrip("\t")) for s in hierarchy) == MAX_INDENT + 2  # End Site OFFSET, deepest
+    assert max(len(s) for s in hierarchy) < MAX_INDENT + 80
+    assert path.stat().st_size < 10_000_000
+    back = load_bvh(path, scale=0.01)
+    assert back.skeleton.names == sk.names
+    assert np.array_equal(back.skeleton.parents, sk.parents)
+    assert np.allclose(back.skeleton.offsets, sk.offsets, rtol=0, atol=1e-12)
+    assert np.allclose(back.skeleton.end_site_offsets, sk.end_site_offsets, rtol=0, atol=1e-12)

@@ -19,8 +19,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from mocaplab.io import MocapFormatError, load_asf_amc, load_bvh
-from mocaplab.motion import Motion
+from mocaplab import quat
+from mocaplab.io import MocapFormatError, load_asf_amc, load_bvh, save_bvh
+from mocaplab.io.bvh import FPS_RANGE
+from mocaplab.motion import Motion, Skeleton
 
 CLIP = "16_35"
 BVH_FRAMES = 40
@@ -34,6 +36,7 @@ TOKENS = [
     b"end", b"dof", b"rx", b"tx", b"l", b"axis", b"XYZ", b"XXY", b"direction", b"length", b":root",
     b":bonedata", b":hierarchy", b":units", b":FULLY-SPECIFIED", b":RADIANS", b"angle", b"rad", b"order",
     b"\t", b"\r", b"\x00", b"\xff", b"\xc3\xa9", b"#", b"(", b")",
+    b"1" + b"0" * 20, b"9" * 5000,  # beyond int64, beyond Python's int() digit limit
 ]
 
 SETTINGS = {
@@ -189,3 +192,86 @@ def test_every_prefix_kind(corpus, cut):
     try_load(load_bvh, folder / "cut.bvh", scale=0.05)
     try_load(load_asf_amc, folder / "cut.asf", folder / "clip.amc")
     try_load(load_asf_amc, folder / "clip.asf", folder / "cut.amc")
+
+
+# ------------------------------------------------- headers and names (issue 17)
+
+
+def _replace_line(data: bytes, startswith: bytes, new: bytes, nth: int = 0) -> bytes:
+    lines = data.split(b"\n")
+    hits = [i for i, line in enumerate(lines) if line.strip().startswith(startswith)]
+    lines[hits[nth % len(hits)]] = new
+    return b"\n".join(lines)
+
+
+# integers as digit strings (str() of a 5000-digit int would itself hit Python's digit limit)
+integers = st.one_of(st.integers(0, 10**25).map(str), st.integers(1, 6000).map(lambda n: "7" * n))
+
+
+@settings(max_examples=150, **SETTINGS)
+@given(value=integers, where=st.sampled_from(["Frames:", "CHANNELS"]), nth=st.integers(0, 40))
+def test_bvh_header_integers_of_any_size(corpus, value, where, nth):
+    """Any integer in a CHANNELS or Frames: header: MocapFormatError or a valid Motion, nothing else."""
+    digits = value.encode()
+    data = corpus["bvh"]
+    if where == "Frames:":
+        data = _replace_line(data, b"Frames:", b"Frames: " + digits)
+    else:
+        data = _replace_line(data, b"CHANNELS", b"CHANNELS " + digits + b" Zrotation Yrotation Xrotation", nth)
+    path = corpus["dir"] / "header.bvh"
+    path.write_bytes(data)
+    try_load(load_bvh, path, scale=0.056)
+
+
+@settings(max_examples=100, **SETTINGS)
+@given(value=integers, nth=st.integers(0, AMC_FRAMES - 1))
+def test_amc_frame_numbers_of_any_size(corpus, value, nth):
+    lines = corpus["amc"].split(b"\n")
+    frames = [i for i, line in enumerate(lines) if line.strip().isdigit()]
+    lines[frames[nth]] = value.encode()
+    path = corpus["dir"] / "frames.amc"
+    path.write_bytes(b"\n".join(lines))
+    try_load(load_asf_amc, corpus["dir"] / "clip.asf", path)
+
+
+@settings(max_examples=300, **SETTINGS)
+@given(frame_time=st.floats(allow_nan=True, allow_infinity=True) | st.floats(1e-6, 20.0))
+def test_frame_time_gives_a_plausible_rate_or_a_format_error(corpus, frame_time):
+    data = _replace_line(corpus["bvh"], b"Frame Time:", f"Frame Time: {frame_time!r}".encode())
+    path = corpus["dir"] / "rate.bvh"
+    path.write_bytes(data)
+    try:
+        motion = load_bvh(path, scale=0.056)
+    except MocapFormatError as err:
+        assert err.line > 0 and "Frame Time" in err.expected
+        return
+    assert FPS_RANGE[0] <= motion.fps <= FPS_RANGE[1]
+
+
+name_chars = st.one_of(
+    st.characters(),
+    st.sampled_from(list(" \t\n\r\x00\x0b\x0c\x1c\x85\xa0\u2028{}#\ufeff") + ["\ud800"]),
+)
+names = st.one_of(
+    st.text(name_chars, max_size=10),
+    st.lists(st.sampled_from(["{", "}", "End", "Site", "JOINT", "ROOT", "OFFSET", "CHANNELS", "MOTION", "a", "b{"]),
+             min_size=1, max_size=3).map(" ".join),
+)
+
+
+@settings(max_examples=400, **SETTINGS)
+@given(name=names)
+def test_save_bvh_writes_only_names_it_reads_back(corpus, name):
+    """save_bvh either refuses a joint name (ValueError naming it) or load_bvh gives the same name back."""
+    sk = Skeleton(["root", name], [-1, 0], [[0.0, 0.0, 0.0], [0.0, 0.1, 0.0]])
+    motion = Motion(sk, quat.identity((1, 2)), np.zeros((1, 3)), 30.0)
+    path = corpus["dir"] / "named.bvh"
+    if path.exists():
+        path.unlink()
+    try:
+        save_bvh(motion, path)
+    except ValueError as err:
+        assert repr(name) in str(err) and "cannot be written to a BVH file" in str(err)
+        assert not path.exists()
+        return
+    assert load_bvh(path, scale=0.01).skeleton.names == ("root", name)

@@ -44,6 +44,24 @@ Bone translation and length dofs (``tx ty tz l``) are not supported (no CMU
 file has them) and raise :class:`~mocaplab.io.MocapFormatError`, like every
 other problem in either file: it names the file, the line and what was
 expected.
+
+Paths and limits
+----------------
+* **Paths** are handled as by :func:`~mocaplab.io.load_bvh`: ``str`` or
+  ``os.PathLike``, ``bytes`` decoded with :func:`os.fsdecode`; a missing
+  file, a dangling symbolic link, a symbolic-link loop, an empty path, a
+  directory, a device or pipe, or an unreadable file is a
+  :class:`~mocaplab.io.MocapFormatError` naming that path (line 0), for the
+  ASF and the AMC alike.  No ``OSError`` escapes.
+* **Work is linear in the file**: an ASF of 20,000 bones (a chain or a
+  star) parses in a fraction of a second; AMC frame numbers longer than
+  :data:`~mocaplab.io.bvh.MAX_INTEGER_DIGITS` digits are rejected before
+  conversion.
+* **Frame rate.** ``fps`` must lie in :data:`~mocaplab.io.bvh.FPS_RANGE`
+  (0.1 to 10,000 frames per second), the range the BVH reader accepts.
+* **Overflow.** Values that overflow once converted to metres are reported
+  on the line that holds them: an AMC root translation on its AMC line, a
+  bone's direction and length on the ASF line that begins the bone.
 """
 
 from __future__ import annotations
@@ -59,7 +77,7 @@ from numpy.typing import NDArray
 from .. import quat
 from ..motion import Motion, Skeleton, _owned
 from . import euler
-from .bvh import _to_float, read_text, split_lines
+from .bvh import FPS_RANGE, MAX_INTEGER_DIGITS, _to_float, as_path, decode_text, header_integer, read_text, split_lines
 from .errors import MocapFormatError
 
 __all__ = ["load_asf_amc", "parse_asf", "parse_amc", "Asf", "AsfBone", "CMU_BVH_NAMES", "INCH_M"]
@@ -165,10 +183,15 @@ def _axis_order(path: str, line: int, tok: str) -> str:
     return up
 
 
-def parse_asf(path: str | PathLike[str]) -> Asf:
+def parse_asf(path: str | bytes | PathLike[str]) -> Asf:
     """Parse an ASF file (no unit conversion); see :func:`load_asf_amc`."""
-    path = os.fspath(path)
-    lines = split_lines(read_text(path, "an ASF file"))
+    path = as_path(path)
+    return _parse_asf_text(path, read_text(path, "an ASF file"))
+
+
+def _parse_asf_text(path: str, text: str) -> Asf:
+    """:func:`parse_asf` of the file's text (``path`` names it in errors)."""
+    lines = split_lines(text)
     while lines and not lines[-1].strip():
         lines.pop()  # so that "end of file" names the last line with text
     if not lines:
@@ -198,8 +221,8 @@ def parse_asf(path: str | PathLike[str]) -> Asf:
         name = str(bone["name"])
         if name in bones or name == "root":
             raise MocapFormatError(path, bone_line, "unique bone names (other than 'root')", f"a second {name!r}")
-        direction = np.asarray(bone["direction"], dtype=float)
-        norm = float(np.linalg.norm(direction))
+        direction: list[float] = bone["direction"]  # type: ignore[assignment]
+        norm = math.hypot(*direction)  # plain floats: a numpy call per bone is most of the time on big files
         if not (math.isfinite(norm) and norm > 0):
             raise MocapFormatError(path, bone_line, f"a non-zero direction for bone {name!r}", "zero")
         length = float(bone["length"])  # type: ignore[arg-type]
@@ -207,7 +230,7 @@ def parse_asf(path: str | PathLike[str]) -> Asf:
             raise MocapFormatError(path, bone_line, f"a length >= 0 for bone {name!r}", f"{length:g}")
         bones[name] = AsfBone(
             name=name,
-            direction=tuple(direction / norm),  # type: ignore[arg-type]
+            direction=(direction[0] / norm, direction[1] / norm, direction[2] / norm),
             length=length,
             axis=tuple(bone.get("axis", (0.0, 0.0, 0.0))),  # type: ignore[arg-type]
             axis_order=str(bone.get("axis_order", "XYZ")),
@@ -348,7 +371,8 @@ def parse_asf(path: str | PathLike[str]) -> Asf:
         here = len(order) - 1
         for child in reversed(children.get(name, [])):
             stack.append((child, here))
-    missing = [b for b in bones if b not in set(order)]
+    placed = set(order)
+    missing = [b for b in bones if b not in placed]
     if missing:
         b = bones[missing[0]]
         raise MocapFormatError(path, b.line, f"bone {b.name!r} attached to the hierarchy below 'root'", "no path from the root")
@@ -376,7 +400,7 @@ def _dof_count(asf: Asf) -> dict[str, int]:
     return counts
 
 
-def parse_amc(path: str | PathLike[str], asf: Asf) -> tuple[dict[str, NDArray[np.float64]], int, bool | None]:
+def parse_amc(path: str | bytes | PathLike[str], asf: Asf) -> tuple[dict[str, NDArray[np.float64]], int, bool | None]:
     """Parse an AMC file against its skeleton.
 
     Returns
@@ -388,8 +412,23 @@ def parse_amc(path: str | PathLike[str], asf: Asf) -> tuple[dict[str, NDArray[np
     degrees : bool or None
         ``True``/``False`` if the file says ``:DEGREES``/``:RADIANS``, else None.
     """
-    path = os.fspath(path)
-    lines = split_lines(read_text(path, "an AMC file"))
+    path = as_path(path)
+    values, n_frames, degrees, _ = _parse_amc_text(path, read_text(path, "an AMC file"), asf)
+    return values, n_frames, degrees
+
+
+#: AMC values per bone, frame count, angle unit, and the line each bone's value of each frame came from
+_AmcResult = tuple[dict[str, NDArray[np.float64]], int, bool | None, dict[str, NDArray[np.int64]]]
+
+
+def _parse_amc_text(path: str, text: str, asf: Asf) -> _AmcResult:
+    """:func:`parse_amc` of the file's text, with the source line of every value row.
+
+    ``lines[bone][f]`` is the 1-based line that gave ``values[bone][f]`` (for
+    a bone missing from a frame of a file that is not fully specified, the
+    line its value was kept from, or the frame-number line in the first frame).
+    """
+    lines = split_lines(text)
     while lines and not lines[-1].strip():
         lines.pop()
     counts = _dof_count(asf)
@@ -417,18 +456,21 @@ def parse_amc(path: str | PathLike[str], asf: Asf) -> tuple[dict[str, NDArray[np
     body = lines[start:]
     while body and not body[-1].strip():
         body.pop()
-    result = _fast_amc(body, counts)
+    result = _fast_amc(body, start, counts)
     if result is None:
         result = _slow_amc(path, body, start, counts, fully)
-    values, n_frames = result
-    return values, n_frames, degrees
+    values, n_frames, where = result
+    return values, n_frames, degrees, where
 
 
 def _frame_number(s: str) -> int | None:
-    return int(s) if s.isascii() and s.isdigit() else None
+    return header_integer(s)
 
 
-def _fast_amc(body: list[str], counts: dict[str, int]) -> tuple[dict[str, NDArray[np.float64]], int] | None:
+_Frames = tuple[dict[str, NDArray[np.float64]], int, dict[str, NDArray[np.int64]]]
+
+
+def _fast_amc(body: list[str], start: int, counts: dict[str, int]) -> _Frames | None:
     """Read a regular file (every frame the same bone lines in the same order,
     no comments or blank lines) as one table; None if the file is not that
     regular or anything in it is wrong, so that :func:`_slow_amc` reads it
@@ -467,8 +509,9 @@ def _fast_amc(body: list[str], counts: dict[str, int]) -> tuple[dict[str, NDArra
     if table.shape != (n_frames, width):
         return None
     out: dict[str, NDArray[np.float64]] = {}
+    where: dict[str, NDArray[np.int64]] = {}
     col = 1
-    for name in names:
+    for r, name in enumerate(names, start=1):
         n = counts[name]
         if not np.isnan(table[:, col]).all():
             return None
@@ -476,13 +519,12 @@ def _fast_amc(body: list[str], counts: dict[str, int]) -> tuple[dict[str, NDArra
         if not np.isfinite(values).all():
             return None
         out[name] = np.ascontiguousarray(values)
+        where[name] = start + 1 + r + k * np.arange(n_frames, dtype=np.int64)
         col += 1 + n
-    return out, n_frames
+    return out, n_frames, where
 
 
-def _slow_amc(
-    path: str, body: list[str], start: int, counts: dict[str, int], fully: bool
-) -> tuple[dict[str, NDArray[np.float64]], int]:
+def _slow_amc(path: str, body: list[str], start: int, counts: dict[str, int], fully: bool) -> _Frames:
     """Line-by-line reading with precise errors."""
     dof_bones = [n for n, c in counts.items() if c > 0]
     tokens: dict[str, list[str]] = {n: [] for n in dof_bones}
@@ -501,7 +543,7 @@ def _slow_amc(
         for n in missing:  # keep the previous value (zero in the first frame)
             prev = tokens[n][-counts[n] :] if n_frames > 1 else ["0"] * counts[n]
             tokens[n].extend(prev)
-            lines_of[n].append(frame_line)
+            lines_of[n].append(lines_of[n][-1] if n_frames > 1 else frame_line)
 
     for i, text in enumerate(body):
         number = start + i + 1
@@ -511,6 +553,10 @@ def _slow_amc(
         if len(toks) == 1 and toks[0] not in counts:
             value = _frame_number(toks[0])
             if value is None:
+                if toks[0].isascii() and toks[0].isdigit():
+                    raise MocapFormatError(
+                        path, number, f"a frame number of at most {MAX_INTEGER_DIGITS} digits", f"{len(toks[0])} digits"
+                    )
                 raise MocapFormatError(path, number, "a frame number or a bone line", repr(toks[0][:40]))
             if frame is not None:
                 finish_frame(number - 1)
@@ -545,7 +591,8 @@ def _slow_amc(
     if frame is None:
         raise MocapFormatError(path, start + len(body), "AMC frames", "none")
     finish_frame(start + len(body))
-    return {n: np.array(tokens[n], dtype=float).reshape(n_frames, counts[n]) for n in dof_bones}, n_frames
+    values = {n: np.array(tokens[n], dtype=float).reshape(n_frames, counts[n]) for n in dof_bones}
+    return values, n_frames, {n: np.array(lines_of[n], dtype=np.int64) for n in dof_bones}
 
 
 # ------------------------------------------------------------------ loading
@@ -561,8 +608,8 @@ def _fixed_axes_quat(order: str, angles: NDArray[np.float64], degrees: bool) -> 
 
 
 def load_asf_amc(
-    asf_path: str | PathLike[str],
-    amc_path: str | PathLike[str],
+    asf_path: str | bytes | PathLike[str],
+    amc_path: str | bytes | PathLike[str],
     *,
     name: str | None = None,
     fps: float = 120.0,
@@ -573,10 +620,12 @@ def load_asf_amc(
     Parameters
     ----------
     asf_path, amc_path : str or path-like
+        ``bytes`` paths are decoded with :func:`os.fsdecode`.
     name : str, optional
         Label (default: the AMC file stem).
     fps : float
-        Frame rate; the format has none (120 for the CMU database).
+        Frame rate; the format has none (120 for the CMU database).  Must lie
+        in :data:`~mocaplab.io.bvh.FPS_RANGE` (0.1 to 10,000).
     scale : float, optional
         Metres per ASF length unit; default from the ASF's ``:units length``
         (``0.0254 / length``, 0.056444 m for the CMU files).
@@ -590,7 +639,14 @@ def load_asf_amc(
     Raises
     ------
     MocapFormatError
-        For any malformed ASF or AMC file (file, line and expectation).
+        For any malformed ASF or AMC file (file, line and expectation), and
+        for any problem with either path (missing, dangling link, link loop,
+        empty, a directory, ...: see the module notes).
+    ValueError
+        For an ``fps`` outside :data:`~mocaplab.io.bvh.FPS_RANGE` or a
+        ``scale`` that is not a positive finite number.
+    TypeError
+        For a path that is not a str, bytes or os.PathLike.
 
     Examples
     --------
@@ -598,12 +654,52 @@ def load_asf_amc(
     >>> walk.skeleton.names[:3]                      # doctest: +SKIP
     ('root', 'lhipjoint', 'lfemur')
     """
-    if not (isinstance(fps, (int, float, np.floating)) and math.isfinite(fps) and fps > 0):
-        raise ValueError(f"Expected `fps` > 0, got {fps!r}")
-    if scale is not None and not (isinstance(scale, (int, float, np.floating)) and math.isfinite(scale) and scale > 0):
+    asf_file = as_path(asf_path, "asf_path")
+    amc_file = as_path(amc_path, "amc_path")
+    _check_options(fps, scale)
+    asf = _parse_asf_text(asf_file, read_text(asf_file, "an ASF file"))
+    amc = _parse_amc_text(amc_file, read_text(amc_file, "an AMC file"), asf)
+    return _motion_from_acclaim(asf, amc_file, amc, name=name, fps=fps, scale=scale)
+
+
+def load_asf_amc_bytes(
+    asf_raw: bytes,
+    asf_path: str,
+    amc_raw: bytes,
+    amc_path: str,
+    *,
+    name: str | None = None,
+    fps: float = 120.0,
+    scale: float | None = None,
+) -> Motion:
+    """:func:`load_asf_amc` of files' bytes already in memory (the paths name them in errors).
+
+    For callers that must parse exactly the bytes they checked (the data
+    registry hashes the files, then parses those same bytes).
+    """
+    _check_options(fps, scale)
+    asf = _parse_asf_text(asf_path, decode_text(asf_path, asf_raw))
+    amc = _parse_amc_text(amc_path, decode_text(amc_path, amc_raw), asf)
+    return _motion_from_acclaim(asf, amc_path, amc, name=name, fps=fps, scale=scale)
+
+
+def _check_options(fps: object, scale: object) -> None:
+    if not (
+        isinstance(fps, (int, float, np.integer, np.floating))
+        and not isinstance(fps, bool)
+        and FPS_RANGE[0] <= fps <= FPS_RANGE[1]  # type: ignore[operator]
+    ):
+        raise ValueError(f"Expected `fps` from {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} frames per second, got {fps!r}")
+    if scale is not None and not (
+        isinstance(scale, (int, float, np.floating)) and math.isfinite(scale) and scale > 0  # type: ignore[arg-type]
+    ):
         raise ValueError(f"Expected `scale` > 0 (metres per ASF unit), got {scale!r}")
-    asf = parse_asf(asf_path)
-    values, n_frames, amc_degrees = parse_amc(amc_path, asf)
+
+
+def _motion_from_acclaim(
+    asf: Asf, amc_path: str, amc: _AmcResult, *, name: str | None, fps: float, scale: float | None
+) -> Motion:
+    values, n_frames, amc_degrees, value_lines = amc
     amc_deg = asf.degrees if amc_degrees is None else amc_degrees
     unit = asf.scale if scale is None else float(scale)
     names = asf.order
@@ -626,19 +722,23 @@ def load_asf_amc(
     # local rotations L = C M C^-1, grouped by dof order
     rotations = np.zeros((n_frames, n, 4))
     rotations[..., 3] = 1.0
-    axes_q = np.zeros((n, 4))
-    axes_q[:, 3] = 1.0
+    axis_angles = np.zeros((n, 3))
+    by_axis_order: dict[str, list[int]] = {}
     groups: dict[str, list[int]] = {}
     for j, b in enumerate(names):
         if b == "root":
-            axes_q[j] = _fixed_axes_quat(asf.root_axis_order, np.asarray(asf.root_orientation), asf.degrees)
+            axis_order, axis_angles[j] = asf.root_axis_order, asf.root_orientation
             order = "".join(d[1].upper() for d in asf.root_order if d[0] == "r")
         else:
             bone = asf.bones[b]
-            axes_q[j] = _fixed_axes_quat(bone.axis_order, np.asarray(bone.axis), asf.degrees)
+            axis_order, axis_angles[j] = bone.axis_order, bone.axis
             order = "".join(d[1].upper() for d in bone.dofs)
+        by_axis_order.setdefault(axis_order, []).append(j)
         if order:
             groups.setdefault(order, []).append(j)
+    axes_q = np.empty((n, 4))
+    for axis_order, joints in by_axis_order.items():  # one call per axis order, not per bone
+        axes_q[joints] = _fixed_axes_quat(axis_order, axis_angles[joints], asf.degrees)
     for order, joints in groups.items():
         cols = []
         for j in joints:
@@ -663,8 +763,7 @@ def load_asf_amc(
         root *= unit
         scaled = offsets * unit
         end_offsets = ends[leaves] * unit
-    if not (np.isfinite(root).all() and np.isfinite(scaled).all() and np.isfinite(end_offsets).all()):
-        raise MocapFormatError(asf.path, 0, f"lengths that stay finite in metres (scale {unit:g})", "an overflow")
+    _report_overflow(asf, amc_path, names, parents, leaves, root, scaled, end_offsets, value_lines, unit)
     skeleton = Skeleton(
         names=tuple(names),
         parents=parents,
@@ -677,5 +776,40 @@ def load_asf_amc(
         rotations=_owned(rotations),
         root_positions=_owned(root),
         fps=float(fps),
-        name=name if name is not None else os.path.splitext(os.path.basename(os.fspath(amc_path)))[0],
+        name=name if name is not None else os.path.splitext(os.path.basename(amc_path))[0],
     )
+
+
+def _report_overflow(
+    asf: Asf,
+    amc_path: str,
+    names: list[str],
+    parents: NDArray[np.int64],
+    leaves: list[int],
+    root: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    end_offsets: NDArray[np.float64],
+    value_lines: dict[str, NDArray[np.int64]],
+    unit: float,
+) -> None:
+    """MocapFormatError on the line whose values overflowed in metres, if any did."""
+    expected = f"values that stay finite in metres (scale {unit:g})"
+    bad_root = ~np.isfinite(root)
+    if bad_root.any():
+        frame, axis = (int(i) for i in np.argwhere(bad_root)[0])
+        translated = any(d == "t" + "xyz"[axis] for d in asf.root_order)
+        if translated and "root" in value_lines:
+            line = int(value_lines["root"][frame])
+            raise MocapFormatError(amc_path, line, f"root translation {expected}", "an overflow")
+        raise MocapFormatError(asf.path, 0, f"a root position {expected}", "an overflow")
+    bad = np.flatnonzero(~np.isfinite(offsets).all(axis=1))
+    if bad.size:
+        j = int(bad[0])
+        if j == 0:
+            raise MocapFormatError(asf.path, 0, f"a root position {expected}", "an overflow")
+        bone = asf.bones[names[int(parents[j])]]
+        raise MocapFormatError(asf.path, bone.line, f"bone {bone.name!r} direction * length {expected}", "an overflow")
+    bad = np.flatnonzero(~np.isfinite(end_offsets).all(axis=1))
+    if bad.size:
+        bone = asf.bones[names[leaves[int(bad[0])]]]
+        raise MocapFormatError(asf.path, bone.line, f"bone {bone.name!r} direction * length {expected}", "an overflow")

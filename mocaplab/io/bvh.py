@@ -23,6 +23,26 @@ Numbers are plain ASCII decimals or exponent floats (``1e-5``, ``+2.5E3``);
 CRLF and CR line endings and a UTF-8 byte-order mark are accepted; blank lines
 between frame rows are skipped.
 
+Paths and limits
+----------------
+* **Paths.** ``path`` is a ``str`` or ``os.PathLike``; a ``bytes`` path is
+  decoded with :func:`os.fsdecode` (anything else is a ``TypeError``).  Every
+  problem with the path itself is a :class:`~mocaplab.io.MocapFormatError`
+  (a ``ValueError``) naming the path, at line 0: a missing file, a dangling
+  symbolic link, a symbolic-link loop, an empty path, a directory, a device,
+  pipe or socket (never read, so a FIFO cannot block), or a file that may not
+  be read.  No ``OSError`` escapes a reader.
+* **Memory is bounded by the file.** The ``Frames:`` count is checked against
+  the rows actually present before anything is allocated: a header promising
+  more rows than the file holds is the "truncated file" error.  Integers in
+  headers (``CHANNELS`` and ``Frames:`` counts) longer than
+  :data:`MAX_INTEGER_DIGITS` digits are rejected before conversion.
+* **Frame rate.** ``1 / Frame Time`` must lie in :data:`FPS_RANGE`, 0.1 to
+  10,000 frames per second (``Frame Time`` from 0.0001 s to 10 s), otherwise
+  the file is rejected at its ``Frame Time`` line: rates outside it are typing
+  errors, and would fail far from the file (a division by zero, a
+  billion-frame resampling).
+
 Speed: the frame rows are read by numpy's C reader in one call and checked
 afterwards (row by row only when something is wrong, to name the line), and
 the rotations are built in the component-major layout forward kinematics
@@ -32,8 +52,11 @@ takes a few times less than pure-Python readers (``benchmarks/bench_io.py``).
 
 from __future__ import annotations
 
+import errno
 import math
 import os
+import stat
+import unicodedata
 import warnings
 from dataclasses import dataclass, field
 from os import PathLike
@@ -46,7 +69,16 @@ from ..motion import VALID_CHANNELS, Motion, Skeleton, _owned
 from . import euler
 from .errors import MocapFormatError
 
-__all__ = ["load_bvh", "save_bvh", "parse_bvh", "estimate_scale", "CANDIDATE_UNITS"]
+__all__ = [
+    "load_bvh",
+    "save_bvh",
+    "parse_bvh",
+    "estimate_scale",
+    "CANDIDATE_UNITS",
+    "FPS_RANGE",
+    "MAX_INTEGER_DIGITS",
+    "MAX_INDENT",
+]
 
 #: Units considered by :func:`estimate_scale`, metres per unit.
 CANDIDATE_UNITS: dict[str, float] = {
@@ -57,6 +89,19 @@ CANDIDATE_UNITS: dict[str, float] = {
     "CMU Acclaim units (1/0.45 inch)": 0.0254 / 0.45,
 }
 TYPICAL_HEIGHT_M = 1.7
+
+#: Frame rates (frames per second, inclusive) that a file may declare; the
+#: readers reject others (BVH at its ``Frame Time`` line, ``load_asf_amc``'s
+#: ``fps`` argument) and :func:`save_bvh` does not write them.
+FPS_RANGE: tuple[float, float] = (0.1, 10000.0)
+
+#: Most digits read for a header integer (a CHANNELS or Frames: count, an AMC
+#: frame number): longer ones are rejected before ``int()`` sees them.
+MAX_INTEGER_DIGITS = 18
+
+#: Deepest indentation :func:`save_bvh` writes, in tabs: joints deeper in the
+#: hierarchy are indented like this depth, so a line never grows with depth.
+MAX_INDENT = 24
 
 
 @dataclass
@@ -124,16 +169,83 @@ class _Tokens:
         return value
 
 
+def as_path(path: object, argument: str = "path") -> str:
+    """``path`` as a ``str``: ``str`` and ``os.PathLike`` as given, ``bytes`` decoded with :func:`os.fsdecode`.
+
+    Raises
+    ------
+    TypeError
+        For anything else, naming ``argument``.
+    """
+    try:
+        value = os.fspath(path)  # type: ignore[call-overload]
+    except TypeError:
+        raise TypeError(f"Expected `{argument}` to be a str or os.PathLike, got {type(path).__name__}") from None
+    return os.fsdecode(value) if isinstance(value, bytes) else value
+
+
+def _path_problem(path: str, exc: OSError) -> str:
+    """What is wrong with ``path``, for the ``got`` part of an error."""
+    if exc.errno == getattr(errno, "ELOOP", None):
+        return "a symbolic link loop"
+    if isinstance(exc, IsADirectoryError) or os.path.isdir(path):
+        return "a directory"
+    if isinstance(exc, FileNotFoundError):
+        if os.path.islink(path):
+            try:
+                target = os.readlink(path)
+            except OSError:  # pragma: no cover - the link vanished meanwhile
+                return "a dangling symbolic link"
+            return f"a dangling symbolic link (to {target!r})"
+        return "no such file"
+    if isinstance(exc, NotADirectoryError):
+        return "no such file (a folder in the path is a file)"
+    if isinstance(exc, PermissionError):
+        return "a file it may not read (permission denied)"
+    return f"an unreadable path ({exc.strerror or exc})"
+
+
+def read_bytes(path: str, what: str = "a text file") -> bytes:
+    """The bytes of a regular file, or MocapFormatError naming ``path`` for any path problem.
+
+    Missing files, dangling links, link loops, empty paths, directories,
+    devices, pipes and sockets (opened without blocking and never read) and
+    unreadable files all raise :class:`MocapFormatError` at line 0.
+    """
+    if not path:
+        raise MocapFormatError(path, 0, f"a path to {what}", "an empty path")
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0)
+    try:
+        fd = os.open(path, flags)
+    except OSError as exc:
+        raise MocapFormatError(path, 0, what, _path_problem(path, exc)) from exc
+    except ValueError:  # an embedded NUL character
+        raise MocapFormatError(path, 0, f"a path to {what}", "a path with a NUL character") from None
+    try:
+        mode = os.fstat(fd).st_mode
+    except OSError:  # pragma: no cover - fstat of an open descriptor
+        mode = 0
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        kind = "a directory" if stat.S_ISDIR(mode) else "not a regular file (a device, pipe or socket)"
+        raise MocapFormatError(path, 0, what, kind)
+    with open(fd, "rb") as fh:
+        try:
+            return fh.read()
+        except OSError as exc:  # pragma: no cover - I/O errors of the disk
+            raise MocapFormatError(path, 0, what, f"a read error ({exc.strerror or exc})") from exc
+
+
 def read_text(path: str, what: str = "a text file") -> str:
-    """The text of a motion file, or MocapFormatError for binary or undecodable bytes.
+    """The text of a motion file, or MocapFormatError for path problems, binary or undecodable bytes.
 
     A UTF-8 byte-order mark is dropped.  Line numbers in errors count ``\n``.
     """
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read()
-    except IsADirectoryError:
-        raise MocapFormatError(path, 0, what, "a directory") from None
+    return decode_text(path, read_bytes(path, what))
+
+
+def decode_text(path: str, raw: bytes) -> str:
+    """``raw`` as text, or MocapFormatError (naming ``path``) for binary or undecodable bytes."""
     if b"\x00" in raw:
         line = raw[: raw.index(b"\x00")].count(b"\n") + 1
         raise MocapFormatError(path, line, "text", "binary data (NUL byte)")
@@ -219,9 +331,11 @@ def _parse_channels(tok: _Tokens) -> tuple[str, ...]:
     path = tok.path
     _, channels_line = tok.next("CHANNELS")
     t, line = tok.next("a channel count")
-    count = int(t) if t.isascii() and t.isdigit() else None
-    if count is None:
+    if not (t.isascii() and t.isdigit()):
         raise MocapFormatError(path, line, "an integer channel count", repr(t[:40]))
+    if len(t) > MAX_INTEGER_DIGITS:
+        raise MocapFormatError(path, line, "a channel count between 0 and 6", f"a {len(t)}-digit number")
+    count = int(t)
     if not 0 <= count <= 6:
         raise MocapFormatError(path, line, "a channel count between 0 and 6", str(count))
     names: list[str] = []
@@ -253,10 +367,25 @@ def _header_value(path: str, lines: list[str], i: int, label: str) -> str:
     return text[len(label):].strip()
 
 
-def parse_bvh(path: str | PathLike[str]) -> tuple[list[_Joint], float, NDArray[np.float64]]:
-    """Parse a BVH file into joints, frame time and the raw channel matrix (F, C)."""
-    path = os.fspath(path)
-    lines = split_lines(read_text(path, "a BVH file"))
+def header_integer(text: str) -> int | None:
+    """A header integer (plain ASCII digits, at most :data:`MAX_INTEGER_DIGITS`), else None."""
+    if text.isascii() and text.isdigit() and len(text) <= MAX_INTEGER_DIGITS:
+        return int(text)
+    return None
+
+
+def parse_bvh(path: str | bytes | PathLike[str]) -> tuple[list[_Joint], float, NDArray[np.float64]]:
+    """Parse a BVH file into joints, frame time and the raw channel matrix (F, C).
+
+    See the module notes for paths and limits.
+    """
+    path = as_path(path)
+    return _parse_bvh_text(path, read_text(path, "a BVH file"))
+
+
+def _parse_bvh_text(path: str, text: str) -> tuple[list[_Joint], float, NDArray[np.float64]]:
+    """:func:`parse_bvh` of the file's text (``path`` names it in errors)."""
+    lines = split_lines(text)
     while lines and not lines[-1].strip():
         lines.pop()  # so that "end of file" names the last line with text
     first = next((i for i, s in enumerate(lines) if s.strip()), None)
@@ -280,8 +409,12 @@ def parse_bvh(path: str | PathLike[str]) -> tuple[list[_Joint], float, NDArray[n
     if n_channels == 0:
         raise MocapFormatError(path, joints[0].line, "at least one CHANNELS entry in the hierarchy", "none")
     frames_text = _header_value(path, lines, motion_line + 1, "Frames:")
-    n_frames = int(frames_text) if frames_text.isascii() and frames_text.isdigit() else None
+    n_frames = header_integer(frames_text)
     if n_frames is None:
+        if frames_text.isascii() and frames_text.isdigit():
+            raise MocapFormatError(
+                path, motion_line + 2, f"a frame count of at most {MAX_INTEGER_DIGITS} digits", f"{len(frames_text)} digits"
+            )
         raise MocapFormatError(path, motion_line + 2, "an integer frame count", repr(frames_text[:40]))
     if n_frames < 1:
         raise MocapFormatError(path, motion_line + 2, "a frame count of at least 1", str(n_frames))
@@ -291,6 +424,11 @@ def parse_bvh(path: str | PathLike[str]) -> tuple[list[_Joint], float, NDArray[n
         raise MocapFormatError(path, motion_line + 3, "a number of seconds per frame", repr(ft_text[:40]))
     if not (math.isfinite(frame_time) and frame_time > 0 and math.isfinite(1.0 / frame_time)):
         raise MocapFormatError(path, motion_line + 3, "a positive, finite Frame Time", ft_text[:40])
+    if not FPS_RANGE[0] <= 1.0 / frame_time <= FPS_RANGE[1]:
+        raise MocapFormatError(
+            path, motion_line + 3, f"a Frame Time from {1 / FPS_RANGE[1]:g} to {1 / FPS_RANGE[0]:g} s "
+            f"({FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} frames per second)", f"{ft_text[:40]} ({1.0 / frame_time:.6g} fps)"
+        )
     data = _parse_rows(path, lines, motion_line + 3, n_frames, n_channels)
     return joints, frame_time, data
 
@@ -310,8 +448,11 @@ def _parse_rows(path: str, lines: list[str], start: int, n_frames: int, n_channe
         if flat is not None and flat.shape == (n_frames, n_channels) and np.isfinite(flat).all():
             return flat
     # Slow path: row by row, to say exactly what is wrong and where.  Blank
-    # lines between rows are allowed.
-    out = np.empty((n_frames, n_channels))
+    # lines between rows are allowed.  The rows present are counted first, so
+    # that a 'Frames:' header promising more than the file holds allocates
+    # only what is there (and is then the "truncated" error below).
+    present = sum(1 for row in rows if row and not row.isspace())
+    out = np.empty((min(n_frames, present), n_channels))
     count = 0
     for i, row in enumerate(rows):
         number = start + i + 1
@@ -382,12 +523,13 @@ def estimate_scale(skeleton_in_file_units: Skeleton) -> tuple[float, str]:
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
 
 
-def load_bvh(path: str | PathLike[str], *, scale: float | None = None, name: str | None = None) -> Motion:
+def load_bvh(path: str | bytes | PathLike[str], *, scale: float | None = None, name: str | None = None) -> Motion:
     """Read a BVH file into a :class:`~mocaplab.motion.Motion`.
 
     Parameters
     ----------
     path : str or path-like
+        A ``bytes`` path is decoded with :func:`os.fsdecode`.
     scale : float, optional
         Metres per file unit.  If omitted it is estimated (see
         :func:`estimate_scale`) and a ``UserWarning`` says which unit was
@@ -406,18 +548,43 @@ def load_bvh(path: str | PathLike[str], *, scale: float | None = None, name: str
     Raises
     ------
     MocapFormatError
-        For any malformed file, naming the file, line and expectation.
+        For any malformed file, naming the file, line and expectation, and
+        for any problem with the path (missing, dangling link, link loop,
+        empty, a directory, ...: see the module notes); a frame rate outside
+        :data:`FPS_RANGE`.
     ValueError
         For a ``scale`` that is not a positive finite number.
+    TypeError
+        For a ``path`` that is not a str, bytes or os.PathLike.
 
     Examples
     --------
     >>> walk = load_bvh("16_15.bvh", scale=0.0254 / 0.45)  # doctest: +SKIP
     """
-    path = os.fspath(path)
-    if scale is not None and not (isinstance(scale, (int, float, np.floating)) and math.isfinite(scale) and scale > 0):
+    path = as_path(path)
+    _check_scale(scale)
+    return _motion_from_text(path, read_text(path, "a BVH file"), scale=scale, name=name, stacklevel=3)
+
+
+def _check_scale(scale: object) -> None:
+    if scale is not None and not (
+        isinstance(scale, (int, float, np.floating)) and math.isfinite(scale) and scale > 0  # type: ignore[arg-type]
+    ):
         raise ValueError(f"Expected `scale` > 0 (metres per file unit), got {scale!r}")
-    joints, frame_time, data = parse_bvh(path)
+
+
+def load_bvh_bytes(raw: bytes, path: str, *, scale: float | None = None, name: str | None = None) -> Motion:
+    """:func:`load_bvh` of a file's bytes already in memory (``path`` names it in errors and the default name).
+
+    For callers that must parse exactly the bytes they checked (the data
+    registry hashes a file, then parses those same bytes).
+    """
+    _check_scale(scale)
+    return _motion_from_text(path, decode_text(path, raw), scale=scale, name=name, stacklevel=3)
+
+
+def _motion_from_text(path: str, text: str, *, scale: float | None, name: str | None, stacklevel: int) -> Motion:
+    joints, frame_time, data = _parse_bvh_text(path, text)
     n = len(joints)
     offsets = np.array([j.offset for j in joints])
     esp = [i for i, j in enumerate(joints) for _ in j.end_sites]
@@ -436,7 +603,7 @@ def load_bvh(path: str | PathLike[str], *, scale: float | None = None, name: str
             f"{path}: BVH has no unit; assuming {unit} ({scale:g} m per unit) from the skeleton size. "
             "Pass scale=... to load_bvh to choose.",
             UserWarning,
-            stacklevel=2,
+            stacklevel=stacklevel,
         )
     scale = float(scale)
     n_frames = data.shape[0]
@@ -530,29 +697,62 @@ def _dfs_order(parents: NDArray[np.int64]) -> list[int]:
     return order
 
 
+def _name_problem(name: str) -> str | None:
+    """Why ``name`` cannot be written as a BVH joint name and read back the same, or None."""
+    if not name:
+        return "it is empty"
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        return "it is not valid Unicode text (it holds a lone surrogate)"
+    control = next((c for c in name if unicodedata.category(c) == "Cc"), None)
+    if control is not None:
+        return f"it holds the control character {control!r}"
+    words = name.split()
+    if " ".join(words) != name:
+        return "it has leading, trailing or repeated whitespace, or whitespace other than a space"
+    keyword = next((t for t in words if t in _KEYWORDS or t == "Site"), None)
+    if keyword is not None:
+        return f"its word {keyword!r} is a BVH keyword or brace"
+    return None
+
+
 def _writable_name(name: str) -> bool:
-    toks = name.split()
-    return bool(toks) and " ".join(toks) == name and not any(t in _KEYWORDS or t == "Site" for t in toks)
+    return _name_problem(name) is None
+
+
+def _length_decimals(largest: float, precision: int) -> int:
+    """Decimals for lengths so that the largest one keeps at least ``precision + 1`` significant digits."""
+    if not 0 < largest < 1:
+        return precision
+    return precision - math.floor(math.log10(largest))
 
 
 def save_bvh(
     motion: Motion,
-    path: str | PathLike[str],
+    path: str | bytes | PathLike[str],
     *,
     scale: float = 0.01,
     precision: int = 6,
     channels: list[tuple[str, ...]] | None = None,
 ) -> None:
-    """Write a Motion as a BVH file.
+    """Write a Motion as a BVH file that :func:`load_bvh` reads back.
 
     Parameters
     ----------
     motion : Motion
+        Its ``fps`` must lie in :data:`FPS_RANGE` (what :func:`load_bvh` reads).
     path : str or path-like
+        A ``bytes`` path is decoded with :func:`os.fsdecode`, as when reading.
     scale : float
         Metres per file unit (default 0.01: the file is in centimetres).
     precision : int
-        Decimals written for every number (default 6).
+        Decimals written for every number (default 6, at most 17).  Lengths
+        get more when the figure is small in file units: they keep at least
+        ``precision + 1`` significant digits of the largest length written,
+        so any ``scale`` whose file values stay finite reads back (a figure
+        written with ``scale=1e300`` has lengths near ``1e-300`` units and is
+        written with about 306 decimals rather than as zeros).
     channels : list of tuple of str, optional
         Channel order per joint; defaults to ``motion.skeleton.channels``.
 
@@ -568,20 +768,51 @@ def save_bvh(
       differs from its OFFSET on some axis without a channel.
     * Rotations are written as Euler angles in each joint's channel order
       (scipy), unwrapped over time so curves have no 360-degree jumps.
+    * One tab of indentation per level of the hierarchy, up to
+      :data:`MAX_INDENT` tabs: deeper joints are indented like that depth, so
+      a 20,000-joint chain writes lines of bounded width (the reader ignores
+      indentation).
+    * Everything is checked and the whole text built before the file is
+      opened: an error leaves no partial file.
 
     Raises
     ------
     ValueError
-        For a non-positive ``scale``, bad ``channels`` or joint names that a
-        BVH file cannot hold (empty, with leading, trailing or repeated
-        whitespace, or with a BVH keyword or brace as a word).
+        For a non-positive ``scale`` or one that overflows the lengths in
+        file units, a ``precision`` that is not an integer from 0 to 17, bad
+        ``channels``, a frame rate outside :data:`FPS_RANGE`, or a joint name
+        that a BVH file cannot hold and give back: empty, not valid Unicode,
+        with a control character (NUL, tab, newline, ...), leading, trailing
+        or repeated whitespace or whitespace other than a space, or a BVH
+        keyword or brace as a word (``{``, ``}``, ``JOINT``, ``End``, ...).
+        The message names the joint.
+    TypeError
+        For a ``path`` that is not a str, bytes or os.PathLike.
+    OSError
+        When the file cannot be created or written.
+
+    Examples
+    --------
+    >>> save_bvh(walk, "walk.bvh", scale=0.01)  # doctest: +SKIP
     """
+    path = as_path(path)
     if not (math.isfinite(scale) and scale > 0):
         raise ValueError(f"Expected `scale` > 0 (metres per file unit), got {scale!r}")
+    if isinstance(precision, bool) or not isinstance(precision, (int, np.integer)) or not 0 <= precision <= 17:
+        raise ValueError(f"Expected `precision` to be an integer from 0 to 17 (decimals), got {precision!r}")
+    precision = int(precision)
+    if not FPS_RANGE[0] <= motion.fps <= FPS_RANGE[1]:
+        raise ValueError(
+            f"Expected `motion.fps` from {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} frames per second "
+            f"(the rates load_bvh reads), got {motion.fps!r}"
+        )
     sk = motion.skeleton
-    bad_names = [n for n in sk.names if not _writable_name(n)]
-    if bad_names:
-        raise ValueError(f"Joint names {bad_names[:3]} cannot be written to a BVH file (see save_bvh notes)")
+    for j, joint_name in enumerate(sk.names):
+        problem = _name_problem(joint_name)
+        if problem is not None:
+            raise ValueError(
+                f"Joint {j} name {joint_name!r} cannot be written to a BVH file: {problem}; rename the joint"
+            )
     chans = [tuple(c) for c in (channels if channels is not None else sk.channels)]
     if len(chans) != sk.n_joints:
         raise ValueError(f"Expected channels for {sk.n_joints} joints, got {len(chans)}")
@@ -607,45 +838,68 @@ def save_bvh(
                 c = ("Xposition", "Yposition", "Zposition") + tuple(x for x in c if x[1] == "r")
         chans[j] = c
     order = _dfs_order(sk.parents)
-    columns = []
+    # Euler angles of all joints sharing a rotation order in one call
+    # (fewer than three rotation channels only when the joint never rotates)
+    by_order: dict[str, list[int]] = {}
     for j in order:
-        c = chans[j]
-        rot_order = "".join(x[0] for x in c if x[1] == "r")
-        angles = np.zeros((n_frames, len(rot_order)))
+        rot_order = "".join(x[0] for x in chans[j] if x[1] == "r")
         if len(rot_order) == 3:
-            angles = euler.from_quat(rot_order, motion.rotations[:, j])
-            if n_frames > 1:
-                angles = np.unwrap(angles, period=360.0, axis=0)
-        # (fewer than three rotation channels only when the joint never rotates)
-        if j == 0:
-            pos = motion.root_positions
-        elif motion.translations is not None:
-            pos = motion.translations[:, j]
-        else:
-            pos = np.broadcast_to(sk.offsets[j], (n_frames, 3))
-        k = 0
-        for x in c:
-            if x[1] == "r":
-                columns.append(angles[:, k])
-                k += 1
+            by_order.setdefault(rot_order, []).append(j)
+    euler_of: dict[int, NDArray[np.float64]] = {}
+    for rot_order, members in by_order.items():
+        angles = euler.from_quat(rot_order, motion.rotations[:, members])  # (F, G, 3)
+        if n_frames > 1:
+            angles = np.unwrap(angles, period=360.0, axis=0)
+        euler_of.update((j, angles[:, g]) for g, j in enumerate(members))
+    columns = []
+    is_length: list[bool] = []
+    with np.errstate(over="ignore"):  # overflow is reported below
+        for j in order:
+            c = chans[j]
+            joint_angles = euler_of.get(j)
+            if joint_angles is None:
+                joint_angles = np.zeros((n_frames, 3))
+            if j == 0:
+                pos = motion.root_positions
+            elif motion.translations is not None:
+                pos = motion.translations[:, j]
             else:
-                columns.append(pos[:, _AXIS[x[0]]] / scale)
-    data = np.stack(columns, axis=1) if columns else np.zeros((n_frames, 0))
+                pos = np.broadcast_to(sk.offsets[j], (n_frames, 3))
+            k = 0
+            for x in c:
+                if x[1] == "r":
+                    columns.append(joint_angles[:, k])
+                    is_length.append(False)
+                    k += 1
+                else:
+                    columns.append(pos[:, _AXIS[x[0]]] / scale)
+                    is_length.append(True)
+        data = np.stack(columns, axis=1) if columns else np.zeros((n_frames, 0))
+        offsets = sk.offsets / scale
+        end_offsets = sk.end_site_offsets / scale
+    lengths = np.concatenate([data[:, np.array(is_length, dtype=bool)].ravel(), offsets.ravel(), end_offsets.ravel()])
+    largest = float(np.max(np.abs(lengths))) if lengths.size else 0.0
+    if not math.isfinite(largest):
+        raise ValueError(
+            f"Expected `scale` to keep every length finite in file units, got {scale!r}: "
+            "the motion's lengths divided by it overflow; pass a larger scale"
+        )
 
     num = f"%.{precision}f"
+    length_num = f"%.{_length_decimals(largest, precision)}f"
     out: list[str] = ["HIERARCHY"]
     children: list[list[int]] = [[] for _ in range(sk.n_joints)]
     for j in range(1, sk.n_joints):
         children[int(sk.parents[j])].append(j)
     ends: list[list[NDArray[np.float64]]] = [[] for _ in range(sk.n_joints)]
-    for p, e in zip(sk.end_site_parents, sk.end_site_offsets, strict=True):
-        ends[int(p)].append(e / scale)
-    triple = f"{num} {num} {num}"
+    for p, e in zip(sk.end_site_parents, end_offsets, strict=True):
+        ends[int(p)].append(e)
+    triple = f"{length_num} {length_num} {length_num}"
     # iterative depth-first writer: ("open", j, depth) or ("close", j, depth)
     stack: list[tuple[str, int, int]] = [("open", 0, 0)]
     while stack:
         what, j, depth = stack.pop()
-        pad = "\t" * depth
+        pad = "\t" * min(depth, MAX_INDENT)
         if what == "close":
             for e in ends[j]:
                 out.append(f"{pad}\tEnd Site")
@@ -656,7 +910,7 @@ def save_bvh(
             continue
         out.append(f"{pad}{'ROOT' if j == 0 else 'JOINT'} {sk.names[j]}")
         out.append(pad + "{")
-        out.append(f"{pad}\tOFFSET " + triple % tuple(sk.offsets[j] / scale))
+        out.append(f"{pad}\tOFFSET " + triple % tuple(offsets[j]))
         out.append(f"{pad}\tCHANNELS {len(chans[j])}" + "".join(" " + x for x in chans[j]))
         stack.append(("close", j, depth))
         stack.extend(("open", c, depth + 1) for c in reversed(children[j]))
@@ -664,7 +918,8 @@ def save_bvh(
     out.append(f"Frames: {n_frames}")
     # 17 significant digits: reading back gives the same fps to the last bit
     out.append(f"Frame Time: {1.0 / motion.fps:.17g}")
-    row = " ".join([num] * data.shape[1])
+    row = " ".join(length_num if length else num for length in is_length)
     out.extend(row % tuple(values) for values in data.tolist())
-    with open(os.fspath(path), "w", encoding="utf-8", newline="\n") as fh:
-        fh.write("\n".join(out) + "\n")
+    text = "\n".join(out) + "\n"
+    with open(path, "w", encoding="utf-8", newline="\n") as fh:
+        fh.write(text)

@@ -34,10 +34,16 @@ from . import kinematics, quat
 if TYPE_CHECKING:
     from .roles import Roles
 
-__all__ = ["Skeleton", "Motion", "concatenate", "mirror_name"]
+__all__ = ["Skeleton", "Motion", "concatenate", "mirror_name", "readonly", "FPS_RANGE"]
 
 DEFAULT_ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation")
 DEFAULT_JOINT_CHANNELS = ("Zrotation", "Yrotation", "Xrotation")
+#: Frame rates a Motion may have (frames per second, inclusive): below 0.1 fps
+#: or above 10,000 fps a clip is almost surely a unit mistake, and kernels sized
+#: in frames (smoothing, blending windows) would be absurd; the file readers
+#: reject such files at their frame-time line.
+FPS_RANGE: tuple[float, float] = (0.1, 10000.0)
+
 VALID_CHANNELS = frozenset(
     ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 )
@@ -63,6 +69,18 @@ def readonly(arr: NDArray[Any]) -> NDArray[Any]:
     view = arr.view()
     view.flags.writeable = False
     return view
+
+
+def _check_fps(fps: Any) -> float:
+    try:
+        value = float(fps)
+    except (TypeError, ValueError):
+        raise ValueError(f"Expected `fps` to be a number of frames per second, got {fps!r}") from None
+    if not FPS_RANGE[0] <= value <= FPS_RANGE[1]:
+        raise ValueError(
+            f"Expected `fps` from {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} frames per second, got {fps!r}"
+        )
+    return value
 
 
 def _frozen(a: ArrayLike, dtype: Any = float) -> NDArray[Any]:
@@ -354,9 +372,7 @@ class Motion:
         if lo < 1.0 - 2e-14 or hi > 1.0 + 2e-14:
             rot = rot / np.sqrt(sq)[..., None]
             rot_fresh = True
-        fps = float(self.fps)
-        if not np.isfinite(fps) or fps <= 0:
-            raise ValueError(f"Expected `fps` > 0, got {self.fps!r}")
+        fps = _check_fps(self.fps)
         tr = self.translations
         if tr is not None:
             tr, tr_fresh = _take(tr)
@@ -516,8 +532,7 @@ class Motion:
         The new clip covers the same time span (its last frame is at or before
         the old last frame's time).
         """
-        if not fps > 0:
-            raise ValueError(f"Expected fps > 0, got {fps}")
+        fps = _check_fps(fps)
         n_new = int(np.floor(self.duration * fps + 1e-9)) + 1
         return self.sample(np.arange(n_new) / fps, fps=fps)
 

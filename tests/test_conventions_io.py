@@ -21,7 +21,7 @@ from conventions import CMU_UNIT_M, CONVENTIONS, EXTRA_JOINTS, LOAD_OPTIONS, con
 
 import mocaplab
 from mocaplab import Motion, Skeleton, load, quat
-from mocaplab.io import load_asf_amc, load_bvh, save_bvh
+from mocaplab.io import MocapFormatError, load_asf_amc, load_bvh, save_bvh
 
 DATA = Path(__file__).parent / "data"
 CLIPS = {"16_15": "walk", "16_05": "jump", "05_02": "dance"}
@@ -330,7 +330,7 @@ def test_acclaim_pairing_errors(tmp_path):
     lonely = tmp_path / "lonely"
     lonely.mkdir()
     shutil.copyfile(DATA / "tiny.amc", lonely / "09_01.amc")
-    with pytest.raises(FileNotFoundError) as info:
+    with pytest.raises(MocapFormatError) as info:
         load(lonely / "09_01.amc")
     assert str(info.value) == (
         f"{lonely / '09_01.amc'}: expected an .asf skeleton beside the .amc motion (09.asf or 09_01.asf "
@@ -348,7 +348,7 @@ def test_acclaim_pairing_errors(tmp_path):
         f"{many / '16.asf'}: an .asf holds only a skeleton; expected one .amc motion in {str(many)!r}, got 2 "
         f"(16_01.amc, 16_02.amc); pass the .amc path instead, e.g. load({str(many / '16_01.amc')!r})"
     )
-    with pytest.raises(FileNotFoundError, match="no such file"):
+    with pytest.raises(MocapFormatError, match="none.amc: expected an AMC file, got no such file"):
         load(tmp_path / "none.amc")
 
 

@@ -71,10 +71,13 @@ def test_motion_validation_messages():
     bad[2, 3] = [0, 0, 0, 2.0]
     with pytest.raises(ValueError, match="Expected unit quaternions in `rotations`, got norm 2 at frame 2, joint 'RightUpLeg'"):
         Motion(sk, bad, np.zeros((3, 3)), 30.0)
-    with pytest.raises(ValueError, match=re.escape("Expected `fps` > 0, got 0")):
+    with pytest.raises(ValueError, match=re.escape("Expected `fps` from 0.1 to 10000 frames per second, got 0")):
         Motion(sk, ok, np.zeros((3, 3)), 0)
-    with pytest.raises(ValueError, match=re.escape("Expected `fps` > 0, got nan")):
-        Motion(sk, ok, np.zeros((3, 3)), float("nan"))
+    for fps in (float("nan"), 1e-300, 1e5, 1e300, float("inf")):
+        with pytest.raises(ValueError, match=re.escape(f"Expected `fps` from 0.1 to 10000 frames per second, got {fps!r}")):
+            Motion(sk, ok, np.zeros((3, 3)), fps)
+    with pytest.raises(ValueError, match="number of frames per second"):
+        Motion(sk, ok, np.zeros((3, 3)), "fast")
     with pytest.raises(ValueError, match=re.escape("Expected finite `translations` of shape (3, 5, 3), got (3, 5)")):
         Motion(sk, ok, np.zeros((3, 3)), 30.0, translations=np.zeros((3, 5)))
 
@@ -110,8 +113,10 @@ def test_replace_validates_and_shares_unchanged_arrays(rng):
     m2 = m.replace(fps=60.0)
     assert m2.fps == 60.0 and m.fps == 30.0
     assert np.shares_memory(m2.rotations, m.rotations)  # read-only, so sharing is safe
-    with pytest.raises(ValueError, match="Expected `fps` > 0"):
+    with pytest.raises(ValueError, match="Expected `fps` from 0.1 to 10000"):
         m.replace(fps=-1.0)
+    with pytest.raises(ValueError, match="Expected `fps` from 0.1 to 10000"):
+        m.resample(1e300)  # refused before any array is sized by it
 
 
 def test_editing_recipe_from_the_docs(rng):

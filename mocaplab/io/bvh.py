@@ -65,6 +65,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import quat
+from ..motion import FPS_RANGE as MOTION_FPS_RANGE
 from ..motion import VALID_CHANNELS, Motion, Skeleton, _owned
 from . import euler
 from .errors import MocapFormatError
@@ -93,7 +94,7 @@ TYPICAL_HEIGHT_M = 1.7
 #: Frame rates (frames per second, inclusive) that a file may declare; the
 #: readers reject others (BVH at its ``Frame Time`` line, ``load_asf_amc``'s
 #: ``fps`` argument) and :func:`save_bvh` does not write them.
-FPS_RANGE: tuple[float, float] = (0.1, 10000.0)
+FPS_RANGE = MOTION_FPS_RANGE
 
 #: Most digits read for a header integer (a CHANNELS or Frames: count, an AMC
 #: frame number): longer ones are rejected before ``int()`` sees them.

@@ -33,6 +33,7 @@ import numpy as np
 from .. import quat
 from ..motion import Motion
 from .bvh import load_bvh
+from .errors import MocapFormatError
 
 __all__ = ["load", "SUPPORTED_EXTENSIONS", "FPS_SNAP_TOLERANCE", "NTSC_RATES"]
 
@@ -106,8 +107,10 @@ def load(
         ``.amc`` files (or an ``.amc`` next to several unrelated ``.asf``).
         :class:`~mocaplab.io.MocapFormatError` (a ``ValueError``) for a
         malformed file.
-    FileNotFoundError
-        When the file, or the Acclaim file that goes with it, does not exist.
+    MocapFormatError
+        Also when the file, or the Acclaim file that goes with it, does not
+        exist (every path problem is a MocapFormatError naming the path, as
+        in the readers).
     TypeError
         For ``roles`` that is not a mapping.
 
@@ -202,7 +205,7 @@ def _asf_for(amc: str) -> str:
     p = Path(amc)
     folder = p.parent
     if not p.is_file():
-        raise FileNotFoundError(f"Expected `path` to be an existing .amc file, got {amc!r} (no such file)")
+        raise MocapFormatError(amc, 0, "an AMC file", "no such file")
     asfs = _folder_files(folder, ".asf")
     by_stem = {a.stem: a for a in asfs}
     wanted = [p.stem.split("_", 1)[0]] if "_" in p.stem else []
@@ -214,9 +217,9 @@ def _asf_for(amc: str) -> str:
         return str(asfs[0])
     tried = " or ".join(f"{s}.asf" for s in wanted)
     if not asfs:
-        raise FileNotFoundError(
-            f"{amc}: expected an .asf skeleton beside the .amc motion ({tried} or the only .asf in "
-            f"{str(folder)!r}), got no .asf file there; put the skeleton next to the motion"
+        raise MocapFormatError(
+            amc, 0, f"an .asf skeleton beside the .amc motion ({tried} or the only .asf in {str(folder)!r})",
+            "no .asf file there; put the skeleton next to the motion",
         )
     raise ValueError(
         f"{amc}: expected the .asf skeleton {tried} or a single .asf in {str(folder)!r}, "
@@ -229,13 +232,13 @@ def _amc_for(asf: str) -> str:
     """The one AMC motion in the folder of the ASF skeleton ``asf``."""
     p = Path(asf)
     if not p.is_file():
-        raise FileNotFoundError(f"Expected `path` to be an existing .asf file, got {asf!r} (no such file)")
+        raise MocapFormatError(asf, 0, "an ASF file", "no such file")
     amcs = _folder_files(p.parent, ".amc")
     if len(amcs) == 1:
         return str(amcs[0])
     if not amcs:
-        raise FileNotFoundError(
-            f"{asf}: an .asf holds only a skeleton; expected one .amc motion in {str(p.parent)!r}, got none"
+        raise MocapFormatError(
+            asf, 0, f"one .amc motion in {str(p.parent)!r} (an .asf holds only a skeleton)", "none"
         )
     raise ValueError(
         f"{asf}: an .asf holds only a skeleton; expected one .amc motion in {str(p.parent)!r}, got "

@@ -237,20 +237,59 @@ def test_partial_pose_controls_a_subset(walk_sm) -> None:
 def test_constraint_layer_keeps_planted_feet(cmu) -> None:
     walk = cmu("16_15")
     sm = extract(walk, max_poses=14, optimize=False, constraints=True)
-    assert sm.constraints is not None and set(sm.constraints.joints) == {"LeftFoot", "RightFoot"}
+    roles = walk.skeleton.roles
+    # the feet of the joint roles: each ankle (two-bone leg IK) and its toe (the foot turns about the ankle)
+    assert sm.constraints is not None and sm.constraints.joints == roles.foot_joints()
+    assert sm.constraints.kinds == ("foot", "toe", "foot", "toe")
     rot, pos = max_diff(sm.evaluate(), walk)
     assert rot < 1e-6 and pos < 1e-6
     # lower the hips at a pose during a right-foot contact
-    foot = walk.skeleton.index("RightFoot")
-    e = sm.constraints.joints.index("RightFoot")
+    e = sm.constraints.joints.index(roles["right_ankle"])
     planted = sm.constraints.masks[:, e]
     k = int(np.argmax(planted[np.round(sm.times * walk.fps).astype(int)]))
     edited = sm.edit_pose(k, root_position=sm.root_values[k] + [0.0, -0.05, 0.0])
-    free = edited.evaluate(constraints=False).global_positions()[:, foot]
-    held = edited.evaluate().global_positions()[:, foot]
-    orig = walk.global_positions()[:, foot]
-    assert np.linalg.norm(free - orig, axis=-1)[planted].max() > 0.02
-    assert np.linalg.norm(held - orig, axis=-1)[planted].max() < 1e-4
+    for name in (roles["right_ankle"], roles["right_toe"]):
+        j = walk.skeleton.index(name)
+        free = edited.evaluate(constraints=False).global_positions()[:, j]
+        held = edited.evaluate().global_positions()[:, j]
+        orig = walk.global_positions()[:, j]
+        assert np.linalg.norm(free - orig, axis=-1)[planted].max() > 0.02
+        assert np.linalg.norm(held - orig, axis=-1)[planted].max() < 1e-4
+
+
+def test_constraint_layer_holds_the_whole_foot(cmu) -> None:
+    """Timing and leg edits turn the feet: the toes stay planted with the ankles, the stiller joint wins."""
+    import dataclasses
+
+    walk = cmu("16_15")
+    sm = extract(walk, max_poses=14, optimize=False, constraints=True)
+    layer = sm.constraints
+    legs = [walk.skeleton.roles[f"{s}_{p}"] for s in ("left", "right") for p in ("hip", "knee", "ankle")]
+    edited = sm.exaggerate(0.5, joints=legs)
+    out, free = edited.evaluate(), edited.evaluate(constraints=False)
+    w, targets = layer.weights_and_targets(edited, out.times)
+    idx = [walk.skeleton.index(n) for n in layer.joints]
+    on = w == 1.0
+
+    def error(m):
+        return np.linalg.norm(m.global_positions()[:, idx] - targets, axis=-1)
+
+    assert error(free)[on].max() > 0.1  # the edit moves every planted joint
+    assert error(out)[on].max() < 0.003  # ankles and toes stay (within the ankle/toe compromise)
+    # goals get the stiffness 1 / (speed + 0.05) of foot_goals: without it the ankles give way more
+    assert np.allclose(layer.speeds, walk.joint_speeds()[:, idx])
+    uniform = dataclasses.replace(edited, constraints=dataclasses.replace(layer, speeds=np.zeros_like(layer.speeds)))
+    ankles = [layer.joints.index(walk.skeleton.roles[f"{s}_ankle"]) for s in ("left", "right")]
+    held, even = error(out)[:, ankles], error(uniform.evaluate())[:, ankles]
+    assert held[on[:, ankles]].mean() < 0.8 * even[on[:, ankles]].mean()
+    with pytest.raises(ValueError, match="ankles, toes"):
+        type(layer).from_contacts(walk, sm_contacts(walk), sm.times, joints=[walk.skeleton.roles["head"]])
+
+
+def sm_contacts(walk):
+    from mocaplab.contacts import stillness_contacts
+
+    return stillness_contacts(walk)
 
 
 def test_editor_drives_the_representation(cmu) -> None:

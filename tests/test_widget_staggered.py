@@ -98,3 +98,37 @@ def test_rejects_wrong_input() -> None:
 
     with pytest.raises(TypeError, match="Motion or a StaggeredEditor"):
         StaggeredExplorer("16_05")  # type: ignore[arg-type]
+
+
+@pytest.mark.filterwarnings("ignore:The motion path follows joint")
+def test_defaults_come_from_the_roles_below_a_static_root(cmu, monkeypatch) -> None:
+    """A pelvis travelling below a static joint 0: the explorer's defaults are the pelvis, its curves the travel."""
+    monkeypatch.setenv("MOCAPLAB_JUPYTER_BACKEND", "static")
+    from mocaplab.widgets import StaggeredExplorer
+    from test_staggered_invariance import static_root
+
+    m = static_root(cmu("16_15")[:360])
+    pelvis = m.skeleton.roles["pelvis"]
+    x = StaggeredExplorer(m, max_poses=6, backend="agg", optimize=False)
+    try:
+        ed = x.editor
+        assert m.skeleton.names[0] != pelvis
+        assert ed.joint == pelvis and x.succession_dropdown.value == pelvis
+        assert x.editor.curve_joint in m.skeleton.names  # a joint rotation, never a translation
+        assert ed.current.constraints is None and ed.analysis.event_joints == m.skeleton.roles.foot_joints()
+        x.joint_dropdown.value = pelvis + ".position"
+        assert info(x)["variable"] == pelvis + ".position" and x.ax.get_ylabel() == "m"
+        c = ed.curves()
+        assert c["kind"] == "translation"
+        assert np.abs(c["original"] - m.translations[:, 1]).max() == 0.0
+        assert np.abs(c["values"] - m.translations[:, 1]).max() < 1e-9
+        # the overlaid poses stand where the pelvis has travelled to
+        x.pose_list.value = 3
+        ns, true = ed.overlay()
+        assert ns.translations is not None
+        t3 = ed.current.times[3]
+        f = int(round(t3 * m.fps))
+        assert np.abs(true.global_positions()[0] - m.global_positions()[f]).max() < 1e-9
+        assert np.abs(x.viewer.characters[3].motion.global_positions()[0] - m.global_positions()[f]).max() < 1e-9
+    finally:
+        x.close()

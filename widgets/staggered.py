@@ -4,13 +4,15 @@ Coleman et al. 2008 represent a motion as staggered poses whose knots carry
 timing refinements.  :class:`StaggeredExplorer` shows, for one clip:
 
 * **joint curves** of a chosen control variable (rotation vector
-  components of a joint, or the root position) as played, over the original
+  components of a joint, the root position or a joint's animated
+  translation) as played, over the original
   clip (grey), with the pose times (vertical lines, the selected pose bold)
   and the refined knots (dots) drawn on them;
 * a **toggle** (CSS class ``mocaplab-staggered-toggle``) between staggered
   playback and non-staggered playback (every refinement zeroed);
 * sliders for the **succession** offset ``s`` and exponent ``l``
-  (``r + s d(i)^l``, depth measured from a chosen joint), the **random**
+  (``r + s d(i)^l``, depth measured from a chosen joint, by default the
+  pelvis of the skeleton's joint roles), the **random**
   timing bound ``tau`` (seeded), relative **exaggeration** ``w_r`` against
   the average pose, and the **pose count** (culling by priority);
 * the **pose list** with the priorities ``w_k`` and number of refined knots;
@@ -37,7 +39,7 @@ from __future__ import annotations
 import html
 import json
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import ipywidgets as W
@@ -66,10 +68,15 @@ class StaggeredExplorer:
     max_poses : int, optional
         Initial pose count (culling by priority); default every candidate.
     curve_joint : str, optional
-        Variable whose curves are drawn (a joint name or ``"root_position"``);
-        default the first joint with the largest signal weight.
+        Variable whose curves are drawn (a joint name, ``"root_position"``
+        or ``"<joint>.position"``); default the joint rotation with the
+        largest signal weight.
     joint : str, optional
-        Joint the succession depth is measured from (default the root).
+        Joint the succession depth is measured from (default the pelvis of
+        the joint roles, :func:`mocaplab.staggered.default_joint`).
+    roles : mapping, optional
+        Joint-role overrides (:func:`mocaplab.roles.resolve_roles`) for the
+        defaults (pelvis, contact joints, constraint layer).
     viewer : bool
         Build the 3D views (:class:`~mocaplab.widgets.MotionViewer`).
     backend : str, optional
@@ -101,18 +108,20 @@ class StaggeredExplorer:
         viewer: bool = True,
         backend: str = "auto",
         viewer_backend: str | None = None,
+        roles: Mapping[str, Any] | None = None,
         **extract_options: Any,
     ) -> None:
         if isinstance(motion, StaggeredEditor):
             self.editor = motion
         elif isinstance(motion, Motion):
-            self.editor = StaggeredEditor(motion, max_poses=max_poses, joint=joint, **extract_options)
+            self.editor = StaggeredEditor(motion, max_poses=max_poses, joint=joint, roles=roles, **extract_options)
         else:
             raise TypeError(f"Expected `motion` to be a Motion or a StaggeredEditor, got {type(motion).__name__}")
         ed = self.editor
         if curve_joint is None:
-            w = ed.analysis.weights
-            curve_joint = ed.analysis.variables[1 + int(np.argmax(w[1:]))]
+            # the joint rotation (variables 1 .. J) with the largest signal weight
+            w = ed.analysis.weights[1 : ed.motion.n_joints + 1]
+            curve_joint = ed.analysis.variables[1 + int(np.argmax(w))]
         ed.set_curve_joint(curve_joint)
         self._viewer_enabled = bool(viewer)
         self._syncing = False
@@ -209,7 +218,7 @@ class StaggeredExplorer:
         sel = ed.selected
         for k, t in enumerate(c["pose_times"]):
             ax.axvline(t, color="k", lw=1.6 if k == sel else 0.5, alpha=0.8 if k == sel else 0.35)
-        unit = "m" if name == "root_position" else "rad (rotation vector)"
+        unit = "m" if c["kind"] == "translation" else "rad (rotation vector)"
         mode = "staggered" if ed.staggered else "non-staggered (refinements zeroed)"
         ax.set_title(f"{name}: {mode}", fontsize=10)
         ax.set_xlabel("time (s)")

@@ -2,7 +2,8 @@
 
 >>> from mocaplab import cmu, staggered                   # doctest: +SKIP
 >>> sm = staggered.extract(cmu("16_15"))                  # doctest: +SKIP
->>> edited = sm.succession(0.03, 2.0, joint="LeftShoulder").evaluate()  # doctest: +SKIP
+>>> arm = sm.skeleton.roles["left_shoulder"]              # doctest: +SKIP
+>>> edited = sm.succession(0.03, 2.0, joint=arm).evaluate()  # doctest: +SKIP
 
 Modules: :mod:`.representation` (section 3, the :class:`StaggeredMotion`
 container and its evaluation), :mod:`.features` (section 4.1, locating
@@ -18,6 +19,8 @@ from .edit import (
     StaggeredEditor,
     apply_knot_deltas,
     average_pose,
+    constraint_joints,
+    default_joint,
     delete_pose,
     edit_pose,
     exaggerate,
@@ -33,17 +36,23 @@ from .features import PoseAnalysis, analyze
 from .fit import extract, fit_representation, fit_rotation_tangents, fit_translation_tangents, rotation_objective
 from .representation import (
     ROOT_POSITION,
+    TRANSLATION_SUFFIX,
     StaggeredMotion,
     StaggeredTimingWarning,
     bezier,
     compose_rotation,
     factor_rotation,
     quat_bezier,
+    translation_joints,
     variable_names,
 )
 
 __all__ = [
     "ROOT_POSITION",
+    "TRANSLATION_SUFFIX",
+    "translation_joints",
+    "constraint_joints",
+    "default_joint",
     "StaggeredMotion",
     "StaggeredTimingWarning",
     "PoseAnalysis",

@@ -43,29 +43,41 @@ knots are re-evaluated at ``t_k`` (Figure 6c).  A
 knot comes closer to a neighbouring pose than to its own, and a
 ``ValueError`` is raised when knots would cross.
 
+Translation variables (a pelvis travelling below a static joint 0, the
+translation channels of a skeleton with 6 channels per joint) are edited like
+the root translation: added changes, the same edit offsets, the same timing.
+
 Constraint layer
 ----------------
 :class:`ConstraintLayer` is the final displacement layer of section 3: on
-contact intervals (mapped through the pose timing), the end effector is
-brought back to its original position by two-bone IK
-(:func:`mocaplab.ik.two_bone_ik`), blended in and out over a short window
-with :func:`mocaplab.refinement.blend_ramp`.
+contact intervals (mapped through the pose timing), the feet (and any other
+constrained end effector) are brought back to their original positions by
+the package's one goal solver, :func:`mocaplab.refinement.solve_goals`, with
+:class:`~mocaplab.refinement.Goal` weights blended in and out over a short
+window by :func:`mocaplab.refinement.blend_weights`.
+
+Joints are never named here: the succession's default joint is the pelvis
+and the constraint layer's joints are the feet of the skeleton's joint roles
+(:mod:`mocaplab.roles`; every entry point that needs them accepts
+``roles=``).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, Literal, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .. import quat
+from .. import kinematics, quat
 from ..motion import Motion, Skeleton
+from ..roles import RolesError, resolve_roles
 from .representation import (
     StaggeredMotion,
     _smoothstep,
+    bezier,
     casteljau,
     locate,
     next_active,
@@ -87,20 +99,26 @@ __all__ = [
     "delete_pose",
     "average_pose",
     "ConstraintLayer",
+    "constraint_joints",
+    "default_joint",
     "StaggeredEditor",
 ]
 
 Array = NDArray[np.float64]
-ReferencePose = Union[Literal["average", "previous", "next"], int, tuple[ArrayLike, ArrayLike]]  # noqa: UP007 (runtime alias, py3.10)
+ReferencePose = Union[Literal["average", "previous", "next"], int, tuple[ArrayLike, ...]]  # noqa: UP007 (runtime alias, py3.10)
 
 
 # ------------------------------------------------------------------ helpers
-def _variables_mask(sm: StaggeredMotion, joints: Sequence[str] | None, *, default_root: bool = True) -> NDArray[np.bool_]:
-    """Bool mask (V,) of the named variables (joint names and/or ``"root_position"``)."""
+def _variables_mask(sm: StaggeredMotion, joints: Sequence[str] | None, *, rotations_only: bool = False) -> NDArray[np.bool_]:
+    """Bool mask (V,) of the named variables (joint names, ``"root_position"``, ``"<joint>.position"``).
+
+    ``joints=None``: every variable, or with ``rotations_only`` every joint rotation.
+    """
     V = sm.n_variables
     if joints is None:
         mask = np.ones(V, dtype=bool)
-        mask[0] = default_root
+        if rotations_only:
+            mask[sm.position_columns] = False
         return mask
     if isinstance(joints, str):
         joints = [joints]
@@ -196,29 +214,51 @@ def retime(sm: StaggeredMotion, k: int, time: float) -> StaggeredMotion:
     return out
 
 
-def succession_depths(skeleton: Skeleton, joint: str | Sequence[str] | None = None) -> Array:
+def default_joint(skeleton: Skeleton, roles: Mapping[str, Any] | None = None) -> str:
+    """The joint the succession depth is measured from by default: the pelvis.
+
+    The ``pelvis`` role (:func:`mocaplab.roles.resolve_roles`, ``roles``
+    overriding), which is joint 0 on most skeletons but not below a static
+    reference joint; joint 0 when the skeleton has no pelvis role.
+    """
+    try:
+        pelvis = resolve_roles(skeleton, roles).get("pelvis")
+    except RolesError:
+        pelvis = None
+    return str(pelvis) if pelvis is not None else skeleton.names[0]
+
+
+def succession_depths(
+    skeleton: Skeleton,
+    joint: str | Sequence[str] | None = None,
+    *,
+    translation_joints: Sequence[int] = (),
+    roles: Mapping[str, Any] | None = None,
+) -> Array:
     """Depth ``d(i)`` of every control variable below the chosen joint(s), shape (V,).
 
     The rotation of a joint ``c`` in the subtree of a chosen joint ``j`` has
     depth ``depth(c) - depth(j)`` (the chosen joint's own rotation: 0); with
-    several chosen joints the nearest chosen ancestor counts.  The root
-    translation has depth 0 when the root is chosen.  Variables outside every
-    chosen subtree get NaN (they are not retimed).  Default joint: the root.
+    several chosen joints the nearest chosen ancestor counts.  A joint's
+    translation (the root translation for joint 0, the translation
+    variables for ``translation_joints``) has the depth of its rotation.
+    Variables outside every chosen subtree get NaN (they are not retimed).
+    Default joint: the pelvis (:func:`default_joint`, ``roles`` overriding).
     """
-    names = [skeleton.names[0]] if joint is None else ([joint] if isinstance(joint, str) else list(joint))
+    if joint is None:
+        joint = default_joint(skeleton, roles)
+    names = [joint] if isinstance(joint, str) else list(joint)
     chosen = {skeleton.index(n) for n in names}
     J = skeleton.n_joints
     depth = skeleton.depth()
-    out = np.full(J + 1, np.nan)
+    rot = np.full(J, np.nan)
     for c in range(J):
         a = c
         while a >= 0 and a not in chosen:
             a = int(skeleton.parents[a])
         if a >= 0:
-            out[1 + c] = float(depth[c] - depth[a])
-    if 0 in chosen:
-        out[0] = 0.0
-    return out
+            rot[c] = float(depth[c] - depth[a])
+    return np.concatenate([rot[:1], rot, rot[np.asarray(translation_joints, dtype=np.int64)]])
 
 
 def succession(
@@ -228,6 +268,7 @@ def succession(
     *,
     joint: str | Sequence[str] | None = None,
     poses: Sequence[int] | None = None,
+    roles: Mapping[str, Any] | None = None,
 ) -> StaggeredMotion:
     """Nonlinear succession: ``r_hat_{k,i} = r_{k,i} + s d(i)^l`` (section 5.2).
 
@@ -241,11 +282,14 @@ def succession(
         Nonlinearity (1 is Neff and Fiume's linear succession; larger values
         loosen the extremities).
     joint : str or sequence of str, optional
-        Joint(s) the depth is measured from (default the root): only
-        variables in their subtrees move.
+        Joint(s) the depth is measured from (default the pelvis, see
+        :func:`default_joint`): only variables in their subtrees move.
     poses : sequence of int, optional
         Poses to edit (default every interior pose; the first and last poses
         anchor the clip's ends).
+    roles : mapping, optional
+        Joint-role overrides for the default joint
+        (:func:`mocaplab.roles.resolve_roles`).
 
     Returns
     -------
@@ -258,7 +302,7 @@ def succession(
         raise ValueError(f"Expected a finite `s` in seconds, got {s!r}")
     if not (np.isfinite(l) and l > 0):
         raise ValueError(f"Expected `l` > 0, got {l!r}")
-    d = succession_depths(sm.skeleton, joint)
+    d = succession_depths(sm.skeleton, joint, translation_joints=sm.translation_joints, roles=roles)
     offset = np.where(np.isfinite(d), float(s) * np.power(np.nan_to_num(d), float(l)), 0.0)
     r = np.array(sm.refinements, copy=True)
     ks = _poses(sm, poses, interior=True)
@@ -281,8 +325,8 @@ def randomize(
     tau : float >= 0
         Bound of the offsets, seconds.
     joints : sequence of str, optional
-        Variables to affect (joint names, ``"root_position"``); default every
-        joint rotation.
+        Variables to affect (joint names, ``"root_position"``,
+        ``"<joint>.position"``); default every joint rotation.
     poses : sequence of int, optional
         Default every interior pose.
     seed : int, optional
@@ -290,7 +334,7 @@ def randomize(
     """
     if not (np.isfinite(tau) and tau >= 0):
         raise ValueError(f"Expected `tau` >= 0 seconds, got {tau!r}")
-    mask = _variables_mask(sm, joints, default_root=False)
+    mask = _variables_mask(sm, joints, rotations_only=True)
     ks = _poses(sm, poses, interior=True)
     rng = np.random.default_rng(seed)
     noise = rng.uniform(-tau, tau, size=(ks.size, sm.n_variables))
@@ -336,6 +380,7 @@ def apply_knot_deltas(
     sm: StaggeredMotion,
     root_delta: ArrayLike,
     rotation_delta: ArrayLike,
+    translation_delta: ArrayLike | None = None,
 ) -> StaggeredMotion:
     """Give knots the changes ``Delta`` and write them back (see the module notes).
 
@@ -345,6 +390,8 @@ def apply_knot_deltas(
         Translation changes of the root-position knots (added).
     rotation_delta : array_like, shape (K, J, 4)
         Rotation changes, composed as ``v (+) Delta = mul(v, Delta)``.
+    translation_delta : array_like, shape (K, T, 3), optional
+        Changes of the translation variables' knots (added); default none.
 
     Returns
     -------
@@ -354,35 +401,47 @@ def apply_knot_deltas(
         where the offset is ``Delta_k`` between pose ``k``'s editing knot and
         extreme knot, smoothly blended between poses.
     """
-    K, J = sm.n_poses, sm.n_joints
+    K, J, T = sm.n_poses, sm.n_joints, sm.n_translations
+    V = sm.n_variables
+    pc = sm.position_columns
     dr = np.asarray(root_delta, dtype=float).reshape(K, 3)
+    dt = np.zeros((K, T, 3)) if translation_delta is None else np.asarray(translation_delta, dtype=float)
+    if dt.shape != (K, T, 3):
+        raise ValueError(f"Expected `translation_delta` of shape ({K}, {T}, 3), got {dt.shape}")
+    dp = np.concatenate([dr[:, None], dt], axis=1)  # (K, P, 3)
     dq = quat.normalize(np.asarray(rotation_delta, dtype=float).reshape(K, J, 4))
     dq = np.where(dq[..., 3:4] < 0, -dq, dq)
-    changed = np.zeros((K, J + 1), dtype=bool)
-    changed[:, 0] = np.any(dr != 0.0, axis=-1)
-    changed[:, 1:] = quat.angle(dq) > 0.0
+    changed = np.zeros((K, V), dtype=bool)
+    changed[:, pc] = np.any(dp != 0.0, axis=-1)
+    changed[:, 1 : J + 1] = quat.angle(dq) > 0.0
     changed &= sm.active
     if not changed.any():
         return sm
-    new_root_values = sm.root_values + np.where(changed[:, :1], dr, 0.0)
-    new_rot_values = np.where(changed[:, 1:, None], quat.mul(sm.rotation_values, dq), sm.rotation_values)
-    new = _replace(sm, root_values=new_root_values, rotation_values=new_rot_values)
+    new_pos_values = sm.position_values + np.where(changed[:, pc, None], dp, 0.0)
+    new_rot_values = np.where(changed[:, 1 : J + 1, None], quat.mul(sm.rotation_values, dq), sm.rotation_values)
+    new = _replace(
+        sm,
+        root_values=new_pos_values[:, 0],
+        translation_values=new_pos_values[:, 1:],
+        rotation_values=new_rot_values,
+    )
     # re-measure the displacement samples of the affected segments only
     k0, k1, tn = _segments_of_u(sm.sample_u, sm.active)
-    col = np.arange(J + 1)
+    col = np.arange(V)
     hit = changed[k0, col] | changed[k1, col]
-    d_root = np.array(sm.root_displacement, copy=True)
+    d_pos = sm.position_displacement  # a fresh array
     d_rot = np.array(sm.rotation_displacement, copy=True)
     h = _edit_offset_weight(sm, k0, k1, tn)
-    rows = np.flatnonzero(hit[:, 0])
+    rows, ps = np.nonzero(hit[:, pc])
     if rows.size:
-        sub = (k0[rows], k1[rows], tn[rows])
-        old, _ = sm.spline_values(*sub)
-        nw, _ = new.spline_values(*sub)
-        hh = h[rows, :1]
-        e = (1.0 - hh) * dr[k0[rows, 0]] + hh * dr[k1[rows, 0]]
-        d_root[rows] = old + e + sm.root_displacement[rows] - nw
-    rows, js = np.nonzero(hit[:, 1:])
+        c = pc[ps]
+        kk0, kk1, tt = k0[rows, c], k1[rows, c], tn[rows, c]
+        old = _position_spline_at(sm, kk0, ps, tt)
+        nw = _position_spline_at(new, kk0, ps, tt)
+        hh = h[rows, c][:, None]
+        e = (1.0 - hh) * dp[kk0, ps] + hh * dp[kk1, ps]
+        d_pos[rows, ps] = old + e + d_pos[rows, ps] - nw
+    rows, js = np.nonzero(hit[:, 1 : J + 1])
     if rows.size:
         # evaluate only the affected (sample, joint) pairs
         kk0 = k0[rows, 1 + js]
@@ -393,23 +452,34 @@ def apply_knot_deltas(
         e = slerp_unit(dq[kk0, js], dq[kk1, js], h[rows, 1 + js])
         v = quat.mul(quat.mul(old, e), quat.exp(sm.rotation_displacement[rows, js]))
         d_rot[rows, js] = quat.log(quat.mul(quat.inv(nw), v))
-    out = _replace(new, root_displacement=d_root, rotation_displacement=d_rot)
+    out = _replace(
+        new,
+        root_displacement=d_pos[:, 0],
+        translation_displacement=d_pos[:, 1:],
+        rotation_displacement=d_rot,
+    )
     out._inherit_raw(sm, changed.any(axis=0))
     return out
 
 
+def _position_spline_at(sm: StaggeredMotion, k0: NDArray[Any], p: NDArray[Any], tn: Array) -> Array:
+    """Spline of position variable(s) ``p`` (0: the root) on segments starting at ``k0`` at ``tn`` (all (n,))."""
+    C = sm.control_points_all()[0][k0, p]  # (n, 4, 3)
+    return bezier(C[:, 0], C[:, 1], C[:, 2], C[:, 3], tn)
+
+
 def _rotation_spline_at(sm: StaggeredMotion, k0: NDArray[Any], k1: NDArray[Any], j: NDArray[Any], tn: Array) -> Array:
     """Rotation spline of joint(s) ``j`` on segments starting at ``k0`` at ``tn`` (all shape (n,))."""
-    _, ctrl, theta = sm.control_points()
+    _, ctrl, theta = sm.control_points_all()
     return casteljau(ctrl[k0, j], theta[k0, j], tn)
 
 
 def _true_layers(sm: StaggeredMotion, k: int) -> tuple[Array, Array, Array, Array]:
-    """Spline and displacement of every variable at ``t_k``: s_root, d_root, s_rot, D_rot."""
+    """Spline and displacement of every variable at ``t_k``: s_pos (P, 3), d_pos (P, 3), s_rot, D_rot (J, 4)."""
     k0, k1, tn = sm.locate(np.array([sm.times[k]]))
-    s_root, s_rot = sm.spline_values(k0, k1, tn)
-    d_root, d_rot = sm.displacement_values(k0 + tn * (k1 - k0))
-    return s_root[0], d_root[0], s_rot[0], quat.exp(d_rot[0])
+    s_pos, s_rot = sm._spline_layers(k0, tn)
+    d_pos, d_rot = sm._displacement_layers(k0 + tn * (k1 - k0))
+    return s_pos[0], d_pos[0], s_rot[0], quat.exp(d_rot[0])
 
 
 def _rotation_targets(sm: StaggeredMotion, rotations: Any) -> tuple[Array, NDArray[np.bool_]]:
@@ -431,12 +501,41 @@ def _rotation_targets(sm: StaggeredMotion, rotations: Any) -> tuple[Array, NDArr
     return quat.normalize(arr), np.ones(J, dtype=bool)
 
 
+def _position_targets(
+    sm: StaggeredMotion, root_position: ArrayLike | None, translations: Mapping[str, ArrayLike] | None
+) -> tuple[Array, NDArray[np.bool_]]:
+    """(P, 3) position targets and a (P,) mask from a root position and a ``{joint: (3,)}`` dict."""
+    P = 1 + sm.n_translations
+    out = np.zeros((P, 3))
+    mask = np.zeros(P, dtype=bool)
+    if root_position is not None:
+        out[0] = np.asarray(root_position, dtype=float).reshape(3)
+        mask[0] = True
+    if translations is not None:
+        if not isinstance(translations, Mapping):
+            raise TypeError(
+                f"Expected `translations` as a dict joint name -> (3,) translation, got {type(translations).__name__}"
+            )
+        for name, value in translations.items():
+            j = sm.skeleton.index(name)
+            if j not in sm.translation_joints:
+                have = [sm.skeleton.names[i] for i in sm.translation_joints]
+                raise ValueError(
+                    f"Expected `translations` keys among the joints with a translation variable {have}, got {name!r}"
+                )
+            p = 1 + sm.translation_joints.index(j)
+            out[p] = np.asarray(value, dtype=float).reshape(3)
+            mask[p] = True
+    return out, mask
+
+
 def edit_pose(
     sm: StaggeredMotion,
     k: int,
     *,
     root_position: ArrayLike | None = None,
     rotations: ArrayLike | dict[str, ArrayLike] | None = None,
+    translations: Mapping[str, ArrayLike] | None = None,
     which: Literal["true", "non-staggered"] = "non-staggered",
 ) -> StaggeredMotion:
     """Give pose ``k`` new values (section 5.1).
@@ -448,6 +547,9 @@ def edit_pose(
         New root translation (metres).
     rotations : array_like, shape (J, 4), or dict of joint name -> (4,), optional
         New local rotations; with a dict only the named joints change.
+    translations : dict of joint name -> (3,), optional
+        New local translations of joints with a translation variable
+        (metres, parent frame).
     which : {"non-staggered", "true"}
         ``"non-staggered"``: the values are the new extreme values
         ``v_hat_{k,i}``; editing knots are offset by the same change.
@@ -462,45 +564,52 @@ def edit_pose(
     if which not in ("true", "non-staggered"):
         raise ValueError(f"Expected `which` in ('true', 'non-staggered'), got {which!r}")
     k = sm._pose_index(k)
-    K, J = sm.n_poses, sm.n_joints
-    dr = np.zeros((K, 3))
+    K, J, P = sm.n_poses, sm.n_joints, 1 + sm.n_translations
+    pc = sm.position_columns
+    dp = np.zeros((K, P, 3))
     dq = np.tile([0.0, 0.0, 0.0, 1.0], (K, J, 1))
     tq, tmask = _rotation_targets(sm, rotations)
-    tmask &= sm.active[k, 1:]
+    tmask &= sm.active[k, 1 : J + 1]
+    tp, pmask = _position_targets(sm, root_position, translations)
+    pmask &= sm.active[k, pc]
     if which == "non-staggered":
-        if root_position is not None and sm.active[k, 0]:
-            dr[k] = np.asarray(root_position, dtype=float).reshape(3) - sm.root_values[k]
+        dp[k] = np.where(pmask[:, None], tp - sm.position_values[k], 0.0)
         dq[k] = np.where(tmask[:, None], quat.mul(quat.inv(sm.rotation_values[k]), tq), dq[k])
     else:
-        s_root, d_root, s_rot, D_rot = _true_layers(sm, k)
-        if root_position is not None and sm.active[k, 0]:
-            dr[k] = np.asarray(root_position, dtype=float).reshape(3) - (s_root + d_root)
+        s_pos, d_pos, s_rot, D_rot = _true_layers(sm, k)
+        dp[k] = np.where(pmask[:, None], tp - (s_pos + d_pos), 0.0)
         # s (+) Delta (+) D = target  ->  Delta = inv(s) target inv(D)
         delta = quat.mul(quat.mul(quat.inv(s_rot), tq), quat.inv(D_rot))
         dq[k] = np.where(tmask[:, None], delta, dq[k])
-    return apply_knot_deltas(sm, dr, dq)
+    return apply_knot_deltas(sm, dp[:, 0], dq, dp[:, 1:])
 
 
 def average_pose(sm: StaggeredMotion, *, which: Literal["true", "non-staggered"] = "non-staggered") -> tuple[Array, Array]:
     """Average pose over all poses: mean root (3,), rotation means (J, 4).
 
     Rotations are averaged as the dominant eigenvector of ``sum q q^T``
-    (sign independent).
+    (sign independent).  (Translation variables average like the root.)
     """
-    root, rot = _pose_values(sm, which)
+    pos, rot = _average_pose(sm, which)
+    return pos[0], rot
+
+
+def _average_pose(sm: StaggeredMotion, which: str) -> tuple[Array, Array]:
+    """Average pose: positions (P, 3), rotations (J, 4)."""
+    pos, rot = _pose_values(sm, which)
     M = np.einsum("kji,kjl->jil", rot, rot)
     _, vecs = np.linalg.eigh(M)
     mean = vecs[..., -1]
     mean = np.where(np.sum(mean * rot[0], axis=-1, keepdims=True) < 0, -mean, mean)
-    return root.mean(axis=0), quat.normalize(mean)
+    return pos.mean(axis=0), quat.normalize(mean)
 
 
 def _pose_values(sm: StaggeredMotion, which: str) -> tuple[Array, Array]:
+    """Values of every pose: positions (K, P, 3), rotations (K, J, 4)."""
     if which == "non-staggered":
-        return np.asarray(sm.root_values), np.asarray(sm.rotation_values)
+        return sm.position_values, np.asarray(sm.rotation_values)
     if which == "true":
-        root, rot = sm._compose(sm.times)
-        return root, rot
+        return sm._compose(sm.times)
     raise ValueError(f"Expected `which` in ('true', 'non-staggered'), got {which!r}")
 
 
@@ -520,15 +629,17 @@ def exaggerate(
     w_r : float
         Degree of offset (0: no change; positive exaggerates away from the
         reference, negative moves toward it, -1 reaches it).
-    reference : "average", "previous", "next", int, or (root (3,), rotations (J, 4))
+    reference : "average", "previous", "next", int, or (root (3,), rotations (J, 4)[, translations (T, 3)])
         The relative pose: the average pose (global exaggeration), the
         previous or next pose (local; the first/last pose uses its only
-        neighbour), a pose index, or explicit values.
+        neighbour), a pose index, or explicit values (the translation
+        variables' reference is needed only if they are edited).
     poses : sequence of int, optional
         Poses to edit (default all).
     joints : sequence of str, optional
-        Variables to edit (joint names, ``"root_position"``); default every
-        joint rotation (not the root translation).
+        Variables to edit (joint names, ``"root_position"``,
+        ``"<joint>.position"``); default every joint rotation (not the
+        translations).
     which : {"non-staggered", "true"}
         Apply to the extreme values or to the true poses at ``t_k`` (see
         :func:`edit_pose`).
@@ -539,52 +650,64 @@ def exaggerate(
     """
     if not np.isfinite(w_r):
         raise ValueError(f"Expected a finite `w_r`, got {w_r!r}")
-    K, J = sm.n_poses, sm.n_joints
-    root, rot = _pose_values(sm, which)
+    K, J, P = sm.n_poses, sm.n_joints, 1 + sm.n_translations
+    pc = sm.position_columns
+    pos, rot = _pose_values(sm, which)
     ks = _poses(sm, poses, interior=False)
-    mask = _variables_mask(sm, joints, default_root=False)
+    mask = _variables_mask(sm, joints, rotations_only=True)
     if isinstance(reference, str):
         if reference == "average":
-            r_root, r_rot = average_pose(sm, which=which)
-            ref_root = np.broadcast_to(r_root, (K, 3))
+            r_pos, r_rot = _average_pose(sm, which)
+            ref_pos = np.broadcast_to(r_pos, (K, P, 3))
             ref_rot = np.broadcast_to(r_rot, (K, J, 4))
         elif reference in ("previous", "next"):
             idx = np.arange(K) + (-1 if reference == "previous" else 1)
             idx = np.where(idx < 0, 1, np.where(idx >= K, K - 2, idx))
-            ref_root, ref_rot = root[idx], rot[idx]
+            ref_pos, ref_rot = pos[idx], rot[idx]
         else:
             raise ValueError(f"Expected `reference` 'average', 'previous', 'next', an int or values, got {reference!r}")
     elif isinstance(reference, (int, np.integer)):
         r = sm._pose_index(int(reference))
-        ref_root = np.broadcast_to(root[r], (K, 3))
+        ref_pos = np.broadcast_to(pos[r], (K, P, 3))
         ref_rot = np.broadcast_to(rot[r], (K, J, 4))
     else:
-        given_root, given_rot = reference
-        ref_root = np.broadcast_to(np.asarray(given_root, dtype=float), (K, 3))
-        ref_rot = np.broadcast_to(quat.normalize(np.asarray(given_rot, dtype=float)), (K, J, 4))
-    new_root = root + w_r * (root - ref_root)
+        given = tuple(reference)
+        if len(given) not in (2, 3):
+            raise ValueError(
+                "Expected `reference` values as (root (3,), rotations (J, 4)) or "
+                f"(root, rotations, translations (T, 3)), got {len(given)} items"
+            )
+        given_tr = np.asarray(given[2], dtype=float) if len(given) == 3 else pos.mean(axis=0)[1:]
+        if len(given) == 2 and mask[pc[1:]].any():
+            raise ValueError(
+                "Expected `reference` with translations (root, rotations, translations (T, 3)) "
+                "to exaggerate translation variables, got (root, rotations)"
+            )
+        r_pos = np.concatenate([np.asarray(given[0], dtype=float).reshape(1, 3), given_tr.reshape(-1, 3)])
+        if r_pos.shape != (P, 3):
+            raise ValueError(f"Expected reference translations of shape ({P - 1}, 3), got {given_tr.shape}")
+        ref_pos = np.broadcast_to(r_pos, (K, P, 3))
+        ref_rot = np.broadcast_to(quat.normalize(np.asarray(given[1], dtype=float)), (K, J, 4))
+    new_pos = pos + w_r * (pos - ref_pos)
     rel = quat.mul(quat.inv(ref_rot), rot)
     new_rot = quat.mul(rot, quat.exp(w_r * quat.log(rel)))
-    out = sm
+    sel = np.zeros((K, sm.n_variables), dtype=bool)
+    sel[ks] = mask
+    sel &= sm.active
     if which == "non-staggered":
-        sel = np.zeros((K, J + 1), dtype=bool)
-        sel[ks] = mask
-        sel &= sm.active
-        dr = np.where(sel[:, :1], new_root - root, 0.0)
-        dq = np.where(sel[:, 1:, None], quat.mul(quat.inv(rot), new_rot), quat.identity((K, J)))
-        return apply_knot_deltas(sm, dr, dq)
+        dp = np.where(sel[:, pc, None], new_pos - pos, 0.0)
+        dq = np.where(sel[:, 1 : J + 1, None], quat.mul(quat.inv(rot), new_rot), quat.identity((K, J)))
+        return apply_knot_deltas(sm, dp[:, 0], dq, dp[:, 1:])
     # true poses: one knot-change per pose, all computed on the unedited motion
-    K_r = np.zeros((K, 3))
+    K_p = np.zeros((K, P, 3))
     K_q = np.tile([0.0, 0.0, 0.0, 1.0], (K, J, 1))
     for k in ks:
-        s_root, d_root, s_rot, D_rot = _true_layers(sm, int(k))
-        act = sm.active[k] & mask
-        if act[0]:
-            K_r[k] = new_root[k] - (s_root + d_root)
+        s_pos, d_pos, s_rot, D_rot = _true_layers(sm, int(k))
+        act = sel[k]
+        K_p[k] = np.where(act[pc, None], new_pos[k] - (s_pos + d_pos), 0.0)
         delta = quat.mul(quat.mul(quat.inv(s_rot), new_rot[k]), quat.inv(D_rot))
-        K_q[k] = np.where(act[1:, None], delta, K_q[k])
-    out = apply_knot_deltas(sm, K_r, K_q)
-    return out
+        K_q[k] = np.where(act[1 : J + 1, None], delta, K_q[k])
+    return apply_knot_deltas(sm, K_p[:, 0], K_q, K_p[:, 1:])
 
 
 # --------------------------------------------------- creating/deleting poses
@@ -594,7 +717,7 @@ def _restructure(
     times: Array,
     refinements: Array,
     active: NDArray[np.bool_],
-    root_values: Array,
+    position_values: Array,
     rotation_values: Array,
     old_to_new: NDArray[np.int64],
     refit: NDArray[np.bool_],
@@ -602,18 +725,23 @@ def _restructure(
 ) -> StaggeredMotion:
     """Re-parameterise the displacement samples for a new pose structure,
     refit the splines of segments starting at ``refit`` (K_new, V) and
-    re-measure displacements so the motion is unchanged on every sample."""
+    re-measure displacements so the motion is unchanged on every sample.
+
+    ``position_values`` (K_new, P, 3) and ``rotation_values`` (K_new, J, 4)
+    are the new knot values."""
     from .fit import fit_rotation_tangents, fit_translation_tangents
 
     K, J = times.size, sm.n_joints
-    V = J + 1
+    V = sm.n_variables
+    P = 1 + sm.n_translations
+    pc = sm.position_columns
     # current sample times and values
     k0, k1, tn = _segments_of_u(sm.sample_u, sm.active)
     col = np.arange(V)
     T_old = sm.times[:, None] + sm.refinements
     tau = T_old[k0, col] + tn * (T_old[k1, col] - T_old[k0, col])  # (N, V)
-    s_root, s_rot = sm.spline_values(k0, k1, tn)
-    v_root = s_root + sm.root_displacement
+    s_pos, s_rot = sm._spline_layers(k0, tn)
+    v_pos = s_pos + sm.position_displacement
     v_rot = quat.mul(s_rot, quat.exp(sm.rotation_displacement))
     # new segments
     n0, n1, ntn = locate(times, refinements, active, tau)
@@ -622,40 +750,47 @@ def _restructure(
     nxt = next_active(active)
     nxt_safe = np.where(nxt < 0, np.arange(K)[:, None], nxt)
     # carry old tangents, refit the marked segments
-    root_t = np.zeros((K, 2, 3))
+    pos_t = np.zeros((K, P, 2, 3))
     rot_t = np.tile([0.0, 0.0, 0.0, 1.0], (K, J, 2, 1))
     keep = old_to_new >= 0
-    root_t[old_to_new[keep]] = sm.root_tangents[keep]
+    pos_t[old_to_new[keep]] = np.concatenate([sm.root_tangents[:, None], sm.translation_tangents], axis=1)[keep]
     rot_t[old_to_new[keep]] = sm.rotation_tangents[keep]
-    if refit[:, 0].any():
-        a, b = fit_translation_tangents(n0[:, 0], ntn[:, 0], v_root, root_values, root_values[nxt_safe[:, 0]])
-        root_t[refit[:, 0]] = np.stack([a, b], axis=1)[refit[:, 0]]
-    if refit[:, 1:].any():
-        for j in np.flatnonzero(refit[:, 1:].any(axis=0)):
-            q1 = rotation_values[:, j]
-            q4 = rotation_values[nxt_safe[:, 1 + j], j]
-            qs = v_rot[:, j]
-            qs = np.where(np.sum(qs * q1[n0[:, 1 + j]], axis=-1, keepdims=True) < 0, -qs, qs)
-            al, be, _ = fit_rotation_tangents(n0[:, 1 + j], ntn[:, 1 + j], qs, q1, q4)
-            rows = refit[:, 1 + j]
-            rot_t[rows, j, 0] = al[rows]
-            rot_t[rows, j, 1] = be[rows]
+    for p in np.flatnonzero(refit[:, pc].any(axis=0)):
+        c = pc[p]
+        a, b = fit_translation_tangents(
+            n0[:, c], ntn[:, c], v_pos[:, p], position_values[:, p], position_values[nxt_safe[:, c], p]
+        )
+        rows = refit[:, c]
+        pos_t[rows, p] = np.stack([a, b], axis=1)[rows]
+    for j in np.flatnonzero(refit[:, 1 : J + 1].any(axis=0)):
+        q1 = rotation_values[:, j]
+        q4 = rotation_values[nxt_safe[:, 1 + j], j]
+        qs = v_rot[:, j]
+        qs = np.where(np.sum(qs * q1[n0[:, 1 + j]], axis=-1, keepdims=True) < 0, -qs, qs)
+        al, be, _ = fit_rotation_tangents(n0[:, 1 + j], ntn[:, 1 + j], qs, q1, q4)
+        rows = refit[:, 1 + j]
+        rot_t[rows, j, 0] = al[rows]
+        rot_t[rows, j, 1] = be[rows]
     new = _replace(
         sm,
         times=times,
         refinements=refinements,
         active=active,
-        root_values=root_values,
+        root_values=position_values[:, 0],
+        translation_values=position_values[:, 1:],
         rotation_values=rotation_values,
-        root_tangents=root_t,
+        root_tangents=pos_t[:, 0],
+        translation_tangents=pos_t[:, 1:],
         rotation_tangents=rot_t,
         sample_u=n0 + ntn * (n1 - n0),
         priorities=priorities,
     )
-    ns_root, ns_rot = new.spline_values(n0, n1, ntn)
+    ns_pos, ns_rot = new._spline_layers(n0, ntn)
+    d_pos = v_pos - ns_pos
     return _replace(
         new,
-        root_displacement=v_root - ns_root,
+        root_displacement=d_pos[:, 0],
+        translation_displacement=d_pos[:, 1:],
         rotation_displacement=quat.log(quat.mul(quat.inv(ns_rot), v_rot)),
     )
 
@@ -670,7 +805,7 @@ def insert_pose(sm: StaggeredMotion, time: float, *, joints: Sequence[str] | Non
         of every variable it controls.
     joints : sequence of str, optional
         A partial pose controlling only these variables (joint names,
-        ``"root_position"``); default every variable.
+        ``"root_position"``, ``"<joint>.position"``); default every variable.
 
     Returns
     -------
@@ -683,7 +818,7 @@ def insert_pose(sm: StaggeredMotion, time: float, *, joints: Sequence[str] | Non
     K, V = sm.n_poses, sm.n_variables
     if not sm.times[0] < t < sm.times[-1] or np.any(np.isclose(sm.times, t, rtol=0.0, atol=1e-9)):
         raise ValueError(f"Expected `time` strictly inside ({sm.times[0]}, {sm.times[-1]}) and not on a pose, got {time!r}")
-    mask = _variables_mask(sm, joints, default_root=True)
+    mask = _variables_mask(sm, joints)
     pos = int(np.searchsorted(sm.times, t))
     T = sm.times[:, None] + sm.refinements
     for i in np.flatnonzero(mask):
@@ -694,7 +829,7 @@ def insert_pose(sm: StaggeredMotion, time: float, *, joints: Sequence[str] | Non
                 f"A knot of {sm.variables[i]!r} at {t:.4f} s would cross its refined neighbours "
                 f"({before.max():.4f}, {after.min():.4f}) s: choose another time or fewer `joints`"
             )
-    root, rot = sm._compose(np.array([t]))
+    p_now, rot = sm._compose(np.array([t]))
     old_to_new = np.arange(K) + (np.arange(K) >= pos)
     times = np.insert(sm.times, pos, t)
     refinements = np.insert(sm.refinements, pos, 0.0, axis=0)
@@ -702,7 +837,7 @@ def insert_pose(sm: StaggeredMotion, time: float, *, joints: Sequence[str] | Non
     # rotation knot in the hemisphere of its predecessor
     prev_rot = sm.rotation_values[pos - 1]
     q = np.where(np.sum(rot[0] * prev_rot, axis=-1, keepdims=True) < 0, -rot[0], rot[0])
-    root_values = np.insert(sm.root_values, pos, root[0], axis=0)
+    position_values = np.insert(sm.position_values, pos, p_now[0], axis=0)
     rotation_values = np.insert(sm.rotation_values, pos, q, axis=0)
     refit = np.zeros((K + 1, V), dtype=bool)
     for i in np.flatnonzero(mask):
@@ -711,7 +846,7 @@ def insert_pose(sm: StaggeredMotion, time: float, *, joints: Sequence[str] | Non
         refit[pos, i] = True
     priorities = np.insert(sm.priorities, pos, np.nan)
     return _restructure(
-        sm, times=times, refinements=refinements, active=active, root_values=root_values,
+        sm, times=times, refinements=refinements, active=active, position_values=position_values,
         rotation_values=rotation_values, old_to_new=old_to_new, refit=refit, priorities=priorities,
     )
 
@@ -739,43 +874,129 @@ def delete_pose(sm: StaggeredMotion, k: int) -> StaggeredMotion:
         refit[prev, i] = True
     return _restructure(
         sm, times=times, refinements=refinements, active=active,
-        root_values=np.delete(sm.root_values, k, axis=0),
+        position_values=np.delete(sm.position_values, k, axis=0),
         rotation_values=np.delete(sm.rotation_values, k, axis=0),
         old_to_new=old_to_new, refit=refit, priorities=np.delete(sm.priorities, k),
     )
 
 
 # ------------------------------------------------------- constraint layer
+GoalKind = Literal["foot", "toe", "limb"]
+
+
+def constraint_joints(
+    skeleton: Skeleton, candidates: Sequence[str], *, roles: Mapping[str, Any] | None = None
+) -> tuple[tuple[str, ...], tuple[GoalKind, ...]]:
+    """The joints of ``candidates`` the constraint layer can hold, and how.
+
+    From the joint roles (:func:`mocaplab.roles.resolve_roles`): an ankle
+    is a ``"foot"`` goal (the leg's two-bone IK), a toe whose parent is an
+    ankle a ``"toe"`` goal (the foot turns about the ankle), a wrist a
+    ``"limb"`` goal (the arm's two-bone IK); other joints are left out.
+    Returns the kept joint names (in the order of ``candidates``) and their
+    kinds of :class:`~mocaplab.refinement.Goal`.
+    """
+    r = resolve_roles(skeleton, roles)
+    ankles = {r[f"{s}_ankle"] for s in ("left", "right") if f"{s}_ankle" in r}
+    toes = {r[f"{s}_toe"] for s in ("left", "right") if f"{s}_toe" in r}
+    wrists = {r[f"{s}_wrist"] for s in ("left", "right") if f"{s}_wrist" in r}
+    names: list[str] = []
+    kinds: list[GoalKind] = []
+    for name in candidates:
+        j = skeleton.index(name)
+        parent = skeleton.names[int(skeleton.parents[j])] if j > 0 else None
+        if name in ankles:
+            kind: GoalKind | None = "foot"
+        elif name in toes:
+            kind = "toe" if parent in ankles else None
+        elif name in wrists:
+            kind = "limb"
+        else:
+            kind = None
+        if kind is not None:
+            names.append(name)
+            kinds.append(kind)
+    return tuple(names), tuple(kinds)
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class ConstraintLayer:
     """Contact constraints as the last displacement layer (section 3).
 
+    On the frames of a contact (mapped through the current pose timing) each
+    constrained joint is held at its original world position by the one
+    goal solver of the package, :func:`mocaplab.refinement.solve_goals`
+    (ankles by the leg's two-bone IK, toes by turning the foot about the
+    ankle, wrists by the arm's two-bone IK), with weights that are 1 inside
+    the contact and fall to 0 over ``window`` seconds on each side
+    (:func:`mocaplab.refinement.blend_weights`).  The motion's translation
+    channels take part in the forward kinematics and are passed through.
+
     Attributes
     ----------
     joints : tuple of str
-        End effectors (ankles, wrists): each is the end of a two-bone limb
-        (:func:`mocaplab.ik.limb_joints`).
+        Constrained joints (see :func:`constraint_joints`).
     pose_u : ndarray, shape (N,)
         Position of each original frame in *pose-index units*
         (``k + (t - t_k) / (t_{k+1} - t_k)``, pose times only), so contact
         intervals and targets follow the poses when they are retimed.
     masks : ndarray of bool, shape (N, E)
-        Contact state of each effector on the original frames.
+        Contact state of each joint on the original frames.
     targets : ndarray, shape (N, E, 3)
-        Original world positions of the effectors (the targets kept).
+        Original world positions of the joints (the targets kept).
+    speeds : ndarray, shape (N, E), optional
+        Original world speeds of the joints (m/s); a goal's stiffness is
+        ``1 / (speed + 0.05 m/s)`` as in :func:`mocaplab.refinement.foot_goals`,
+        so where an ankle and its toe cannot both hold (one of them blending
+        in or out) the foot rolls about the stiller one.  Default zeros.
     window : float
-        Seconds over which the IK solution is blended in and out.
+        Seconds over which the solution is blended in and out.
     tolerance : float
-        Position errors below this (metres) are left alone, so the layer is
-        the identity on the unedited motion.
+        Frames where every constrained joint is within this distance of its
+        target (metres) are left alone, so the layer is the identity on the
+        unedited motion and outside the edited stretch.
+    kinds : tuple of str, optional
+        The :class:`~mocaplab.refinement.Goal` kind of each joint
+        (``"foot"``, ``"toe"`` or ``"limb"``); default from the joint roles
+        (:func:`constraint_joints`).
+    adjust_root : bool
+        Let the solver lower the root where a leg cannot reach its target
+        (:func:`~mocaplab.refinement.solve_goals`); off by default, since
+        the root translation is an animated variable of the staggered poses.
     """
 
     joints: tuple[str, ...]
     pose_u: Array
     masks: NDArray[np.bool_]
     targets: Array
+    speeds: Array = None  # type: ignore[assignment]  # None: zeros
     window: float = 0.1
     tolerance: float = 1e-6
+    kinds: tuple[GoalKind, ...] = ()
+    adjust_root: bool = False
+
+    def __post_init__(self) -> None:
+        joints = tuple(str(n) for n in self.joints)
+        E = len(joints)
+        pose_u = np.asarray(self.pose_u, dtype=float).reshape(-1)
+        masks = np.asarray(self.masks, dtype=bool).reshape(pose_u.size, E)
+        targets = np.asarray(self.targets, dtype=float)
+        if targets.shape != (pose_u.size, E, 3):
+            raise ValueError(f"Expected `targets` of shape ({pose_u.size}, {E}, 3), got {targets.shape}")
+        speeds = np.zeros((pose_u.size, E)) if self.speeds is None else np.asarray(self.speeds, dtype=float)
+        if speeds.shape != (pose_u.size, E) or not np.all(np.isfinite(speeds)) or np.any(speeds < 0):
+            raise ValueError(f"Expected finite `speeds` >= 0 of shape ({pose_u.size}, {E}), got shape {speeds.shape}")
+        kinds = tuple(self.kinds)
+        if kinds and (len(kinds) != E or any(k not in ("foot", "toe", "limb") for k in kinds)):
+            raise ValueError(f"Expected `kinds` of 'foot', 'toe' or 'limb', one per joint {joints}, got {kinds}")
+        if not (np.isfinite(self.window) and self.window >= 0):
+            raise ValueError(f"Expected `window` >= 0 seconds, got {self.window!r}")
+        for name, value in (("pose_u", pose_u), ("masks", masks), ("targets", targets), ("speeds", speeds)):
+            value.flags.writeable = False
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "joints", joints)
+        object.__setattr__(self, "kinds", kinds)
+        object.__setattr__(self, "window", float(self.window))
 
     @classmethod
     def from_contacts(
@@ -786,83 +1007,106 @@ class ConstraintLayer:
         *,
         joints: Sequence[str] | None = None,
         window: float = 0.1,
+        roles: Mapping[str, Any] | None = None,
     ) -> ConstraintLayer:
         """Build the layer from a clip, its Contacts and the pose times (seconds).
 
-        Default joints: the contact joints that end a two-bone limb and
-        are not toes (for CMU feet: LeftFoot, RightFoot).
+        Default joints: the contact joints that are feet (ankles, toes) or
+        wrists in the joint roles (:func:`constraint_joints`, ``roles``
+        overriding); for CMU feet: LeftFoot, LeftToeBase, RightFoot,
+        RightToeBase.  Given ``joints`` must be among them.
         """
-        from ..ik import limb_joints
-
         sk = motion.skeleton
-        if joints is None:
-            joints = []
-            for name in contacts.joints:
-                if "toe" in name.lower():
-                    continue
-                try:
-                    limb_joints(sk, name)
-                except ValueError:
-                    continue
-                joints.append(name)
-        joints = tuple(joints)
-        idx = [sk.index(n) for n in joints]
-        masks = np.stack([contacts.of(n) for n in joints], axis=1) if joints else np.zeros((motion.n_frames, 0), bool)
-        targets = motion.global_positions()[:, idx]
+        if contacts.n_frames != motion.n_frames:
+            raise ValueError(
+                f"Expected contacts over the motion's {motion.n_frames} frames, got {contacts.n_frames}"
+            )
+        names, kinds = constraint_joints(sk, tuple(contacts.joints) if joints is None else tuple(joints), roles=roles)
+        if joints is not None and len(names) != len(tuple(joints)):
+            bad = [n for n in joints if n not in names]
+            raise ValueError(
+                f"Expected `joints` that are ankles, toes (below an ankle) or wrists in the joint roles, got {bad}; "
+                "name the roles with roles={...} or skeleton.with_roles(...)"
+            )
+        idx = [sk.index(n) for n in names]
+        masks = np.stack([contacts.of(n) for n in names], axis=1) if names else np.zeros((motion.n_frames, 0), bool)
+        targets = np.array(motion.global_positions()[:, idx])
         return cls(
-            joints=joints,
+            joints=names,
             pose_u=_pose_u(np.asarray(times, dtype=float), motion.times),
             masks=masks,
-            targets=np.array(targets),
+            targets=targets,
+            speeds=np.linalg.norm(kinematics.velocities(targets, motion.fps), axis=-1),
             window=float(window),
+            kinds=kinds,
         )
 
     def weights_and_targets(self, sm: StaggeredMotion, t: Array) -> tuple[Array, Array]:
-        """Blend weights (F, E) and targets (F, E, 3) at times ``t`` for ``sm``'s pose timing."""
-        from ..refinement import blend_ramp
+        """Blend weights (F, E) and targets (F, E, 3) at times ``t`` for ``sm``'s pose timing.
 
-        u = _pose_u(sm.times, t)
-        # time of every original frame under the current pose timing
-        k = np.clip(np.floor(self.pose_u).astype(np.int64), 0, sm.n_poses - 2)
-        frac = self.pose_u - k
-        t_src = sm.times[k] + frac * (sm.times[k + 1] - sm.times[k])
-        F, E = t.size, len(self.joints)
-        w = np.zeros((F, E))
-        tg = np.zeros((F, E, 3))
+        The contact intervals are mapped onto ``sm``'s frames through the
+        pose timing and blended by :func:`mocaplab.refinement.blend_weights`
+        (weights between frames are interpolated).
+        """
+        from ..contacts import intervals_from_mask
+        from ..refinement import blend_weights
+
+        t = np.asarray(t, dtype=float).reshape(-1)
+        grid = np.arange(sm.n_frames) / sm.fps
+        u_grid = _pose_u(sm.times, grid)
+        E = len(self.joints)
+        window = int(round(self.window * sm.fps))
+        w_grid = np.zeros((grid.size, E))
         for e in range(E):
-            m = self.masks[:, e]
-            inside = np.interp(u, self.pose_u, m.astype(float)) >= 0.5
-            # distance in seconds to the nearest contact frame (under the current timing)
-            if m.any():
-                ct = t_src[m]
-                pos = np.clip(np.searchsorted(ct, t), 1, ct.size - 1) if ct.size > 1 else np.zeros(t.size, int)
-                dist = np.minimum(np.abs(t - ct[pos - 1 if ct.size > 1 else 0]), np.abs(t - ct[pos]))
-                ramp = blend_ramp(1.0 - dist / max(self.window, 1e-9)) if self.window > 0 else (dist == 0).astype(float)
-                w[:, e] = np.where(inside, 1.0, ramp)
-            for d in range(3):
-                tg[:, e, d] = np.interp(u, self.pose_u, self.targets[:, e, d])
+            inside = np.interp(u_grid, self.pose_u, self.masks[:, e].astype(float)) >= 0.5
+            w_grid[:, e] = blend_weights(grid.size, intervals_from_mask(inside), window=window)
+        if t.shape == grid.shape and np.array_equal(t, grid):
+            w = w_grid
+        else:
+            w = np.stack([np.interp(t, grid, w_grid[:, e]) for e in range(E)], axis=-1).reshape(t.size, E)
+        tg = self._along(sm, t, self.targets.reshape(self.pose_u.size, -1)).reshape(t.size, E, 3)
         return w, tg
 
+    def _along(self, sm: StaggeredMotion, t: Array, values: Array) -> Array:
+        """Per-original-frame ``values`` (N, C) at times ``t`` under ``sm``'s pose timing: (F, C)."""
+        u = _pose_u(sm.times, t)
+        return np.stack([np.interp(u, self.pose_u, values[:, c]) for c in range(values.shape[1])], axis=-1)
+
     def apply(self, sm: StaggeredMotion, motion: Motion, t: Array, *, staggered: bool = True) -> Motion:
-        """Blend the two-bone IK solution toward the targets into ``motion``."""
-        from ..ik import limb_joints, two_bone_ik
+        """Hold the constrained joints on their targets (:func:`mocaplab.refinement.solve_goals`)."""
+        from ..refinement import Goal, solve_goals
 
         if not self.joints:
             return motion
         w, tg = self.weights_and_targets(sm, t)
+        sk = motion.skeleton
+        idx = [sk.index(n) for n in self.joints]
+        err = np.linalg.norm(motion.global_positions()[:, idx] - tg, axis=-1)
+        frames = np.flatnonzero(np.any((w > 0) & (err > self.tolerance), axis=1))
+        if frames.size == 0:
+            return motion
+        kinds = self.kinds or constraint_joints(sk, self.joints)[1]
+        if len(kinds) != len(self.joints):
+            raise ValueError(f"Joints {self.joints} have no goal kind on this skeleton: pass `kinds`")
+        tr = motion.translations
+        sub = motion.replace(
+            rotations=motion.rotations[frames],
+            root_positions=motion.root_positions[frames],
+            translations=None if tr is None else tr[frames],
+        )
+        stiffness = 1.0 / (self._along(sm, t[frames], self.speeds) + 0.05)
+        goals = [
+            Goal(name, tg[frames, e], w[frames, e], kind=kinds[e], stiffness=stiffness[:, e])
+            for e, name in enumerate(self.joints)
+        ]
+        solved = solve_goals(sub, goals, adjust_root=self.adjust_root)
         rot = np.array(motion.rotations, copy=True)
-        for e, name in enumerate(self.joints):
-            gpos = Motion(motion.skeleton, rot, motion.root_positions, motion.fps).global_positions()
-            j = motion.skeleton.index(name)
-            err = np.linalg.norm(gpos[:, j] - tg[:, e], axis=-1)
-            frames = np.flatnonzero((w[:, e] > 0) & (err > self.tolerance))
-            if frames.size == 0:
-                continue
-            up, mid, _ = limb_joints(motion.skeleton, name)
-            solved = two_bone_ik(rot[frames], motion.root_positions[frames], motion.skeleton, name, tg[frames, e])
-            for jj in (up, mid):
-                rot[frames, jj] = quat.slerp(rot[frames, jj], solved[:, jj], w[frames, e])
-        return motion.replace(rotations=rot)
+        rot[frames] = solved.rotations
+        if not self.adjust_root:
+            return motion.replace(rotations=rot)
+        root = np.array(motion.root_positions, copy=True)
+        root[frames] = solved.root_positions
+        return motion.replace(rotations=rot, root_positions=root)
 
 
 def _pose_u(times: Array, t: Array) -> NDArray[Any]:
@@ -890,12 +1134,16 @@ class StaggeredEditor:
     motion : Motion
     max_poses : int, optional
         Initial pose count (culling); default every candidate.
-    joint : str
-        Joint the succession depth is measured from.
+    joint : str, optional
+        Joint the succession depth is measured from (default the pelvis,
+        :func:`default_joint`).
     random_joints : sequence of str, optional
         Joints affected by random timing (default every joint).
-    curve_joint : str
-        Variable whose curves :meth:`curves` returns.
+    curve_joint : str, optional
+        Variable whose curves :meth:`curves` returns (default the pelvis).
+    roles : mapping, optional
+        Joint-role overrides (:func:`mocaplab.roles.resolve_roles`) for the
+        defaults: the pelvis, the contact joints, the constraint layer.
     **extract_options
         Passed to :func:`~mocaplab.staggered.extract`.
     """
@@ -908,20 +1156,26 @@ class StaggeredEditor:
         joint: str | None = None,
         random_joints: Sequence[str] | None = None,
         curve_joint: str | None = None,
+        roles: Mapping[str, Any] | None = None,
         **extract_options: Any,
     ) -> None:
         from .features import analyze
         from .fit import extract
 
+        if not isinstance(motion, Motion):
+            raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
+        if roles is not None:
+            # pinned on the skeleton: analysis, extraction and edits all see them
+            motion = motion.replace(skeleton=motion.skeleton.with_roles(**dict(resolve_roles(motion, roles))))
         self.motion = motion
         self._extract = extract
         self._options = dict(extract_options)
         contacts = self._options.pop("contacts", "auto")
         self.analysis = analyze(motion, contacts=contacts)
         self.max_poses = None if max_poses is None else int(max_poses)
-        self.joint = joint or motion.skeleton.names[0]
+        self.joint = joint or default_joint(motion.skeleton)
         self.random_joints = None if random_joints is None else tuple(random_joints)
-        self.curve_joint = curve_joint or motion.skeleton.names[0]
+        self.curve_joint = curve_joint or default_joint(motion.skeleton)
         self.s = 0.0
         self.l = 1.0
         self.tau = 0.0
@@ -1019,23 +1273,27 @@ class StaggeredEditor:
         """The dense motion being played."""
         return self.current.evaluate(staggered=self.staggered)
 
-    def curves(self, name: str | None = None) -> dict[str, Array]:
+    def curves(self, name: str | None = None) -> dict[str, Any]:
         """Curves of one variable for plotting.
 
-        Returns a dict with ``"t"`` (F,), ``"values"`` (F, 3) (root position
-        in metres, or the rotation vector ``log(q)`` in radians), ``"pose_times"``
-        (K,), ``"knot_times"`` (K,) and ``"knot_values"`` (K, 3) of the
-        refined knots as played, and ``"original"`` (F0, 3) with ``"t0"`` of
-        the source clip.
+        Returns a dict with ``"t"`` (F,), ``"values"`` (F, 3) (a root
+        position or joint translation in metres, or the rotation vector
+        ``log(q)`` in radians), ``"kind"`` (``"translation"`` or
+        ``"rotation"``), ``"pose_times"`` (K,), ``"knot_times"`` (K,) and
+        ``"knot_values"`` (K, 3) of the refined knots as played, and
+        ``"original"`` (F0, 3) with ``"t0"`` of the source clip.
         """
         name = name or self.curve_joint
         sm = self.playback
         i = sm.variable_index(name)
         motion = self.evaluate()
+        J = sm.n_joints
 
         def series(m: Motion) -> Array:
             if i == 0:
                 return np.asarray(m.root_positions)
+            if i > J:  # a translation variable: the clip has translation channels
+                return np.asarray(m.translations)[:, sm.translation_joints[i - J - 1]]
             return quat.log(quat.unroll(m.rotations[:, i - 1], axis=0))
 
         act = sm.active[:, i]
@@ -1044,6 +1302,7 @@ class StaggeredEditor:
         return {
             "t": motion.times,
             "values": vals,
+            "kind": "translation" if sm.is_translation(i) else "rotation",
             "pose_times": np.asarray(sm.times),
             "knot_times": knots,
             "knot_values": np.stack([np.interp(knots, motion.times, vals[:, d]) for d in range(3)], axis=1),

@@ -5,7 +5,10 @@ The pipeline, one function per step:
 1. :func:`motion_trails`: for every joint rotation and every child ``j``, the
    local-space trails ``m1(j, t)`` (the tip of the unit axis toward the child)
    and ``m2(j, t)`` (the tip of a unit axis orthogonal to it, which sees twist
-   about the limb); one trail of the root position for the root translation.
+   about the limb); one trail of the root position for the root translation,
+   and one of the local translation for each translation variable (a pelvis
+   travelling below a static joint 0 gives the same trail as a travelling
+   root).
 2. :func:`laplacian_smooth`: iterated Laplacian smoothing of the trails
    (discrete curvature is very sensitive to capture noise).
 3. :func:`bounded_curvature`: the modified Taubin measure
@@ -35,7 +38,7 @@ The pipeline, one function per step:
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
 import numpy as np
@@ -43,7 +46,7 @@ from numpy.typing import NDArray
 
 from .. import quat
 from ..motion import Motion
-from .representation import variable_names
+from .representation import translation_joints, variable_names
 
 __all__ = [
     "Trails",
@@ -78,18 +81,19 @@ class Trails:
 
     Attributes
     ----------
-    points : ndarray, shape (F, T, 3)
+    points : ndarray, shape (F, n, 3)
         Trail samples: unit-axis tips in the parent frame of the joint for
-        rotation trails, world root positions (metres) for the root trail.
-    variable : ndarray of int, shape (T,)
+        rotation trails, world root positions (metres) for the root trail,
+        local translations (metres, parent frame) for translation variables.
+    variable : ndarray of int, shape (n,)
         Control variable of each trail (0 = root translation, ``1 + j`` =
-        rotation of joint ``j``).
-    kind : ndarray of int, shape (T,)
+        rotation of joint ``j``, ``J + 1 + m`` = translation variable ``m``).
+    kind : ndarray of int, shape (n,)
         1 for ``m1`` (axis toward the child), 2 for ``m2`` (orthogonal axis),
-        0 for the root translation trail.
-    bone_length : ndarray, shape (T,)
+        0 for the root and translation trails.
+    bone_length : ndarray, shape (n,)
         ``|x_i - x_j|``: the length from the joint to the child the trail
-        follows (metres; 0 for the root trail).
+        follows (metres; 0 for the translation trails).
     """
 
     points: Array
@@ -138,13 +142,16 @@ def motion_trails(motion: Motion) -> Trails:
             rows.append((j, 2, b, length))
     joints = np.array([r[0] for r in rows], dtype=np.int64)
     axes = np.array([r[2] for r in rows])
-    pts = quat.rotate(motion.rotations[:, joints], axes)  # (F, T, 3)
-    points = np.concatenate([np.asarray(motion.root_positions)[:, None, :], pts], axis=1)
+    pts = quat.rotate(motion.rotations[:, joints], axes)  # (F, n, 3)
+    tj = list(translation_joints(motion))
+    moved = np.asarray(motion.translations)[:, tj] if tj else np.zeros((motion.n_frames, 0, 3))
+    points = np.concatenate([np.asarray(motion.root_positions)[:, None, :], pts, moved], axis=1)
+    T = len(tj)
     return Trails(
         points=points,
-        variable=np.concatenate([[0], joints + 1]).astype(np.int64),
-        kind=np.concatenate([[0], [r[1] for r in rows]]).astype(np.int64),
-        bone_length=np.concatenate([[0.0], [r[3] for r in rows]]),
+        variable=np.concatenate([[0], joints + 1, J + 1 + np.arange(T)]).astype(np.int64),
+        kind=np.concatenate([[0], [r[1] for r in rows], np.zeros(T)]).astype(np.int64),
+        bone_length=np.concatenate([[0.0], [r[3] for r in rows], np.zeros(T)]),
     )
 
 
@@ -248,15 +255,17 @@ def signal_weights(trails: Trails, n_variables: int, *, root_weight: float = 1.0
 
     ``|m_j|`` is the arc length of the ``m1`` trail toward child ``j`` (the
     limb's swept angle; its product with the bone length is the distance the
-    child sweeps).  The root translation gets the arc length of the root
-    trail (the distance the root travels, also metres) times ``root_weight``.
-    Arc lengths are measured on the smoothed trails passed in.
+    child sweeps).  The root translation, and every translation variable,
+    gets the arc length of its trail (the distance the joint travels, also
+    metres) times ``root_weight``.  Arc lengths are measured on the smoothed
+    trails passed in.
     """
-    arc = np.linalg.norm(np.diff(trails.points, axis=0), axis=-1).sum(axis=0)  # (T,)
+    arc = np.linalg.norm(np.diff(trails.points, axis=0), axis=-1).sum(axis=0)  # (n,)
     w = np.zeros(n_variables)
     m1 = trails.kind == 1
     np.add.at(w, trails.variable[m1], trails.bone_length[m1] * arc[m1])
-    w[0] = root_weight * arc[trails.kind == 0].sum()
+    m0 = trails.kind == 0
+    w[trails.variable[m0]] = root_weight * arc[m0]
     return w
 
 
@@ -511,6 +520,7 @@ def analyze(
     root_weight: float = 1.0,
     event_weight: float | Literal["auto"] = "auto",
     contact_joints: Sequence[str] | None = None,
+    roles: Mapping[str, Any] | None = None,
 ) -> PoseAnalysis:
     """Signals, pose probability and prioritised candidate poses of a clip.
 
@@ -530,13 +540,18 @@ def analyze(
     filter_width : float
         Tent filter width in seconds (0.15 s in the paper).
     root_weight : float
-        Multiplier of the root translation signal's weight.
+        Multiplier of the weights of the translation signals (the root's and
+        the translation variables').
     event_weight : float or "auto"
         Weight of each contact-event signal.  ``"auto"``: the largest local
         signal weight, so a contact change counts as much as the strongest
         moving limb (the paper only asks for a non-zero value).
     contact_joints : sequence of str, optional
-        Joints for ``contacts="auto"``.
+        Joints for ``contacts="auto"`` (default: the ankles and toes of the
+        joint roles, :func:`mocaplab.contacts.default_foot_joints`).
+    roles : mapping, optional
+        Joint-role overrides (:func:`mocaplab.roles.resolve_roles`) for the
+        default contact joints.
 
     Returns
     -------
@@ -547,7 +562,8 @@ def analyze(
     if filter_width <= 0:
         raise ValueError(f"Expected `filter_width` > 0 seconds, got {filter_width!r}")
     fps = motion.fps
-    V = motion.n_joints + 1
+    tj = translation_joints(motion)
+    V = motion.n_joints + 1 + len(tj)
     iters = int(round(24 * (fps / 120.0) ** 2)) if smoothing is None else int(smoothing)
     trails = motion_trails(motion)
     # continuous quaternion signs do not matter here: trails are rotated vectors
@@ -562,7 +578,7 @@ def analyze(
             raise ValueError(f"Expected `contacts` to be a Contacts, 'auto' or None, got {contacts!r}")
         from ..contacts import stillness_contacts
 
-        contacts = stillness_contacts(motion, joints=contact_joints)
+        contacts = stillness_contacts(motion, joints=contact_joints, roles=roles)
     if contacts is None:
         events = np.zeros((motion.n_frames, 0))
         event_joints: tuple[str, ...] = ()
@@ -576,7 +592,7 @@ def analyze(
     cand = candidate_poses(P)
     return PoseAnalysis(
         fps=fps,
-        variables=variable_names(motion.skeleton),
+        variables=variable_names(motion.skeleton, tj),
         signals=signals,
         weights=weights,
         events=events,

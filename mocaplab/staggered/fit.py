@@ -55,6 +55,7 @@ with a larger mean RMS error (0.46 against 0.41 degrees).
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping
 from typing import Any, Literal
 
 import numpy as np
@@ -63,7 +64,8 @@ from scipy.optimize import minimize
 
 from .. import quat
 from ..motion import Motion
-from .representation import StaggeredMotion, locate, next_active, quat_bezier
+from ..roles import resolve_roles
+from .representation import StaggeredMotion, locate, next_active, quat_bezier, translation_joints
 
 __all__ = [
     "W_F",
@@ -322,25 +324,36 @@ def fit_rotation_tangents(
     return alpha, beta, {"optimized": int(todo.size), "nfev": nfev, "start_error": err0, "error": err}
 
 
-def knot_values(motion: Motion, knot_times: Array, rotations: Array) -> tuple[Array, Array]:
+def knot_values(
+    motion: Motion, knot_times: Array, rotations: Array, positions: Array | None = None
+) -> tuple[Array, Array]:
     """Values of the clip at knot times, shape (K, V) seconds.
 
     Knots on a frame take the frame's values exactly; others are
     interpolated (linear / slerp).  ``rotations`` is the sign-continuous
-    (unrolled) rotation array of the clip.  Returns root (K, 3), rotations
-    (K, J, 4).
+    (unrolled) rotation array of the clip.  Returns positions and rotations
+    (K, J, 4): the root (K, 3) by default, or, with ``positions`` (F, P, 3)
+    the samples of the position variables (columns ``0, J + 1, ..., J + P - 1``
+    of ``knot_times``), their values (K, P, 3).
     """
+    J = motion.n_joints
     u = np.clip(knot_times * motion.fps, 0.0, motion.n_frames - 1)
     f0 = np.clip(np.floor(u + 1e-9).astype(np.int64), 0, motion.n_frames - 1)
     f1 = np.minimum(f0 + 1, motion.n_frames - 1)
     w = np.where(np.abs(u - np.round(u)) < 1e-9, 0.0, u - f0)
-    root = (1 - w[:, :1]) * motion.root_positions[f0[:, 0]] + w[:, :1] * motion.root_positions[f1[:, 0]]
-    J = motion.n_joints
+    if positions is None:
+        root = (1 - w[:, :1]) * motion.root_positions[f0[:, 0]] + w[:, :1] * motion.root_positions[f1[:, 0]]
+    else:
+        P = positions.shape[1]
+        pc = np.concatenate([[0], J + np.arange(1, P)]).astype(np.int64)
+        p = np.arange(P)
+        wp = w[:, pc, None]
+        root = (1 - wp) * positions[f0[:, pc], p] + wp * positions[f1[:, pc], p]
     j = np.arange(J)
-    a = rotations[f0[:, 1:], j]
-    b = rotations[f1[:, 1:], j]
-    on = w[:, 1:] == 0.0
-    rot = np.where(on[..., None], a, quat.slerp(a, b, w[:, 1:]))
+    a = rotations[f0[:, 1 : J + 1], j]
+    b = rotations[f1[:, 1 : J + 1], j]
+    on = w[:, 1 : J + 1] == 0.0
+    rot = np.where(on[..., None], a, quat.slerp(a, b, w[:, 1 : J + 1]))
     rot = np.where(np.sum(rot * a, axis=-1, keepdims=True) < 0, -rot, rot)
     return root, rot
 
@@ -362,11 +375,16 @@ def fit_representation(
     Parameters
     ----------
     motion : Motion
+        Its animated translation channels become translation variables
+        (:func:`~mocaplab.staggered.representation.translation_joints`),
+        fitted like the root translation; constant ones are kept as rest
+        translations.
     times : ndarray, shape (K,)
         Pose times in seconds; the first must be 0 and the last the clip's
         duration (so every frame is reproduced).
     refinements : ndarray, shape (K, V)
-        Timing refinements in seconds (knots strictly ordered per variable).
+        Timing refinements in seconds (knots strictly ordered per variable),
+        ``V = J + 1 + T``.
     active : ndarray of bool, shape (K, V), optional
         Partial poses (default: every pose controls every variable).
     priorities : ndarray, shape (K,), optional
@@ -376,14 +394,17 @@ def fit_representation(
     Returns
     -------
     StaggeredMotion
-        Evaluating it reproduces ``motion`` on every frame (to rounding).
+        Evaluating it reproduces ``motion`` on every frame (to rounding),
+        translations included.
     """
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
     times = np.asarray(times, dtype=float).reshape(-1)
     K = times.size
     J = motion.n_joints
-    V = J + 1
+    tj = translation_joints(motion)
+    T = len(tj)
+    V = J + 1 + T
     refinements = np.asarray(refinements, dtype=float)
     if refinements.shape != (K, V):
         raise ValueError(f"Expected `refinements` of shape ({K}, {V}), got {refinements.shape}")
@@ -394,33 +415,48 @@ def fit_representation(
         )
     act = np.ones((K, V), dtype=bool) if active is None else np.asarray(active, dtype=bool)
     rotations = quat.unroll(motion.rotations, axis=0)
+    positions = np.asarray(motion.root_positions)[:, None]
+    if T:
+        positions = np.concatenate([positions, np.asarray(motion.translations)[:, list(tj)]], axis=1)
+    P = 1 + T
+    pc = np.concatenate([[0], J + np.arange(1, P)]).astype(np.int64)
     knots = times[:, None] + refinements
-    root_values, rotation_values = knot_values(motion, np.where(act, knots, times[:, None]), rotations)
+    position_values, rotation_values = knot_values(
+        motion, np.where(act, knots, times[:, None]), rotations, positions
+    )
     t = motion.times
     k0, k1, tn = locate(times, refinements, act, t)
     nxt = next_active(act)
     nxt_safe = np.where(nxt < 0, np.arange(K)[:, None], nxt)
-    # translations
-    a, b = fit_translation_tangents(k0[:, 0], tn[:, 0], motion.root_positions, root_values, root_values[nxt_safe[:, 0]])
-    root_tangents = np.stack([a, b], axis=1)
+    # translations (the root and the translation variables): one segment per (start pose, variable)
+    p = np.arange(P)
+    a, b = fit_translation_tangents(
+        (k0[:, pc] * P + p).reshape(-1),
+        tn[:, pc].reshape(-1),
+        positions.reshape(-1, 3),
+        position_values.reshape(K * P, 3),
+        position_values[nxt_safe[:, pc], p].reshape(K * P, 3),
+    )
+    position_tangents = np.stack([a.reshape(K, P, 3), b.reshape(K, P, 3)], axis=2)
     # rotations: one segment per (start pose, joint)
     j = np.arange(J)
-    seg = (k0[:, 1:] * J + j).reshape(-1)
+    seg = (k0[:, 1 : J + 1] * J + j).reshape(-1)
     q1 = rotation_values.reshape(K * J, 4)
-    q4 = rotation_values[nxt_safe[:, 1:], j].reshape(K * J, 4)
+    q4 = rotation_values[nxt_safe[:, 1 : J + 1], j].reshape(K * J, 4)
     alpha, beta, _ = fit_rotation_tangents(
-        seg, tn[:, 1:].reshape(-1), rotations.reshape(-1, 4), q1, q4,
+        seg, tn[:, 1 : J + 1].reshape(-1), rotations.reshape(-1, 4), q1, q4,
         start=start, optimize=optimize, maxiter=maxiter, polish_tol=polish_tol,
     )
     rotation_tangents = np.stack([alpha.reshape(K, J, 4), beta.reshape(K, J, 4)], axis=2)
+    rest = None if motion.translations is None else np.asarray(motion.translations[0])
     sm = StaggeredMotion(
         skeleton=motion.skeleton,
         fps=motion.fps,
         times=times,
         refinements=refinements,
-        root_values=root_values,
+        root_values=position_values[:, 0],
         rotation_values=rotation_values,
-        root_tangents=root_tangents,
+        root_tangents=position_tangents[:, 0],
         rotation_tangents=rotation_tangents,
         sample_u=np.asarray(k0 + tn * (k1 - k0), dtype=float),
         root_displacement=np.zeros((t.size, 3)),
@@ -428,12 +464,18 @@ def fit_representation(
         active=act,
         priorities=priorities,  # type: ignore[arg-type]  # None means NaN
         name=motion.name,
-        translations=motion.translations,
+        translation_joints=tj,
+        translation_values=position_values[:, 1:],
+        translation_tangents=position_tangents[:, 1:],
+        translation_displacement=np.zeros((t.size, T, 3)),
+        rest_translations=rest,
     )
-    s_root, s_rot = sm.spline_values(k0, k1, tn)
-    d_root = motion.root_positions - s_root
+    s_pos, s_rot = sm._spline_layers(k0, tn)
+    d_pos = positions - s_pos
     d_rot = quat.log(quat.mul(quat.inv(s_rot), rotations))
-    return _with(sm, root_displacement=d_root, rotation_displacement=d_rot)
+    return _with(
+        sm, root_displacement=d_pos[:, 0], rotation_displacement=d_rot, translation_displacement=d_pos[:, 1:]
+    )
 
 
 def _with(sm: StaggeredMotion, **changes: Any) -> StaggeredMotion:
@@ -456,6 +498,7 @@ def extract(
     constraints: bool = False,
     constraint_window: float = 0.1,
     analysis: Any = None,
+    roles: Mapping[str, Any] | None = None,
     **analysis_options: Any,
 ) -> StaggeredMotion:
     """Staggered poses of a dense clip (section 4): locate, fit, measure.
@@ -475,14 +518,20 @@ def extract(
         Rotation fitting options (see :func:`fit_rotation_tangents`).
     constraints : bool
         Attach the contact constraint layer
-        (:class:`~mocaplab.staggered.edit.ConstraintLayer`, two-bone IK on the
-        feet during the analysis' contacts, blended over
+        (:class:`~mocaplab.staggered.edit.ConstraintLayer`: the feet of the
+        analysis' contacts held by the shared goal solver
+        :func:`mocaplab.refinement.solve_goals`, blended over
         ``constraint_window`` seconds).  It is the identity on the unedited
         motion.
     constraint_window : float
         Seconds.
     analysis : PoseAnalysis, optional
         Reuse signals computed by :func:`~mocaplab.staggered.features.analyze`.
+    roles : mapping, optional
+        Joint-role overrides (:func:`mocaplab.roles.resolve_roles`) for the
+        default contact joints and the constraint layer; they are kept on
+        the result's skeleton (:meth:`~mocaplab.motion.Skeleton.with_roles`),
+        so later edits (the succession's default joint, the pelvis) use them.
     **analysis_options
         Passed to :func:`~mocaplab.staggered.features.analyze`.
 
@@ -490,7 +539,7 @@ def extract(
     -------
     StaggeredMotion
         With ``.times`` (seconds), ``.refinements`` (K, V) and ``.priorities``;
-        ``.evaluate()`` reproduces the clip.
+        ``.evaluate()`` reproduces the clip (its translation channels too).
 
     Examples
     --------
@@ -507,6 +556,9 @@ def extract(
         raise ValueError(f"Expected a clip of at least 2 frames, got {motion.n_frames}")
     if not 0.0 <= max_refinement:
         raise ValueError(f"Expected `max_refinement` >= 0 seconds, got {max_refinement!r}")
+    if roles is not None:
+        resolved = resolve_roles(motion, roles)
+        motion = motion.replace(skeleton=motion.skeleton.with_roles(**dict(resolved)))
     if analysis is None:
         analysis = analyze(motion, contacts=contacts, **analysis_options)
     elif analysis.n_frames != motion.n_frames:

@@ -7,12 +7,27 @@ timing refinement ``r_{k,i}``; the equivalent spline knot is
 
 Control variables
 -----------------
-For a skeleton of ``J`` joints there are ``V = J + 1`` variables, in this
-order:
+For a skeleton of ``J`` joints whose clip animates the local translations
+of ``T`` joints besides the root, there are ``V = J + 1 + T`` variables, in
+this order:
 
-* variable ``0``: the root translation (metres), name ``"root_position"``;
+* variable ``0``: the root translation (metres), name ``"root_position"``
+  (:attr:`~mocaplab.motion.Motion.root_positions`);
 * variable ``1 + j``: the local rotation of joint ``j`` (unit quaternion),
-  named after the joint (variable 1 is the root orientation).
+  named after the joint (variable 1 is the root orientation);
+* variable ``J + 1 + m``: the local translation (metres, in the parent's
+  frame) of joint ``translation_joints[m]``, named ``"<joint>.position"``:
+  the per-joint translation channels of :attr:`~mocaplab.motion.Motion.translations`
+  that change over the clip (:func:`translation_joints`), for instance a
+  pelvis travelling below a static reference joint 0.  They are evaluated
+  exactly like the root translation.  Translations that never change are
+  kept as :attr:`StaggeredMotion.rest_translations` and written back on
+  every frame, so evaluation returns a Motion with ``translations``
+  whenever the source clip had them.
+
+The root translation and the translation variables are the *position
+variables* (``P = 1 + T`` of them, columns :attr:`StaggeredMotion.position_columns`);
+internally they are handled as one block of shape (..., P, 3).
 
 Concatenation and factorisation (the paper's ``+`` in a circle and ``-`` in a
 circle)
@@ -34,10 +49,10 @@ Variable ``i`` at time ``t`` lies between its refined knots
 where ``s_i`` is a cubic spline and ``d_i`` a displacement map, both defined on
 ``t'`` so that moving knots in time warps them with the knots.
 
-* Translation splines are cubic Bezier curves with end points ``v_k`` and
-  ``v_{k+1}``; the inner control points are stored *relative to* their end
-  points (``P1 = v_k + a``, ``P2 = v_{k+1} + b``) so a moved knot carries its
-  tangent with it.
+* Translation splines (the root and every translation variable) are cubic
+  Bezier curves with end points ``v_k`` and ``v_{k+1}``; the inner control
+  points are stored *relative to* their end points (``P1 = v_k + a``,
+  ``P2 = v_{k+1} + b``) so a moved knot carries its tangent with it.
 * Rotation splines are Shoemake's cubic quaternion Bezier curves evaluated by
   recursive spherical linear interpolation (de Casteljau with slerp), with
   control orientations ``q1 = v_k``, ``q2 = v_k (+) alpha``,
@@ -67,7 +82,7 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -89,6 +104,8 @@ __all__ = [
     "bezier",
     "quat_bezier",
     "variable_names",
+    "translation_joints",
+    "TRANSLATION_SUFFIX",
     "locate",
     "next_active",
     "casteljau",
@@ -98,6 +115,9 @@ Array = NDArray[np.float64]
 
 ROOT_POSITION = "root_position"
 """Name of control variable 0, the root translation."""
+
+TRANSLATION_SUFFIX = ".position"
+"""Suffix of the names of the translation variables (``"Hips.position"``)."""
 
 
 class StaggeredTimingWarning(UserWarning):
@@ -184,9 +204,38 @@ def quat_bezier(q1: Array, q2: Array, q3: Array, q4: Array, t: Array, *, unit: b
     return slerp_unit(d, e, t, unit=unit)
 
 
-def variable_names(skeleton: Skeleton) -> tuple[str, ...]:
-    """Names of the ``J + 1`` control variables: ``("root_position", *joint names)``."""
-    return (ROOT_POSITION,) + tuple(skeleton.names)
+def variable_names(skeleton: Skeleton, translation_joints: Sequence[int] = ()) -> tuple[str, ...]:
+    """Names of the ``J + 1 + T`` control variables.
+
+    ``("root_position", *joint names, *("<joint>.position" for each translation joint))``.
+    """
+    names = skeleton.names
+    return (ROOT_POSITION,) + tuple(names) + tuple(names[int(j)] + TRANSLATION_SUFFIX for j in translation_joints)
+
+
+def translation_joints(motion: Motion) -> tuple[int, ...]:
+    """Joints whose local translation is a control variable: those animated in ``motion``.
+
+    Every joint ``j >= 1`` whose row of :attr:`~mocaplab.motion.Motion.translations`
+    is not the same on every frame (exactly: a constant channel is kept as a
+    rest translation, and reproduced bit for bit).  Joint 0 is placed by the
+    root translation (its row of ``translations`` is ignored by forward
+    kinematics).  Empty when the clip has no translation channels.
+
+    >>> import numpy as np
+    >>> from mocaplab.motion import Motion, Skeleton
+    >>> sk = Skeleton(["ref", "hips", "knee"], [-1, 0, 1], [[0, 0, 0], [0, 1, 0], [0, -0.5, 0]])
+    >>> tr = np.broadcast_to(sk.offsets, (3, 3, 3)).copy()
+    >>> tr[:, 1, 0] = [0.0, 0.1, 0.2]  # the hips travel along x below a static joint 0
+    >>> translation_joints(Motion(sk, np.tile([0, 0, 0, 1.0], (3, 3, 1)), np.zeros((3, 3)), 30.0, translations=tr))
+    (1,)
+    """
+    tr = motion.translations
+    if tr is None:
+        return ()
+    moving = np.any(tr[1:] != tr[:1], axis=(0, 2))
+    moving[0] = False
+    return tuple(int(j) for j in np.flatnonzero(moving))
 
 
 def _frame_times(duration: float, fps: float) -> Array:
@@ -215,7 +264,8 @@ class StaggeredMotion:
     times : ndarray, shape (K,)
         Pose times ``t_k`` in seconds, strictly increasing.
     refinements : ndarray, shape (K, V)
-        Timing refinements ``r_{k,i}`` in seconds (``V = J + 1``).
+        Timing refinements ``r_{k,i}`` in seconds (``V = J + 1 + T``, see the
+        module notes).
     root_values : ndarray, shape (K, 3)
         Extreme values of the root translation (metres).
     rotation_values : ndarray, shape (K, J, 4)
@@ -238,12 +288,23 @@ class StaggeredMotion:
         Extraction priorities ``w_k`` (``inf`` for the forced first and last
         poses, NaN for poses created by editing).
     name : str
-    translations : ndarray, shape (F, J, 3), optional
-        Animated non-root translations of the source clip, carried through
-        unchanged (they are not staggered).
     constraints : ConstraintLayer, optional
         The contact constraint displacement layer (see
         :class:`mocaplab.staggered.edit.ConstraintLayer`).
+    translation_joints : tuple of int, length T, optional
+        Joints (never joint 0) whose local translation is a control variable
+        (variable ``J + 1 + m`` for ``translation_joints[m]``).
+    translation_values : ndarray, shape (K, T, 3), optional
+        Extreme values of the translation variables (metres, parent frame).
+    translation_tangents : ndarray, shape (K, T, 2, 3), optional
+        As ``root_tangents``, per translation variable.
+    translation_displacement : ndarray, shape (N, T, 3), optional
+        As ``root_displacement``, per translation variable.
+    rest_translations : ndarray, shape (J, 3), optional
+        Local translations of every joint on every frame where no
+        translation variable overrides them (the source clip's constant
+        translation channels).  ``None``: the clip had no translation
+        channels, and evaluation uses the skeleton offsets.
     """
 
     skeleton: Skeleton
@@ -260,12 +321,20 @@ class StaggeredMotion:
     active: NDArray[np.bool_] = None  # type: ignore[assignment]  # None: every pose controls every variable
     priorities: Array = None  # type: ignore[assignment]  # None: NaN
     name: str = ""
-    translations: Array | None = None
     constraints: Any = None
+    translation_joints: tuple[int, ...] = ()
+    translation_values: Array = None  # type: ignore[assignment]  # None: no translation variables
+    translation_tangents: Array = None  # type: ignore[assignment]
+    translation_displacement: Array = None  # type: ignore[assignment]
+    rest_translations: Array | None = None
 
     def __post_init__(self) -> None:
         J = self.skeleton.n_joints
-        V = J + 1
+        tj = tuple(int(j) for j in self.translation_joints)
+        if any(not 0 < j < J for j in tj) or len(set(tj)) != len(tj):
+            raise ValueError(f"Expected `translation_joints` to be distinct joint indices in [1, {J}), got {tj}")
+        T = len(tj)
+        V = J + 1 + T
         times = np.array(self.times, dtype=float).reshape(-1)
         K = times.size
         if K < 2:
@@ -274,6 +343,8 @@ class StaggeredMotion:
             raise ValueError(f"Expected strictly increasing pose `times`, got {times}")
 
         def arr(x: Any, shape: tuple[int, ...], label: str, dtype: Any = float) -> NDArray[Any]:
+            if x is None and 0 in shape:
+                x = np.zeros(shape, dtype=dtype)
             a = np.array(x, dtype=dtype, copy=True)
             if a.shape != shape:
                 raise ValueError(f"Expected `{label}` of shape {shape}, got {a.shape}")
@@ -282,6 +353,7 @@ class StaggeredMotion:
             a.flags.writeable = False
             return a
 
+        object.__setattr__(self, "translation_joints", tj)
         refinements = arr(self.refinements, (K, V), "refinements")
         active = arr(np.ones((K, V), bool) if self.active is None else self.active, (K, V), "active", bool)
         if not (active[0].all() and active[-1].all()):
@@ -292,7 +364,7 @@ class StaggeredMotion:
             if not np.all(np.diff(col) > 0):
                 bad = int(np.flatnonzero(np.diff(col) <= 0)[0])
                 raise ValueError(
-                    f"Refined knot times of variable {variable_names(self.skeleton)[i]!r} are out of order "
+                    f"Refined knot times of variable {self.variables[i]!r} are out of order "
                     f"(knot {bad} at {col[bad]:.4f} s, next at {col[bad + 1]:.4f} s): reduce the timing edit"
                 )
         N = np.asarray(self.sample_u).shape[0]
@@ -311,6 +383,23 @@ class StaggeredMotion:
         object.__setattr__(
             self, "rotation_displacement", arr(self.rotation_displacement, (N, J, 3), "rotation_displacement")
         )
+        object.__setattr__(self, "translation_values", arr(self.translation_values, (K, T, 3), "translation_values"))
+        object.__setattr__(
+            self, "translation_tangents", arr(self.translation_tangents, (K, T, 2, 3), "translation_tangents")
+        )
+        object.__setattr__(
+            self,
+            "translation_displacement",
+            arr(self.translation_displacement, (N, T, 3), "translation_displacement"),
+        )
+        if self.rest_translations is None:
+            if T:
+                raise ValueError(
+                    "Expected `rest_translations` of shape (J, 3) with translation variables "
+                    f"(`translation_joints` {tj}), got None"
+                )
+        else:
+            object.__setattr__(self, "rest_translations", arr(self.rest_translations, (J, 3), "rest_translations"))
         pr = np.full(K, np.nan) if self.priorities is None else np.array(self.priorities, dtype=float, copy=True)
         if pr.shape != (K,):
             raise ValueError(f"Expected `priorities` of shape ({K},), got {pr.shape}")
@@ -329,14 +418,34 @@ class StaggeredMotion:
         return self.skeleton.n_joints
 
     @property
+    def n_translations(self) -> int:
+        """Number of translation variables ``T``."""
+        return len(self.translation_joints)
+
+    @property
     def n_variables(self) -> int:
-        """Number of control variables ``V = J + 1``."""
-        return self.skeleton.n_joints + 1
+        """Number of control variables ``V = J + 1 + T``."""
+        return self.skeleton.n_joints + 1 + len(self.translation_joints)
 
     @property
     def variables(self) -> tuple[str, ...]:
         """Control variable names (see the module docstring)."""
-        return variable_names(self.skeleton)
+        return variable_names(self.skeleton, self.translation_joints)
+
+    @property
+    def position_columns(self) -> NDArray[np.int64]:
+        """Variable indices of the position variables, shape (P,): ``[0, J + 1, ..., J + T]``."""
+        J = self.n_joints
+        return np.concatenate([[0], J + 1 + np.arange(self.n_translations)]).astype(np.int64)
+
+    @property
+    def position_values(self) -> Array:
+        """Extreme values of the position variables, shape (K, P, 3): root first, then the translations."""
+        return np.concatenate([self.root_values[:, None], self.translation_values], axis=1)
+
+    def is_translation(self, i: int) -> bool:
+        """Whether variable ``i`` is a position (root or joint translation) rather than a rotation."""
+        return not 1 <= int(i) <= self.n_joints
 
     @property
     def duration(self) -> float:
@@ -359,7 +468,7 @@ class StaggeredMotion:
         return self.active & (self.refinements != 0.0)
 
     def variable_index(self, name: str) -> int:
-        """Index of a control variable by name (a joint name or ``"root_position"``)."""
+        """Index of a control variable by name (a joint name, ``"root_position"`` or ``"<joint>.position"``)."""
         names = self.variables
         if name not in names:
             raise KeyError(f"No control variable {name!r}; variables are {list(names)}")
@@ -394,45 +503,73 @@ class StaggeredMotion:
         return locate(self.times, self.refinements, self.active, t, staggered=staggered)
 
     def spline_values(
-        self, k0: NDArray[np.int64], k1: NDArray[np.int64], tn: Array
-    ) -> tuple[Array, Array]:
+        self, k0: NDArray[np.int64], k1: NDArray[np.int64], tn: Array, *, with_translations: bool = False
+    ) -> Any:
         """The spline layer ``s_i(t')`` at given segments and normalised times.
 
         ``k0, k1, tn`` have shape (..., V) as returned by :meth:`locate`.
-        Returns root positions (..., 3) and rotations (..., J, 4).
+        Returns root positions (..., 3) and rotations (..., J, 4), and with
+        ``with_translations`` the translation variables (..., T, 3) too.
         """
-        return _spline(
-            self.root_values,
-            self.rotation_values,
-            self.root_tangents,
-            self.rotation_tangents,
-            k0,
-            k1,
-            tn,
-            self.control_points(),
-        )
+        pos, rot = self._spline_layers(k0, tn)
+        if with_translations:
+            return pos[..., 0, :], rot, pos[..., 1:, :]
+        return pos[..., 0, :], rot
+
+    def _spline_layers(self, k0: NDArray[np.int64], tn: Array) -> tuple[Array, Array]:
+        """Spline layer of every variable: positions (..., P, 3), rotations (..., J, 4)."""
+        return _spline(self.control_points_all(), self.position_columns, k0, tn)
 
     def control_points(self) -> tuple[Array, Array, Array]:
         """Absolute spline control points, indexed by the segment's start pose (cached).
 
         Returns root controls (K, 4, 3) ``P0..P3``, rotation controls
         (K, J, 4, 4) ``q1..q4`` and the angles between consecutive rotation
-        controls (K, J, 3).
+        controls (K, J, 3).  :meth:`control_points_all` has the translation
+        variables' controls too.
         """
+        pos_c, rot_c, rot_th = self.control_points_all()
+        return pos_c[:, 0], rot_c, rot_th
+
+    def control_points_all(self) -> tuple[Array, Array, Array]:
+        """As :meth:`control_points`, with position controls (K, P, 4, 3) for every position variable (cached)."""
         ctrl = self.__dict__.get("_ctrl")
         if ctrl is None:
             ctrl = _controls(
-                self.root_values, self.rotation_values, self.root_tangents, self.rotation_tangents, self.active
+                self.position_values,
+                np.concatenate([self.root_tangents[:, None], self.translation_tangents], axis=1),
+                self.rotation_values,
+                self.rotation_tangents,
+                self.active,
+                self.position_columns,
             )
             object.__setattr__(self, "_ctrl", ctrl)
         return ctrl
 
-    def displacement_values(self, u: NDArray[Any]) -> tuple[Array, Array]:
+    def displacement_values(self, u: NDArray[Any], *, with_translations: bool = False) -> Any:
         """The displacement layer at positions ``u`` (shape (F, V)).
 
-        Returns translations (F, 3) and rotation vectors (F, J, 3).
+        Returns translations (F, 3) and rotation vectors (F, J, 3), and with
+        ``with_translations`` the translation variables' displacements
+        (F, T, 3) too.
         """
-        return _interp_columns(self.sample_u, self.root_displacement, self.rotation_displacement, u)
+        pos, rot = self._displacement_layers(u)
+        if with_translations:
+            return pos[:, 0], rot, pos[:, 1:]
+        return pos[:, 0], rot
+
+    def _displacement_layers(self, u: NDArray[Any]) -> tuple[Array, Array]:
+        """Displacements of every variable at ``u`` (F, V): positions (F, P, 3), rotation vectors (F, J, 3)."""
+        pc = self.position_columns
+        J = self.n_joints
+        pos = _interp_block(self.sample_u[:, pc], self.position_displacement, u[:, pc])
+        rot = _interp_block(self.sample_u[:, 1 : J + 1], self.rotation_displacement, u[:, 1 : J + 1])
+        return pos, rot
+
+    @property
+    def position_displacement(self) -> Array:
+        """Displacements of the position variables, shape (N, P, 3): root first."""
+        return np.concatenate([self.root_displacement[:, None], self.translation_displacement], axis=1)
 
     def evaluate(
         self,
@@ -458,32 +595,43 @@ class StaggeredMotion:
         -------
         Motion
             At ``fps``.  Rotations are ``s (+) d = mul(s, exp(d))``, the root
-            position ``s + d``.
+            position and the translation variables ``s + d``; the motion has
+            ``translations`` (F, J, 3) when the source clip had them.
         """
         default = times is None
         if default and staggered and constraints and "_dense" in self.__dict__:
             return self.__dict__["_dense"]
         t = _frame_times(self.duration, self.fps) if default else np.asarray(times, dtype=float).reshape(-1)
         if default and staggered:
-            root, rot = self._raw()
+            pos, rot = self._raw()
         else:
-            root, rot = self._compose(t, staggered=staggered)
-        tr = self.translations
-        if tr is not None and tr.shape[0] != t.size:
-            tr = None
-        motion = Motion(self.skeleton, rot, root, self.fps, translations=tr, name=self.name)
+            pos, rot = self._compose(t, staggered=staggered)
+        motion = Motion(
+            self.skeleton, rot, pos[:, 0], self.fps, translations=self._translations(pos[:, 1:]), name=self.name
+        )
         if constraints and self.constraints is not None:
             motion = self.constraints.apply(self, motion, t, staggered=staggered)
         if default and staggered and constraints:
             object.__setattr__(self, "_dense", motion)
         return motion
 
+    def _translations(self, values: Array) -> Array | None:
+        """Local translations of every joint, (F, J, 3), from the translation variables' values (F, T, 3)."""
+        if self.rest_translations is None:
+            return None
+        out = np.empty((values.shape[0], self.n_joints, 3))
+        out[:] = self.rest_translations
+        if self.translation_joints:
+            out[:, list(self.translation_joints)] = values
+        return out
+
     def _raw(self) -> tuple[Array, Array]:
         """Dense staggered composition on the default frames, before constraints (cached).
 
-        An edit that changed only some variables hands its result the
-        parent's dense arrays and the changed-variable mask
-        (``_parent_raw``); only those columns are recomputed here.
+        Positions (F, P, 3) and rotations (F, J, 4).  An edit that changed
+        only some variables hands its result the parent's dense arrays and
+        the changed-variable mask (``_parent_raw``); only those columns are
+        recomputed here.
         """
         raw = self.__dict__.get("_raw_cache")
         if raw is not None:
@@ -491,48 +639,48 @@ class StaggeredMotion:
         t = _frame_times(self.duration, self.fps)
         parent = self.__dict__.get("_parent_raw")
         if parent is not None and parent[0].shape[0] == t.size:
-            p_root, p_rot, changed = parent
-            root, rot = np.array(p_root, copy=True), np.array(p_rot, copy=True)
-            moving = np.concatenate([[True], ~self.static_joints()])
+            p_pos, p_rot, changed = parent
+            pos, rot = np.array(p_pos, copy=True), np.array(p_rot, copy=True)
+            moving = np.ones(self.n_variables, dtype=bool)
+            moving[1 : self.n_joints + 1] = ~self.static_joints()
             cols = np.flatnonzero(changed & moving)
             if cols.size:
-                c_root, c_rot, js = self._compose_columns(t, cols, staggered=True)
-                if c_root is not None:
-                    root = c_root
+                c_pos, ps, c_rot, js = self._compose_columns(t, cols, staggered=True)
+                pos[:, ps] = c_pos
                 rot[:, js] = c_rot
         else:
-            root, rot = self._compose(t)
-        root.flags.writeable = False
+            pos, rot = self._compose(t)
+        pos.flags.writeable = False
         rot.flags.writeable = False
-        object.__setattr__(self, "_raw_cache", (root, rot))
+        object.__setattr__(self, "_raw_cache", (pos, rot))
         self.__dict__.pop("_parent_raw", None)
-        return root, rot
+        return pos, rot
 
     def _inherit_raw(self, parent: StaggeredMotion, changed: ArrayLike) -> None:
         """Let this (edited) object reuse ``parent``'s dense evaluation outside ``changed`` (V,)."""
         if "_raw_cache" in parent.__dict__:
-            root, rot = parent.__dict__["_raw_cache"]
-            object.__setattr__(self, "_parent_raw", (root, rot, np.asarray(changed, dtype=bool)))
+            pos, rot = parent.__dict__["_raw_cache"]
+            object.__setattr__(self, "_parent_raw", (pos, rot, np.asarray(changed, dtype=bool)))
         elif "_parent_raw" in parent.__dict__:
-            root, rot, prev = parent.__dict__["_parent_raw"]
-            object.__setattr__(self, "_parent_raw", (root, rot, prev | np.asarray(changed, dtype=bool)))
+            pos, rot, prev = parent.__dict__["_parent_raw"]
+            object.__setattr__(self, "_parent_raw", (pos, rot, prev | np.asarray(changed, dtype=bool)))
 
     def _compose(self, t: Array, *, staggered: bool = True) -> tuple[Array, Array]:
+        """Every variable at times ``t`` (F,): positions (F, P, 3), rotations (F, J, 4)."""
         static = self.static_joints()
         if static.any():
             # joints that never move (CMU hip joints, shoulders...) are their value
-            cols = np.concatenate([[0], 1 + np.flatnonzero(~static)])
-            root, moving, js = self._compose_columns(t, cols, staggered=staggered)
-            rot = np.empty((t.size, self.n_joints, 4))
+            J = self.n_joints
+            cols = np.concatenate([self.position_columns, 1 + np.flatnonzero(~static)])
+            pos, _, moving, js = self._compose_columns(t, cols, staggered=staggered)
+            rot = np.empty((t.size, J, 4))
             rot[:] = self.rotation_values[0]
             rot[:, js] = moving
-            assert root is not None
-            return root, rot
+            return pos, rot
         k0, k1, tn = self.locate(t, staggered=staggered)
-        s_root, s_rot = self.spline_values(k0, k1, tn)
-        u = k0 + tn * (k1 - k0)
-        d_root, d_rot = self.displacement_values(u)
-        return s_root + d_root, quat.mul(s_rot, quat.exp(d_rot))
+        s_pos, s_rot = self._spline_layers(k0, tn)
+        d_pos, d_rot = self._displacement_layers(k0 + tn * (k1 - k0))
+        return s_pos + d_pos, quat.mul(s_rot, quat.exp(d_rot))
 
     def static_joints(self) -> NDArray[np.bool_]:
         """Joints whose rotation is constant everywhere, shape (J,) (cached).
@@ -553,35 +701,52 @@ class StaggeredMotion:
 
     def _compose_columns(
         self, t: Array, cols: NDArray[np.int64], *, staggered: bool = True
-    ) -> tuple[Array | None, Array, NDArray[np.int64]]:
-        """Composition of a subset of variables: root (F, 3) or None, rotations (F, n, 4), joint indices."""
+    ) -> tuple[Array, NDArray[np.int64], Array, NDArray[np.int64]]:
+        """Composition of a subset of variables at times ``t``.
+
+        Returns positions (F, p, 3) with their indices into the position
+        block (p,), rotations (F, r, 4) and their joint indices (r,).
+        """
+        J = self.n_joints
+        cols = np.asarray(cols, dtype=np.int64)
         k0, k1, tn = locate(self.times, self.refinements, self.active, t, staggered=staggered, columns=cols)
         u = k0 + tn * (k1 - k0)
-        root_c, rot_c, rot_th = self.control_points()
-        root = None
-        sel = cols == 0
-        if sel.any():
-            c = int(np.flatnonzero(sel)[0])
-            P = root_c[k0[:, c]]
-            s_root = bezier(P[:, 0], P[:, 1], P[:, 2], P[:, 3], tn[:, c])
-            d_root, _ = _interp_columns(
-                self.sample_u[:, [0]], self.root_displacement, self.rotation_displacement[:, :0], u[:, [c]]
-            )
-            root = s_root + d_root
-        rc = np.flatnonzero(~sel)
+        pos_c, rot_c, rot_th = self.control_points_all()
+        is_rot = (cols >= 1) & (cols <= J)
+        pc = np.flatnonzero(~is_rot)
+        # position-block index of each position column: 0 for the root, 1 + m for translation m
+        ps = np.where(cols[pc] == 0, 0, cols[pc] - J)
+        P = pos_c[k0[:, pc], ps]  # (F, p, 4, 3)
+        s_pos = bezier(P[..., 0, :], P[..., 1, :], P[..., 2, :], P[..., 3, :], tn[:, pc])
+        d_pos = _interp_block(self.sample_u[:, cols[pc]], self.position_displacement[:, ps], u[:, pc])
+        rc = np.flatnonzero(is_rot)
         js = cols[rc] - 1
         kk = k0[:, rc]
         s_rot = casteljau(rot_c[kk, js], rot_th[kk, js], tn[:, rc])
-        xp = np.concatenate([self.sample_u[:, :1], self.sample_u[:, cols[rc]]], axis=1)
-        uu = np.concatenate([np.zeros((t.size, 1)), u[:, rc]], axis=1)
-        _, d_rot = _interp_columns(xp, self.root_displacement, self.rotation_displacement[:, js], uu)
-        return root, quat.mul(s_rot, quat.exp(d_rot)), js
+        d_rot = _interp_block(self.sample_u[:, cols[rc]], self.rotation_displacement[:, js], u[:, rc])
+        return s_pos + d_pos, ps, quat.mul(s_rot, quat.exp(d_rot)), js
+
+    def _pose(self, k: int, which: str) -> tuple[Array, Array]:
+        """Pose ``k`` (true or non-staggered): positions (P, 3), rotations (J, 4)."""
+        if which not in ("true", "non-staggered"):
+            raise ValueError(f"Expected `which` in ('true', 'non-staggered'), got {which!r}")
+        k = self._pose_index(k)
+        pos, rot = self._compose(np.array([self.times[k]]))
+        pos, rot = pos[0], rot[0]
+        if which == "true":
+            return pos, rot
+        act = self.active[k]
+        pos = np.where(act[self.position_columns, None], self.position_values[k], pos)
+        rot = np.where(act[1 : self.n_joints + 1, None], self.rotation_values[k], rot)
+        return pos, rot
 
     def true_pose(self, k: int) -> tuple[Array, Array]:
-        """The pose at the staggered pose time ``t_k``: root (3,), rotations (J, 4)."""
-        k = self._pose_index(k)
-        root, rot = self._compose(np.array([self.times[k]]))
-        return root[0], rot[0]
+        """The pose at the staggered pose time ``t_k``: root (3,), rotations (J, 4).
+
+        (:meth:`pose_motion` has the translation variables too.)
+        """
+        pos, rot = self._pose(k, "true")
+        return pos[0], rot
 
     def non_staggered_pose(self, k: int) -> tuple[Array, Array]:
         """The non-staggered pose: every variable at its extreme value ``v_{k,i}``.
@@ -589,32 +754,30 @@ class StaggeredMotion:
         Variables the pose does not control (partial poses) take their true
         value at ``t_k``.  Returns root (3,), rotations (J, 4).
         """
-        k = self._pose_index(k)
-        root, rot = self.true_pose(k)
-        act = self.active[k]
-        root = np.where(act[0], self.root_values[k], root)
-        rot = np.where(act[1:, None], self.rotation_values[k], rot)
-        return root, rot
+        pos, rot = self._pose(k, "non-staggered")
+        return pos[0], rot
 
     def pose_motion(self, k: int, *, which: Literal["true", "non-staggered"] = "true") -> Motion:
-        """A one-frame Motion of pose ``k`` (``which``: true or non-staggered pose)."""
-        if which == "true":
-            root, rot = self.true_pose(k)
-        elif which == "non-staggered":
-            root, rot = self.non_staggered_pose(k)
-        else:
-            raise ValueError(f"Expected `which` in ('true', 'non-staggered'), got {which!r}")
-        return Motion(self.skeleton, rot[None], root[None], self.fps, name=f"{self.name} pose {k} ({which})")
+        """A one-frame Motion of pose ``k`` (``which``: true or non-staggered pose), translations included."""
+        pos, rot = self._pose(k, which)
+        return Motion(
+            self.skeleton,
+            rot[None],
+            pos[None, 0],
+            self.fps,
+            translations=self._translations(pos[None, 1:]),
+            name=f"{self.name} pose {k} ({which})",
+        )
 
     def editing_knot_values(self) -> tuple[Array, Array]:
         """Values of all editing knots (true values at ``t_k``): root (K, 3), rotations (K, J, 4).
 
         Entries where :attr:`editing_knots` is False equal the extreme values.
         """
-        root, rot = self._compose(self.times)
+        pos, rot = self._compose(self.times)
         ek = self.editing_knots
-        root = np.where(ek[:, :1], root, self.root_values)
-        rot = np.where(ek[:, 1:, None], rot, self.rotation_values)
+        root = np.where(ek[:, :1], pos[:, 0], self.root_values)
+        rot = np.where(ek[:, 1 : self.n_joints + 1, None], rot, self.rotation_values)
         return root, rot
 
     def _pose_index(self, k: int) -> int:
@@ -671,11 +834,12 @@ class StaggeredMotion:
         *,
         joint: str | Sequence[str] | None = None,
         poses: Sequence[int] | None = None,
+        roles: Mapping[str, Any] | None = None,
     ) -> StaggeredMotion:
         """Nonlinear succession ``r + s d(i)^l`` (section 5.2); see :func:`edit.succession`."""
         from . import edit
 
-        return edit.succession(self, s, l, joint=joint, poses=poses)
+        return edit.succession(self, s, l, joint=joint, poses=poses, roles=roles)
 
     def randomize(
         self,
@@ -696,12 +860,15 @@ class StaggeredMotion:
         *,
         root_position: ArrayLike | None = None,
         rotations: ArrayLike | dict[str, ArrayLike] | None = None,
+        translations: dict[str, ArrayLike] | None = None,
         which: Literal["true", "non-staggered"] = "non-staggered",
     ) -> StaggeredMotion:
         """Set new values for pose ``k`` (section 5.1); see :func:`edit.edit_pose`."""
         from . import edit
 
-        return edit.edit_pose(self, k, root_position=root_position, rotations=rotations, which=which)
+        return edit.edit_pose(
+            self, k, root_position=root_position, rotations=rotations, translations=translations, which=which
+        )
 
     def exaggerate(
         self,
@@ -796,55 +963,61 @@ def next_active(active: NDArray[np.bool_]) -> NDArray[np.int64]:
 
 
 def _spline(
-    root_values: Array,
-    rotation_values: Array,
-    root_tangents: Array,
-    rotation_tangents: Array,
+    controls: tuple[Array, Array, Array],
+    position_columns: NDArray[np.int64],
     k0: NDArray[np.int64],
-    k1: NDArray[np.int64],
     tn: Array,
-    controls: tuple[Array, Array, Array] | None = None,
 ) -> tuple[Array, Array]:
-    """Spline layer at (..., V) segment indices; see :meth:`StaggeredMotion.spline_values`."""
-    if controls is None:
-        controls = _controls(root_values, rotation_values, root_tangents, rotation_tangents, None)
-    root_c, rot_c, rot_th = controls
-    a0, t0 = k0[..., 0], tn[..., 0]
-    P = root_c[a0]  # (..., 4, 3)
-    root = bezier(P[..., 0, :], P[..., 1, :], P[..., 2, :], P[..., 3, :], t0)
-    j = np.arange(rotation_values.shape[1])
-    r0 = k0[..., 1:]
-    return root, casteljau(rot_c[r0, j], rot_th[r0, j], tn[..., 1:])
+    """Spline layer at (..., V) segment starts ``k0`` and normalised times ``tn``.
+
+    ``controls`` as returned by :func:`_controls`; returns positions
+    (..., P, 3) and rotations (..., J, 4).
+    """
+    pos_c, rot_c, rot_th = controls
+    P = pos_c.shape[1]
+    J = rot_c.shape[1]
+    C = pos_c[k0[..., position_columns], np.arange(P)]  # (..., P, 4, 3)
+    pos = bezier(C[..., 0, :], C[..., 1, :], C[..., 2, :], C[..., 3, :], tn[..., position_columns])
+    j = np.arange(J)
+    r0 = k0[..., 1 : J + 1]
+    return pos, casteljau(rot_c[r0, j], rot_th[r0, j], tn[..., 1 : J + 1])
 
 
 def _controls(
-    root_values: Array,
+    position_values: Array,
+    position_tangents: Array,
     rotation_values: Array,
-    root_tangents: Array,
     rotation_tangents: Array,
     active: NDArray[np.bool_] | None,
+    position_columns: NDArray[np.int64] | None = None,
 ) -> tuple[Array, Array, Array]:
     """Absolute control points of every segment, indexed by its start pose.
 
-    Returns root controls (K, 4, 3), rotation controls (K, J, 4, 4) and the
-    angles between consecutive rotation controls (K, J, 3).
+    ``position_values`` (K, P, 3) and ``position_tangents`` (K, P, 2, 3) are
+    the position variables (variable columns ``position_columns``, default
+    ``[0]``), ``rotation_values`` (K, J, 4) and ``rotation_tangents``
+    (K, J, 2, 4) the rotations (columns ``1 .. J``).  Returns position
+    controls (K, P, 4, 3), rotation controls (K, J, 4, 4) and the angles
+    between consecutive rotation controls (K, J, 3).
     """
     K, J = rotation_values.shape[:2]
+    P = position_values.shape[1]
+    pcols = np.zeros(1, dtype=np.int64) if position_columns is None else np.asarray(position_columns)
     if active is None:
-        active = np.ones((K, J + 1), dtype=bool)
+        active = np.ones((K, J + P), dtype=bool)
     nxt = next_active(active)
     nxt = np.where(nxt < 0, np.arange(K)[:, None], nxt)
-    p0 = root_values
-    p3 = root_values[nxt[:, 0]]
-    root_c = np.stack([p0, p0 + root_tangents[:, 0], p3 + root_tangents[:, 1], p3], axis=1)
+    p0 = position_values
+    p3 = position_values[nxt[:, pcols], np.arange(P)]
+    pos_c = np.stack([p0, p0 + position_tangents[:, :, 0], p3 + position_tangents[:, :, 1], p3], axis=2)
     j = np.arange(J)
     q1 = rotation_values
-    q4 = rotation_values[nxt[:, 1:], j]
+    q4 = rotation_values[nxt[:, 1 : J + 1], j]
     q2 = quat.mul(q1, rotation_tangents[:, :, 0])
     q3 = quat.mul(q4, rotation_tangents[:, :, 1])
     rot_c = np.stack([q1, q2, q3, q4], axis=2)
     dots = np.einsum("...i,...i->...", rot_c[:, :, :3], rot_c[:, :, 1:])
-    return root_c, rot_c, np.arccos(np.clip(dots, -1.0, 1.0))
+    return pos_c, rot_c, np.arccos(np.clip(dots, -1.0, 1.0))
 
 
 def casteljau(ctrl: Array, theta: Array, t: Array) -> Array:
@@ -905,31 +1078,30 @@ def _search_columns(sorted_cols: Array, queries: NDArray[Any]) -> NDArray[np.int
     return pos - np.arange(V) * N
 
 
-def _interp_columns(xp: Array, f_root: Array, f_rot: Array, u: NDArray[Any]) -> tuple[Array, Array]:
+def _interp_block(xp: Array, f: Array, u: NDArray[Any]) -> Array:
     """Per-variable linear interpolation of displacement samples.
 
-    ``xp`` (N, V) increasing per column, ``u`` (F, V); returns (F, 3), (F, J, 3).
-    Exact on the samples: the weight of the next sample is exactly 0 there.
+    ``xp`` (N, n) increasing per column, ``f`` (N, n, D) the samples of each
+    column, ``u`` (F, n); returns (F, n, D).  Exact on the samples: the
+    weight of the next sample is exactly 0 there.
     """
-    N, V = xp.shape
+    N, n = xp.shape
     F = u.shape[0]
+    if n == 0:
+        return np.zeros((F, 0) + f.shape[2:])
     if N == 1:
-        lo = np.zeros((F, V), dtype=np.int64)
-        w = np.zeros((F, V))
+        lo = np.zeros((F, n), dtype=np.int64)
+        w = np.zeros((F, n))
     else:
         lo = _search_columns(xp, u) - 1
         np.clip(lo, 0, N - 2, out=lo)
-        cols = np.arange(V)
+        cols = np.arange(n)
         x0 = xp[lo, cols]
         span = xp[lo + 1, cols] - x0
         ok = span > 0
         w = np.where(ok, (u - x0) / np.where(ok, span, 1.0), 0.0)
         np.clip(w, 0.0, 1.0, out=w)
     hi = np.minimum(lo + 1, N - 1)
-    r0 = f_root[lo[:, 0]]
-    root = r0 + w[:, :1] * (f_root[hi[:, 0]] - r0)
-    J = f_rot.shape[1]
-    j = np.arange(J)
-    g0 = f_rot[lo[:, 1:], j]
-    rot = g0 + w[:, 1:, None] * (f_rot[hi[:, 1:], j] - g0)
-    return root, rot
+    c = np.arange(n)
+    g0 = f[lo, c]
+    return g0 + w[..., None] * (f[hi, c] - g0)

@@ -451,7 +451,7 @@ class Motion:
         cannot be inferred, joint 0, unless joint 0 never moves and a joint
         below it carries animated translations (then the shallowest such
         joint).  A :class:`UserWarning` names the joint when it is not
-        joint 0 (a static reference joint above a travelling pelvis is a
+        joint 0 (once per skeleton) (a static reference joint above a travelling pelvis is a
         common export layout).  Motion paths, editing, physical touch-up,
         staggered poses and the viewer follow this joint.
         """
@@ -467,7 +467,9 @@ class Motion:
                 if moving.size:
                     depth = sk.depth()
                     j = int(moving[np.argmin(depth[moving])])
-        if j != 0:
+        if j != 0 and not sk.__dict__.get("_path_joint_announced"):
+            # once per skeleton: every edit of a clip shares it
+            sk.__dict__["_path_joint_announced"] = True
             still = np.ptp(self.root_positions, axis=0).max() < 1e-9
             why = f"joint 0 {sk.names[0]!r} never moves" if still else "it is the pelvis"
             warnings.warn(

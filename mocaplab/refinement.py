@@ -35,8 +35,10 @@ characters whose constraints refer to each other (palms meeting).  Physical
 touch-up re-plants the feet after each adjustment with the same goals
 (:func:`foot_goals` of the reference's contacts, built once) solved by the
 IK layer :func:`solve_goals` (``footplants="refine"`` there runs the whole of
-:func:`refine`); the staggered-pose constraint layer uses :func:`blend_ramp`
-with the limb IK of :mod:`mocaplab.ik`.
+:func:`refine`); the staggered-pose constraint layer hands its foot, toe and
+wrist goals, weighted with :func:`blend_weights`, to :func:`solve_goals` too.
+This is the only place in mocaplab that plants a foot or puts an end
+effector on a target.
 
 Measures: :func:`foot_skate` (mm per frame), :func:`end_effector_residuals`
 (mm) and :func:`max_joint_angle_jump` (degrees).

@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 from . import quat
 from .contacts import Contacts
 from .motion import Motion
+from .roles import parse_name
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
@@ -85,14 +86,34 @@ def _frame_index(motion: Motion, frame: int) -> int:
     return f % motion.n_frames
 
 
+def _drawn(motion: Motion) -> NDArray[np.bool_]:
+    """Joints that are drawn, shape (J,): all but those above the path joint.
+
+    A static reference joint above a travelling pelvis (a common export
+    layout) is not part of the body, nor is its "bone" to the pelvis (the
+    travel over the ground).
+    """
+    parents = np.asarray(motion.skeleton.parents)
+    drawn = np.ones(len(parents), bool)
+    j = int(parents[motion.path_joint])
+    while j >= 0:
+        drawn[j] = False
+        j = int(parents[j])
+    return drawn
+
+
 def _bones(motion: Motion, frame: int, end_sites: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Joint positions (J, 3) and bone segments (B, 2, 3) at one frame."""
+    """Joint positions (J, 3) and bone segments (B, 2, 3) at one frame (the drawn joints' bones)."""
     sk = motion.skeleton
     pos = motion.global_positions()[frame]
-    segs = [np.stack([pos[sk.parents[1:]], pos[1:]], axis=1)]
+    drawn = _drawn(motion)
+    parents = np.asarray(sk.parents)
+    child = np.flatnonzero(drawn & (parents >= 0) & drawn[np.maximum(parents, 0)])
+    segs = [np.stack([pos[parents[child]], pos[child]], axis=1)]
     if end_sites and sk.end_site_parents.size:
-        ends = motion.end_site_positions()[frame]
-        segs.append(np.stack([pos[sk.end_site_parents], ends], axis=1))
+        esp = np.asarray(sk.end_site_parents)
+        ends = motion.end_site_positions()[frame][drawn[esp]]
+        segs.append(np.stack([pos[esp[drawn[esp]]], ends], axis=1))
     return pos, np.concatenate(segs, axis=0)
 
 
@@ -165,6 +186,7 @@ def skeleton(
         raise ValueError(f"Expected `projection` in {('3d', *_PLANES)}, got {projection!r}")
     f = _frame_index(motion, frame)
     pos, segs = _bones(motion, f, end_sites)
+    body = pos[_drawn(motion)]
     color = color or COLORS[0]
     label = motion.name if label is None else label
     marked = np.array([motion.skeleton.index(n) for n in highlight], dtype=np.int64)
@@ -174,14 +196,16 @@ def skeleton(
 
         ax3.add_collection3d(Line3DCollection(_to_mpl3d(segs), colors=color, linewidths=linewidth, label=label or None))
         p = _to_mpl3d(pos)
-        ax3.scatter(p[:, 0], p[:, 1], p[:, 2], s=10, color=color, depthshade=False)
+        q = _to_mpl3d(body)
+        ax3.scatter(q[:, 0], q[:, 1], q[:, 2], s=10, color=color, depthshade=False)
         if marked.size:
             ax3.scatter(*_to_mpl3d(pos[marked]).T, s=50, color=highlight_color, depthshade=False)
         if ground:
-            lo, hi = p.min(axis=0) - 0.3, p.max(axis=0) + 0.3
+            lo, hi = q.min(axis=0) - 0.3, q.max(axis=0) + 0.3
             gx, gy = np.meshgrid([lo[0], hi[0]], [lo[1], hi[1]])
             ax3.plot_surface(gx, gy, np.zeros_like(gx), color="0.85", alpha=0.35, zorder=-1)
-        _set_equal_3d(ax3, np.concatenate([_to_mpl3d(segs).reshape(-1, 3), [[p[0, 0], p[0, 1], 0.0]]]))
+        under = p[motion.path_joint]  # the ground under the pelvis, wherever joint 0 is
+        _set_equal_3d(ax3, np.concatenate([_to_mpl3d(segs).reshape(-1, 3), [[under[0], under[1], 0.0]]]))
         ax3.set_xlabel("z (m)")
         ax3.set_ylabel("x (m)")
         ax3.set_zlabel("y (m, up)")
@@ -194,7 +218,7 @@ def skeleton(
         ax.add_collection(
             LineCollection(list(segs[:, :, [h, v]]), colors=color, linewidths=linewidth, label=label or None)
         )
-        ax.scatter(pos[:, h], pos[:, v], s=10, color=color, zorder=3)
+        ax.scatter(body[:, h], body[:, v], s=10, color=color, zorder=3)
         if marked.size:
             ax.scatter(pos[marked, h], pos[marked, v], s=50, color=highlight_color, zorder=4)
         if ground and v == 1:
@@ -213,7 +237,7 @@ def skeleton(
 # --------------------------------------------------------------------------
 def _ground_path(item: object, k: int) -> tuple[NDArray[np.float64], str]:
     if isinstance(item, Motion):
-        return np.asarray(item.root_positions)[:, [0, 2]], item.name
+        return np.asarray(item.pelvis_positions)[:, [0, 2]], item.name
     a = np.asarray(item, dtype=float)
     if a.ndim == 2 and a.shape[1] == 2:
         return a, ""
@@ -245,7 +269,8 @@ def root_path(
     Parameters
     ----------
     motions : Motion, ndarray or a list of them
-        Each item is a Motion (its root's ``(x, z)`` is drawn), an ``(F, 2)``
+        Each item is a Motion (the ``(x, z)`` of its path joint, the pelvis
+        :attr:`~mocaplab.motion.Motion.path_joint`, is drawn), an ``(F, 2)``
         array of ``(x, z)`` points or an ``(F, 3)`` array of world positions.
     ax : Axes, optional
     colors, labels : sequence of str, optional
@@ -374,7 +399,8 @@ def contact_timeline(
     ax : Axes, optional
     colors : sequence of str, optional
         Per joint; default: left-side joints blue, right-side joints orange,
-        others grey (sides guessed from the names).
+        others grey (sides from the names' side words,
+        :func:`mocaplab.roles.parse_name`).
     frame : int, optional
         Draw a vertical line at this frame.
 
@@ -387,11 +413,12 @@ def contact_timeline(
     ax = _new_axes(ax, figsize=(8.0, 0.5 + 0.4 * len(contacts.joints)))
     dt = 1.0 / contacts.fps
     for k, name in enumerate(contacts.joints):
+        side = parse_name(name)[0]
         if colors:
             color = colors[k % len(colors)]
-        elif name.startswith(("Left", "left", "L", "l")):
+        elif side == "left":
             color = COLORS[0]
-        elif name.startswith(("Right", "right", "R", "r")):
+        elif side == "right":
             color = COLORS[1]
         else:
             color = COLORS[7]

@@ -159,3 +159,31 @@ def test_plot_is_not_imported_by_the_core():
     code = "import sys, mocaplab, mocaplab.contacts; print('matplotlib' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_any_skeleton_layout_and_naming(walk):
+    """A static joint 0 above the pelvis and ``_L``/``_R`` names: the pelvis path, the sides from the names."""
+    import warnings
+
+    from test_editing_conventions import static_root
+
+    clip = walk[:200].transformed(translation=(8.0, 0.0, 6.0))  # far from the origin, where joint 0 stays
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="The motion path follows joint")
+        m = static_root(clip)
+        ax = plot.root_path(m)
+        assert np.allclose(ax.get_lines()[0].get_xydata(), clip.root_positions[:, [0, 2]])
+        ax3 = plot.skeleton(m, 0)
+    # the body is drawn, not joint 0 at the origin nor its "bone" to the pelvis: the view frames the character
+    (bones,) = [c for c in ax3.collections if type(c).__name__ == "Line3DCollection"]
+    n = clip.n_joints - 1 + len(clip.skeleton.end_site_parents)
+    assert np.asarray(bones._segments3d).shape == (n, 2, 3)
+    assert ax3.get_xlim()[0] > 3.0 and ax3.get_ylim()[0] > 3.0  # matplotlib X, Y = world z, x
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="The motion path follows joint")
+        ax2 = plot.skeleton(m, 0, projection="top", ax=plt.subplots()[1])
+    assert ax2.get_xlim()[0] > 3.0, "the top view frames the character"
+    c = Contacts(("Foot_L", "Toes_R", "Spine_01", "LowerBack"), np.ones((10, 4), bool), 30.0)
+    colors = [tuple(b.get_facecolor()[0][:3]) for b in plot.contact_timeline(c).collections]
+    rgb = [matplotlib.colors.to_rgb(plot.COLORS[k]) for k in (0, 1, 7, 7)]
+    assert np.allclose(colors, rgb), "left blue, right orange, the spine grey"

@@ -374,3 +374,41 @@ def test_updates_from_another_thread_without_a_loop_run_there(walk):
     _in_thread(setattr, v.slider, "value", 40)
     assert v.frame == 40 and v.queued_calls == 0
     v.close()
+
+
+@pytest.mark.filterwarnings("ignore:The motion path follows joint")
+def test_follow_tracks_the_pelvis_whatever_the_layout(walk):
+    """A static joint 0 above the travelling pelvis: the camera follows the pelvis (Motion.path_joint)."""
+    from test_editing_conventions import renamed, static_root
+
+    clip = walk[:240]
+    shifts = []
+    for m in (clip, static_root(clip)):
+        v = MotionViewer(m, backend="none", follow=True)
+        assert np.allclose(v.characters[0].anchor(0.0), clip.root_positions[0]), "the camera follows the pelvis"
+        assert v.characters[0].positions.shape == (
+            clip.n_frames,
+            clip.n_joints + len(clip.skeleton.end_site_parents),
+            3,
+        ), "joint_Root not drawn"
+        before = np.asarray(v.plotter.camera.focal_point)
+        v.set_frame(v.n_frames - 1)
+        shifts.append(np.asarray(v.plotter.camera.focal_point) - before)
+        v.close()
+    travel = clip.root_positions[-1] - clip.root_positions[0]
+    assert np.allclose(shifts[0][[0, 2]], travel[[0, 2]], atol=1e-6) and np.linalg.norm(travel[[0, 2]]) > 1.0
+    assert np.allclose(shifts[1], shifts[0], atol=1e-9), "the same camera as for the CMU layout"
+    # roles fixed by hand choose the followed joint
+    m = renamed(clip)
+    v = MotionViewer([m, m], backend="none", roles={"pelvis": "Spine_02"})
+    spine = m.global_positions()[0, m.skeleton.index("Spine_02")]
+    assert all(np.allclose(c.anchor(0.0), spine) for c in v.characters)
+    v.set_motions([m, m, m])
+    assert np.allclose(v.characters[2].anchor(0.0), spine)
+    v.close()
+    v = MotionViewer([m, m], backend="none", roles=[None, {"pelvis": "Spine_02"}])
+    assert np.allclose(v.characters[0].anchor(0.0), clip.root_positions[0])
+    assert np.allclose(v.characters[1].anchor(0.0), spine)
+    v.close()
+    with pytest.raises(ValueError, match="one per character"):
+        MotionViewer([m, m], backend="none", roles=[None])

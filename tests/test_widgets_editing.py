@@ -461,3 +461,62 @@ def test_press_away_from_the_tracks_does_nothing(walks):
     tt.figure.canvas.draw()
     _drag(tt, (1.0, 0.5), (1.5, 0.5))  # between the two tracks
     assert len(tt.editor.constraints) == 0
+
+
+# --------------------------------------------------------------------------- any skeleton
+def _same_gestures(make):
+    """Pin a path point and drag it in a PathEditor, re-time a frame in a TimeTrackEditor, on ``make()``."""
+    motions = make()
+    p0 = motions[0].pelvis_positions[0, [0, 2]]
+    pe = PathEditor(motions, [PinPosition(0, 0, p0, hard=True)], viewer=ViewerStub([]))
+    pe.figure.canvas.draw()
+    start = np.array(pe.result.paths[0][60])
+    _drag(pe, start, start + np.array([0.8, 0.3]), steps=2)
+    tt = TimeTrackEditor(pe.editor)
+    tt.figure.canvas.draw()
+    t = float(tt.result.times[0][40])
+    _drag(tt, (t, 0.0), (t + 0.6, 0.0), steps=2)
+    pe.refresh()
+    return pe, tt
+
+
+@pytest.fixture(scope="module")
+def cmu_gestures(walks):
+    return _same_gestures(lambda: [walks[0]])
+
+
+@pytest.mark.filterwarnings("ignore:The motion path follows joint")
+@pytest.mark.parametrize("convention", ["renamed", "static_root"])
+def test_editors_work_on_any_skeleton_with_no_joint_name(walks, cmu_gestures, convention):
+    """The same gestures on a re-expressed CMU walk give the CMU answer (no joint name passed)."""
+    from test_editing_conventions import CONVENTIONS, body
+
+    cmu_pe, cmu_tt = cmu_gestures
+    pe, tt = _same_gestures(lambda: [CONVENTIONS[convention](walks[0])])
+    assert pe.last_error is None and tt.last_error is None, (pe.last_error, tt.last_error)
+    assert [type(c).__name__ for c in pe.editor.constraints] == ["PinPosition", "PinPosition", "AbsoluteTime"]
+    path = np.asarray(pe.result.paths[0])
+    assert np.linalg.norm(path[60] - cmu_pe.result.paths[0][60]) < 1e-9
+    assert np.linalg.norm(path[60] - walks[0].root_positions[60, [0, 2]]) > 0.3, "the path was dragged"
+    assert np.allclose(tt.result.times[0], cmu_tt.result.times[0], atol=1e-9), "the same re-timing"
+    assert np.allclose(pe._lines[0].get_xydata(), path), "the drawn path is the pelvis path"
+    shown = pe.viewer.motions[0]
+    assert shown is pe.result.motions[0]
+    assert np.abs(body(shown) - body(cmu_pe.viewer.motions[0])).max() < 1e-3, "the 3D view gets the same motion"
+
+
+@pytest.mark.filterwarnings("ignore:The motion path follows joint")
+def test_roles_reach_the_scene_editor(walks):
+    from test_editing_conventions import renamed
+
+    m = renamed(walks[0])
+    spine = m.skeleton.index("Spine_02")
+    pe = PathEditor([m], viewer=False, roles={"pelvis": "Spine_02"})
+    assert pe.editor.options["roles"] == {"pelvis": "Spine_02"}
+    assert np.allclose(pe.result.paths[0], m.global_positions()[:, spine][:, [0, 2]], atol=1e-9)
+    tt = TimeTrackEditor([m], roles={"pelvis": "Spine_02"})
+    assert tt.editor.characters[0].path_joint == spine
+    with pytest.raises(ValueError, match="`roles` only with characters"):
+        PathEditor(pe.editor, viewer=False, roles={"pelvis": "Hips"})
+    with pytest.raises(ValueError, match="once"):
+        TimeTrackEditor([m], roles={"pelvis": "Hips"}, editor_options={"roles": {"pelvis": "Hips"}})

@@ -198,10 +198,11 @@ class DragView:
         *,
         pick_radius: float,
         editor_options: dict[str, Any] | None = None,
+        roles: Any = None,
     ) -> None:
         if not pick_radius > 0:
             raise ValueError(f"Expected `pick_radius` > 0 pixels, got {pick_radius!r}")
-        self.editor = as_scene_editor(editor_or_characters, constraints, editor_options)
+        self.editor = as_scene_editor(editor_or_characters, constraints, editor_options, roles=roles)
         self.pick_radius = float(pick_radius)
         self.click_tolerance = 3.0  # pixels a press may move and still count as a click
         self.status = W.HTML(value="")
@@ -470,15 +471,24 @@ class DragView:
 
 # --------------------------------------------------------------------------- helpers
 def as_scene_editor(
-    editor_or_characters: Any, constraints: Sequence[Any] | None, options: dict[str, Any] | None
+    editor_or_characters: Any, constraints: Sequence[Any] | None, options: dict[str, Any] | None, *, roles: Any = None
 ) -> Any:
-    """Accept a SceneEditor (used as is) or characters (+ constraints, options) to build one."""
+    """Accept a SceneEditor (used as is) or characters (+ constraints, options, roles) to build one.
+
+    ``roles`` (joint roles fixed by hand, see :func:`mocaplab.roles.resolve_roles`)
+    becomes the editor's ``roles`` option.
+    """
     if hasattr(editor_or_characters, "drag") and hasattr(editor_or_characters, "constraints"):
-        if constraints is not None or options:
+        if constraints is not None or options or roles is not None:
             raise ValueError(
-                "Pass `constraints` and `editor_options` only with characters, not with a SceneEditor (it has its own)"
+                "Pass `constraints`, `editor_options` and `roles` only with characters, not with a SceneEditor "
+                "(it has its own: SceneEditor(characters, constraints, roles=..., ...))"
             )
         return editor_or_characters  # a SceneEditor, or any object with its interface (tests use spies)
+    if roles is not None:
+        if options and options.get("roles") is not None:
+            raise ValueError("Pass `roles` once: as `roles=` or in `editor_options`, not both")
+        options = {**(options or {}), "roles": roles}
     scene_editor = getattr(editing, "SceneEditor", None)
     if scene_editor is None:
         raise ImportError("mocaplab.editing.SceneEditor is not available")

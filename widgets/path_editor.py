@@ -45,7 +45,7 @@ Examples
 --------
 >>> from mocaplab import data, editing                  # doctest: +SKIP
 >>> walk = data.cmu("16_15").resample(30)              # doctest: +SKIP
->>> PathEditor([walk], [editing.PinPosition(0, 0, walk.root_positions[0, [0, 2]], hard=True)])  # doctest: +SKIP
+>>> PathEditor([walk], [editing.PinPosition(0, 0, walk.pelvis_positions[0, [0, 2]], hard=True)])  # doctest: +SKIP
 """
 
 from __future__ import annotations
@@ -118,6 +118,12 @@ class PathEditor(DragView):
         Length (metres) of direction-pin arrows; default 8% of the view diagonal.
     editor_options : dict, optional
         Options for the :class:`~mocaplab.editing.SceneEditor` built from characters.
+    roles : mapping of role name to joint name, or one per character, optional
+        Joint roles fixed by hand for skeletons whose roles cannot be
+        inferred (the editor's ``roles`` option, see
+        :mod:`mocaplab.editing.scene`): the paths follow their ``pelvis``.
+        Not needed otherwise: no joint name is ever required.  The edited
+        motions carry the roles to the 3D viewer.
     viewer_options : dict, optional
         Keyword options for the :class:`~mocaplab.widgets.MotionViewer` (e.g.
         ``{"window_size": (480, 360), "backend": "static"}``).
@@ -167,8 +173,11 @@ class PathEditor(DragView):
         arrow_length: float | None = None,
         editor_options: dict[str, Any] | None = None,
         viewer_options: dict[str, Any] | None = None,
+        roles: Any = None,
     ) -> None:
-        super().__init__(editor_or_characters, constraints, pick_radius=pick_radius, editor_options=editor_options)
+        super().__init__(
+            editor_or_characters, constraints, pick_radius=pick_radius, editor_options=editor_options, roles=roles
+        )
         self.title = title
         self.arrow_length = arrow_length
         self.original_paths = [np.array(p, dtype=float) for p in self.result.paths]

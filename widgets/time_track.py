@@ -77,6 +77,9 @@ class TimeTrackEditor(DragView):
         Figure title.
     editor_options : dict, optional
         Options for the SceneEditor built from characters.
+    roles : mapping of role name to joint name, or one per character, optional
+        Joint roles fixed by hand (the editor's ``roles`` option), for
+        skeletons whose roles cannot be inferred; not needed otherwise.
 
     Attributes
     ----------
@@ -110,8 +113,11 @@ class TimeTrackEditor(DragView):
         backend: Backend = "auto",
         title: str = "mocaplab time tracks",
         editor_options: dict[str, Any] | None = None,
+        roles: Any = None,
     ) -> None:
-        super().__init__(editor_or_characters, constraints, pick_radius=pick_radius, editor_options=editor_options)
+        super().__init__(
+            editor_or_characters, constraints, pick_radius=pick_radius, editor_options=editor_options, roles=roles
+        )
         self.original_times = [np.array(t, dtype=float) for t in self.result.times]
         n = len(self.original_times)
         if labels is None:

@@ -84,13 +84,14 @@ import logging
 import os
 import sys
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from mocaplab.editing.paths import with_roles
 from mocaplab.motion import Motion
 
 __all__ = ["MotionViewer", "BACKENDS", "default_backend"]
@@ -266,14 +267,19 @@ class _Character:
     motion: Motion
     color: str
     label: str
-    positions: NDArray[np.float64]  # (F, J + E, 3): joints then end sites
+    positions: NDArray[np.float64]  # (F, J + E, 3): drawn joints then end sites
     segments: NDArray[np.int64]  # (B, 2) indices into the positions
+    path_joint: int = 0  # index in `positions` of the joint the camera follows (the pelvis role)
     bones: Any = None  # pyvista.PolyData
     joints: Any = None  # pyvista.PolyData
     actors: tuple[Any, ...] = ()
 
     def frame_at(self, t: float) -> int:
         return int(min(max(round(t * self.motion.fps), 0), self.motion.n_frames - 1))
+
+    def anchor(self, t: float) -> NDArray[np.float64]:
+        """World position of the path joint at time ``t``, shape (3,)."""
+        return self.positions[self.frame_at(t), self.path_joint]
 
 
 @dataclass
@@ -353,7 +359,12 @@ class MotionViewer:
     ground : bool
         Draw the ground grid at y = 0.
     follow : bool
-        Move the camera with the first character's root.
+        Move the camera with the first character's path joint (its pelvis,
+        :attr:`~mocaplab.motion.Motion.path_joint`, whatever the layout).
+    roles : mapping of role name to joint name, or one per character, optional
+        Joint roles fixed by hand (:func:`mocaplab.roles.resolve_roles`) for
+        skeletons whose roles cannot be inferred; the followed joint is
+        their ``pelvis``.  Kept for :meth:`set_motions`.
     window_size : (int, int)
         Pixels of the 3D view.
     backend : str, optional
@@ -391,8 +402,12 @@ class MotionViewer:
         window_size: tuple[int, int] = (760, 460),
         backend: str | None = None,
         frame: int = 0,
+        roles: Any = None,
     ) -> None:
         items = _as_motions(motions)
+        if roles is not None and not isinstance(roles, Mapping) and len(roles) != len(items):
+            raise ValueError(f"Expected `roles` as one mapping or one per character ({len(items)}), got {len(roles)}")
+        self.roles = roles
         backend = (backend or default_backend()).lower()
         if backend not in BACKENDS:
             raise ValueError(f"Expected `backend` (or ${ENV_VAR}) in {BACKENDS}, got {backend!r}")
@@ -452,7 +467,7 @@ class MotionViewer:
         self._update_legend()
         floor = min(float(lo[1]), 0.0)
         if self.follow:
-            root = self.characters[0].positions[self._frame_of(0, self._frame), 0]
+            root = self.characters[0].anchor(self._frame / self.fps)
             self._fit_camera(root - [1.0, 0.0, 1.0], root + [1.0, 0.0, 1.0], floor, float(hi[1]))
             self._camera_root = root.copy()
         else:
@@ -464,16 +479,39 @@ class MotionViewer:
         return rate, int(np.floor(max(m.duration for m in items) * rate + 1e-9)) + 1
 
     def _character(self, k: int, m: Motion, label: str | None) -> _Character:
-        """Character ``k``: its joint and end-site positions and bone segments."""
+        """Character ``k``: its joint and end-site positions and bone segments.
+
+        Joints above the path joint (a static reference joint at the origin
+        over a travelling pelvis) are not drawn, nor the "bone" from them to
+        the pelvis (the travel over the ground): the body looks the same
+        whatever the skeleton's layout.
+        """
         sk = m.skeleton
-        pos = m.global_positions()
-        segs = np.stack([sk.parents[1:], np.arange(1, sk.n_joints)], axis=1)
+        roles = self.roles
+        if roles is not None and not isinstance(roles, Mapping):  # one per character
+            roles = roles[k] if k < len(roles) else None
+        pj = with_roles(m, roles).path_joint
+        parents = np.asarray(sk.parents)
+        drawn = np.ones(sk.n_joints, bool)
+        j = int(parents[pj])
+        while j >= 0:
+            drawn[j] = False
+            j = int(parents[j])
+        idx = np.flatnonzero(drawn)
+        new = np.full(sk.n_joints, -1, dtype=np.int64)
+        new[idx] = np.arange(len(idx))
+        pos = m.global_positions()[:, idx]
+        child = np.flatnonzero(drawn & (parents >= 0) & drawn[np.maximum(parents, 0)])
+        segs = np.stack([new[parents[child]], new[child]], axis=1)
         if self.end_sites and sk.end_site_parents.size:
-            pos = np.concatenate([pos, m.end_site_positions()], axis=1)
-            ends = np.arange(sk.n_joints, sk.n_joints + len(sk.end_site_parents))
-            segs = np.concatenate([segs, np.stack([sk.end_site_parents, ends], axis=1)])
+            esp = np.asarray(sk.end_site_parents)
+            ok = drawn[esp]
+            pos = np.concatenate([pos, m.end_site_positions()[:, ok]], axis=1)
+            ends = np.arange(len(idx), len(idx) + int(ok.sum()))
+            segs = np.concatenate([segs, np.stack([new[esp[ok]], ends], axis=1)])
         color = self._colors[k % len(self._colors)]
-        return _Character(m, color, label if label is not None else (m.name or f"character {k}"), pos, segs)
+        name = label if label is not None else (m.name or f"character {k}")
+        return _Character(m, color, name, pos, segs, int(new[pj]))
 
     def _scene_bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         all_pts = np.concatenate([c.positions.reshape(-1, 3) for c in self.characters])
@@ -642,7 +680,7 @@ class MotionViewer:
         if reset_camera:
             floor = min(float(lo[1]), 0.0)
             if self.follow:
-                root = self.characters[0].positions[self.characters[0].frame_at(frame / self.fps), 0]
+                root = self.characters[0].anchor(frame / self.fps)
                 self._fit_camera(root - [1.0, 0.0, 1.0], root + [1.0, 0.0, 1.0], floor, float(hi[1]))
                 self._camera_root = root.copy()
             else:
@@ -679,7 +717,7 @@ class MotionViewer:
         for ov in self.overlays.values():
             self._update_overlay(ov, t)
         if self.follow:
-            root = self.characters[0].positions[self.characters[0].frame_at(t), 0]
+            root = self.characters[0].anchor(t)
             shift = root - self._camera_root
             shift[1] = 0.0
             cam = self.plotter.camera

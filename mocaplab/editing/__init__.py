@@ -16,8 +16,18 @@ convention of :func:`mocaplab.quat.yaw`).  Local frames are ``(forward, left)``:
 forward along the path tangent, left along the normal ``R t`` (tangent turned
 +90 degrees about +Y).
 
+Any skeleton
+    The "root" of a path is the motion's path joint,
+    :attr:`mocaplab.motion.Motion.path_joint` (the ``pelvis`` role of
+    :mod:`mocaplab.roles`; joint 0 for CMU, the travelling pelvis below a
+    static reference joint in other exports), and the feet are the roles'
+    ankles and toes: no joint name is needed anywhere.  Every entry point
+    takes ``roles=`` (role overrides, one mapping or one per character) for
+    skeletons whose roles cannot be inferred.  Per-joint translations
+    (``Motion.translations``) are carried through every operation.
+
 Paths (:mod:`mocaplab.editing.paths`)
-    ``MotionPath.from_motion(motion, *, min_speed=0.1) -> MotionPath`` with
+    ``MotionPath.from_motion(motion, *, min_speed=0.1, roles=None) -> MotionPath`` with
     ``.positions (F, 2)``, ``.tangents (F, 2)`` (central differences
     ``p[i+1] - p[i-1]``, degenerate ones interpolated), ``.normals (F, 2)``,
     ``.directions (F,)`` root heading relative to the tangent (radians),
@@ -26,8 +36,12 @@ Paths (:mod:`mocaplab.editing.paths`)
     ``.local_offset(frame, point) -> (forward, left)``, ``.local_direction(frame,
     vector)``, ``.from_local(frame, offset) -> (2,)``, ``.with_positions(p)``,
     ``.tangent_operator() -> sparse (F, F)``.
-    ``stationary_segments(motion, *, speed=0.15, min_duration=0.3, contacts=None)
-    -> list[(start, stop)]`` (half-open; ``contacts="auto"`` adds both-feet-planted).
+    ``stationary_segments(motion, *, speed=0.15, min_duration=0.3, contacts=None,
+    joints=None, roles=None) -> list[(start, stop)]`` (half-open; ``contacts="auto"``
+    adds both-feet-planted, on ``joints`` or the roles' feet).
+    ``apply_path(motion, positions (F, 2), heading_change (F,)) -> Motion`` (a
+    per-frame rigid ground motion putting the path joint on the new path),
+    ``contact_joints(motion, joints=None, *, roles=None)``, ``with_roles(motion, roles)``.
 
 Constraints (:mod:`mocaplab.editing.constraints`), frozen dataclasses
     ``PinPosition(character, frame, position, *, hard=False, weight=1.0, frames=None)``
@@ -60,7 +74,8 @@ Editing (:mod:`mocaplab.editing.scene`)
     ``.constraints``, ``.characters``, ``.paths`` (input MotionPaths),
     ``.segments`` (rigid stationary segments), ``.options``,
     ``.factorizations`` (how many factorisations so far; a target drag adds
-    none).  A failed update (ConstraintError) leaves the editor unchanged.
+    none), ``.contact_joints(k)`` (the joints whose foot contacts are kept).
+    A failed update (ConstraintError) leaves the editor unchanged.
     ``EditResult``: ``.paths[k] (F_k, 2)``, ``.times[k] (F_k,)``, ``.motions[k]``
     (lazy; all on one shared clock ``.clock (N,)``, pose held outside each
     character's own span, ``.active[k] (N,) bool``), ``.shape_paths[k]``
@@ -76,7 +91,9 @@ Editing (:mod:`mocaplab.editing.scene`)
     Options: ``scale_compensation=True, stationary="auto", min_step=0.25,
     max_step=4.0`` (ratios of the frame time), ``flip_threshold=pi/2,
     variational_step=10, clock_fps=None, start_times=None, discrete=False``
-    (``True`` or a ``DiscreteOptions``: section 5, below), ``refine=False``.
+    (``True`` or a ``DiscreteOptions``: section 5, below), ``refine=False``,
+    ``roles=None`` (role overrides), ``joints=None`` (contact joints for
+    ``stationary="auto"`` and refinement; default the roles' feet).
     Modes no constraint determines (a character's placement, its time
     shift) keep their undeformed values exactly.
 
@@ -85,7 +102,7 @@ Energy (:mod:`mocaplab.editing.energy`)
 
 Discrete editing (section 5; :mod:`mocaplab.editing.graph`, :mod:`mocaplab.editing.discrete`)
     ``build_graph(clips, *, weights=None, threshold=0.1, window=0.5, min_gap=0.3,
-    chunk=1024) -> MotionGraph`` (frame similarity of joint angles, root height and
+    chunk=1024, roles=None) -> MotionGraph`` (frame similarity of joint angles, root height and
     orientation, joint and root velocities; local minima below ``threshold`` kept,
     stored sparsely, built in row chunks), ``MotionGraph`` with ``.clips``,
     ``.offsets``, ``.pairs (M, 2)``, ``.costs (M,)``, ``.n_frames``,

@@ -30,16 +30,23 @@ Applying a transformation (:func:`apply_transformation`) rebuilds the motion
 from its node sequence: each run of consecutive graph frames is placed on
 the ground by the 2D rigid motion (heading + translation) that puts the
 graph frame before the run (``s - 1``, similar to the frame before the seam)
-on the pose before the seam, so the root path and heading continue without
-a jump.  Each seam is then blended (displacement-map style): the jump ``d``
-between the frame after the seam and the natural successor of the frame
-before it (every joint rotation, root included, as a rotation vector, and
-the root height) is spread as ``+d w / 2`` before and ``-d w / 2`` after the
-seam, ``w`` a raised cosine over ``blend`` seconds on each side (rotations
-by slerp-style ``exp(c d) q``), so there is no pop.  (A frame that ends its
-clip has no successor to compare with; its seam is not blended.)  The motion path and the time track
-(uniform, one frame step per frame) follow from the new motion; constraints
-follow their frames (see :class:`DiscreteSession`).
+on the pose before the seam, so the path and heading continue without a
+jump.  "Root" here is the path joint (:attr:`mocaplab.motion.Motion.path_joint`,
+the pelvis role): the placement follows its ground position and heading and
+moves the whole body rigidly (:func:`~mocaplab.editing.paths.apply_path`),
+whatever the skeleton's layout; per-joint translations (``Motion.translations``)
+are carried along.  Each seam is then blended (displacement-map style): the
+jump ``d`` between the frame after the seam and the natural successor of the
+frame before it (every body joint's local rotation and the path joint's
+placed world rotation as rotation vectors ``d = log(q^-1 q')``, the path
+joint's height and the body joints' translations) is spread as ``+d w / 2``
+before and ``-d w / 2`` after the seam, ``w`` a raised cosine over ``blend``
+seconds on each side, rotations as ``q exp(c d)`` (the one displacement
+convention of :mod:`mocaplab.displacement`), so there is no pop.  (A frame
+that ends its clip has no successor to compare with; its seam is not
+blended.)  The motion path and the time track (uniform, one frame step per
+frame) follow from the new motion; constraints follow their frames (see
+:class:`DiscreteSession`).
 
 Pruning (section 5.2)
 ---------------------
@@ -129,9 +136,9 @@ from .. import quat
 from ..motion import Motion
 from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint, Relative, Sync
 from .energy import deformation_energy
-from .graph import MotionGraph, SimilarityWeights, build_graph
+from .graph import MotionGraph, SimilarityWeights, _above, build_graph
 from .laplacian import Layout, spatial_rows
-from .paths import MotionPath
+from .paths import MotionPath, apply_path
 from .timewarp import temporal_rows
 
 __all__ = [
@@ -469,9 +476,26 @@ class _GraphData:
         self.rot = np.concatenate([np.asarray(m.rotations) for m in g.clips])
         self.root = np.concatenate([np.asarray(m.root_positions) for m in g.clips])
         trs = [m.translations for m in g.clips]
-        self.translations = None if any(t is None for t in trs) else np.concatenate([np.asarray(t) for t in trs])
-        self.pos = self.root[:, [0, 2]]
-        self.yaw = np.unwrap(quat.yaw(self.rot[:, 0]))
+        if any(t is not None for t in trs):  # every clip's, offsets where a clip has none
+            self.translations: Array | None = np.concatenate(
+                [
+                    np.asarray(m.translations)
+                    if m.translations is not None
+                    else np.broadcast_to(m.skeleton.offsets, (m.n_frames, m.n_joints, 3))
+                    for m in g.clips
+                ]
+            )
+        else:
+            self.translations = None
+        # the path joint (pelvis role) carries the ground pose; it and the joints above it are
+        # the "root" of the blend, the joints below it the body
+        self.path_joint = int(g.clips[0].path_joint)
+        self.body = ~_above(np.asarray(g.clips[0].skeleton.parents), self.path_joint)
+        pelvis = np.concatenate([np.asarray(m.pelvis_positions) for m in g.clips])
+        self.wrot = np.concatenate([np.asarray(m.pelvis_rotations) for m in g.clips])  # world, (N, 4)
+        self.height = pelvis[:, 1]
+        self.pos = pelvis[:, [0, 2]]
+        self.yaw = np.unwrap(quat.yaw(self.wrot))
         self.clip = g.clip_of
         self.first = np.zeros(g.n_frames, bool)
         self.first[g.offsets[:-1]] = True
@@ -594,44 +618,72 @@ def _assemble(
     blend: float,
     name: str,
 ) -> Motion:
-    """The motion playing graph ``nodes``, runs placed on the ground and seams blended."""
+    """The motion playing graph ``nodes``, runs placed on the ground and seams blended.
+
+    Each frame is moved rigidly over the ground (:func:`~mocaplab.editing.paths.apply_path`)
+    so that its path joint follows the placement of its run.  A seam's jump
+    is a displacement in the convention of :mod:`mocaplab.displacement`,
+    ``q' = q exp(d)`` with ``d = log(q^-1 q')``: per body joint (below the
+    path joint) between local rotations, for the path joint between its
+    placed world rotations (applied to its local rotation, which turns its
+    world rotation the same way: ``W exp(d) = parent (local exp(d))``), plus
+    the path joint's height and the body joints' translations.
+    """
     theta, trans = _placement(nodes, gd, first)
-    rot = gd.rot[nodes].copy()
-    rot[:, 0] = quat.mul(quat.from_yaw(theta), rot[:, 0])
-    root = gd.root[nodes].copy()
-    root[:, [0, 2]] = _rot2(theta, gd.pos[nodes]) + trans
-    tr = None if gd.translations is None else gd.translations[nodes].copy()
+    raw = Motion(
+        skeleton,
+        gd.rot[nodes],
+        gd.root[nodes],
+        fps,
+        translations=None if gd.translations is None else gd.translations[nodes],
+        name=name,
+    )
+    placed = apply_path(raw, _rot2(theta, gd.pos[nodes]) + trans, theta)
     F = len(nodes)
     n = int(round(blend * fps))
     starts = _runs(nodes, gd)[1:]
-    if n >= 1 and len(starts):
-        w = _blend_weights(n)
-        dr = np.zeros((F,) + rot.shape[1:-1] + (3,))
-        dy = np.zeros(F)
-        for a in starts:
-            prev = int(nodes[a - 1])
-            if gd.last[prev]:
-                continue  # no natural successor to compare with: the similar frame is the best guess
-            exp_node = prev + 1
-            act = int(nodes[a])
-            d_local = quat.log(quat.mul(gd.rot[act], quat.inv(gd.rot[exp_node])))
-            exp_root = quat.mul(quat.from_yaw(theta[a - 1]), gd.rot[exp_node, 0])
-            d_local[0] = quat.log(quat.mul(rot[a, 0], quat.inv(exp_root)))
-            d_h = gd.root[act, 1] - gd.root[exp_node, 1]
-            before = a - 1 - np.arange(n)
-            after = a + np.arange(n)
-            okb = before >= 0
-            oka = after < F
-            cb = 0.5 * w[okb]
-            ca = -0.5 * w[oka]
-            dr[before[okb]] += cb[:, None, None] * d_local
-            dr[after[oka]] += ca[:, None, None] * d_local
-            dy[before[okb]] += cb * d_h
-            dy[after[oka]] += ca * d_h
-        touched = np.flatnonzero(np.any(dr != 0, axis=(1, 2)) | (dy != 0))
-        rot[touched] = quat.normalize(quat.mul(quat.exp(dr[touched]), rot[touched]))
-        root[:, 1] += dy
-    return Motion(skeleton, rot, root, fps, translations=tr, name=name)
+    if not (n >= 1 and len(starts)):
+        return placed
+    rot = np.array(placed.rotations)
+    root = np.array(placed.root_positions)
+    tr = None if placed.translations is None else np.array(placed.translations)
+    pj, body = gd.path_joint, gd.body
+    w = _blend_weights(n)
+    dr = np.zeros((F,) + rot.shape[1:-1] + (3,))
+    dy = np.zeros(F)
+    dt = None if tr is None else np.zeros_like(tr)
+    for a in starts:
+        prev = int(nodes[a - 1])
+        if gd.last[prev]:
+            continue  # no natural successor to compare with: the similar frame is the best guess
+        exp_node = prev + 1
+        act = int(nodes[a])
+        d = np.zeros(rot.shape[1:-1] + (3,))
+        d[body] = quat.log(quat.mul(quat.inv(gd.rot[exp_node, body]), gd.rot[act, body]))
+        exp_world = quat.mul(quat.from_yaw(theta[a - 1]), gd.wrot[exp_node])
+        act_world = quat.mul(quat.from_yaw(theta[a]), gd.wrot[act])
+        d[pj] = quat.log(quat.mul(quat.inv(exp_world), act_world))
+        d_h = gd.height[act] - gd.height[exp_node]
+        before = a - 1 - np.arange(n)
+        after = a + np.arange(n)
+        okb = before >= 0
+        oka = after < F
+        cb = 0.5 * w[okb]
+        ca = -0.5 * w[oka]
+        dr[before[okb]] += cb[:, None, None] * d
+        dr[after[oka]] += ca[:, None, None] * d
+        dy[before[okb]] += cb * d_h
+        dy[after[oka]] += ca * d_h
+        if dt is not None and gd.translations is not None:
+            d_t = np.where(body[:, None], gd.translations[act] - gd.translations[exp_node], 0.0)
+            dt[before[okb]] += cb[:, None, None] * d_t
+            dt[after[oka]] += ca[:, None, None] * d_t
+    touched = np.flatnonzero(np.any(dr != 0, axis=(1, 2)) | (dy != 0))
+    rot[touched] = quat.normalize(quat.mul(rot[touched], quat.exp(dr[touched])))
+    root[:, 1] += dy  # at joint 0: the whole body, path joint included, rises
+    if tr is not None and dt is not None:
+        tr += dt
+    return placed.replace(rotations=rot, root_positions=root, translations=tr)
 
 
 # ======================================================================
@@ -674,12 +726,12 @@ class Track:
         if c is None:
             raise ValueError(
                 f"The motion graph has no clip with the poses of {motion!r}: build it with the character's clip "
-                "among its clips (build_graph([motion, ...]))"
+                "among its clips (build_graph([motion, ...]), with the same roles= as the editor)"
             )
         nodes = graph.offsets[c] + np.arange(motion.n_frames, dtype=np.int64)
         origin = np.arange(motion.n_frames, dtype=np.int64)
-        p = motion.root_positions[0]
-        first = (float(p[0]), float(p[2]), float(quat.yaw(motion.rotations[0, 0])))
+        p = motion.pelvis_positions[0]
+        first = (float(p[0]), float(p[2]), float(quat.yaw(motion.pelvis_rotations[0])))
         return cls(graph, nodes, origin, first, motion)
 
     def frame_of(self, original: int) -> int:
@@ -700,10 +752,10 @@ _HEADINGS: weakref.WeakKeyDictionary[Track, Array] = weakref.WeakKeyDictionary()
 
 
 def _headings(track: Track) -> Array:
-    """Unwrapped root yaw of each current frame, shape (F,) (cached per track)."""
+    """Unwrapped path-joint yaw of each current frame, shape (F,) (cached per track)."""
     h = _HEADINGS.get(track)
     if h is None:
-        h = np.unwrap(quat.yaw(track.motion.rotations[:, 0]))
+        h = np.unwrap(quat.yaw(track.motion.pelvis_rotations))
         _HEADINGS[track] = h
     return h
 

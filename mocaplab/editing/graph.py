@@ -14,7 +14,12 @@ Frame distance (in the spirit of Lee and Lee 2006)
 ``D(i, j) = |f_i - f_j|^2`` with ``f`` the concatenation of weighted
 features (:func:`frame_features`, weights in :class:`SimilarityWeights`):
 
-* **joint angles**: each non-root joint's local rotation as a quaternion
+"Root" is the motion's path joint (:attr:`mocaplab.motion.Motion.path_joint`,
+the pelvis role): its world position and rotation, whatever its index; the
+joints above it (a static reference joint) are part of the ground placement
+and are left out like it.
+
+* **joint angles**: each other joint's local rotation as a quaternion
   ``2 q`` (sign chosen with ``w >= 0``): ``|2 q_a - 2 q_b|^2 ~ theta^2`` for a
   small angle ``theta`` between them, so the term is in squared radians.
   Joint ``j`` is weighted by the length of the bones it moves (sum of the
@@ -60,7 +65,7 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -70,6 +75,7 @@ from scipy.ndimage import minimum_filter
 
 from .. import quat
 from ..motion import Motion
+from .paths import with_roles
 
 __all__ = [
     "SimilarityWeights",
@@ -122,13 +128,29 @@ class SimilarityWeights:
             object.__setattr__(self, f.name, v)
 
 
-def joint_weights(skeleton: Any) -> Array:
-    """Weight of each joint: total bone length of its subtree, max 1 over non-root joints.
+def _above(parents: NDArray[np.int64], j: int) -> NDArray[np.bool_]:
+    """Mask of joint ``j`` and its ancestors."""
+    out = np.zeros(len(parents), bool)
+    while j >= 0:
+        out[j] = True
+        j = int(parents[j])
+    return out
+
+
+def joint_weights(skeleton: Any, *, path_joint: int = 0) -> Array:
+    """Weight of each joint: total bone length of its subtree, max 1 over the other joints.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    path_joint : int
+        The root of the features (:attr:`mocaplab.motion.Motion.path_joint`).
 
     Returns
     -------
     ndarray, shape (J,)
-        ``weights[0]`` (the root) is 1 by convention.
+        ``path_joint`` and its ancestors weigh 1 by convention; the others
+        are normalised so that the largest of them weighs 1.
     """
     parents = np.asarray(skeleton.parents)
     J = len(parents)
@@ -144,9 +166,10 @@ def joint_weights(skeleton: Any) -> Array:
     for j in range(J - 1, 0, -1):
         L[parents[j]] += L[j]
     w = np.ones(J)
-    if J > 1:
-        m = float(L[1:].max())
-        w[1:] = L[1:] / m if m > 0 else 1.0
+    rest = ~_above(parents, int(path_joint))
+    if rest.any():
+        m = float(L[rest].max())
+        w[rest] = L[rest] / m if m > 0 else 1.0
     return w
 
 
@@ -166,13 +189,17 @@ def _rate(q: Array, fps: float) -> Array:
     return quat.log(quat.mul(nxt, quat.inv(prv))) * (fps / span).reshape((F,) + (1,) * (q.ndim - 1))
 
 
-def frame_features(motion: Motion, weights: SimilarityWeights | None = None) -> NDArray[np.float32]:
+def frame_features(
+    motion: Motion, weights: SimilarityWeights | None = None, *, roles: Mapping[str, Any] | None = None
+) -> NDArray[np.float32]:
     """Weighted feature vectors whose squared distances are ``D`` (module docstring).
 
     Parameters
     ----------
     motion : Motion
     weights : SimilarityWeights, optional
+    roles : mapping, optional
+        Joint roles fixed by hand (:func:`~mocaplab.editing.paths.with_roles`).
 
     Returns
     -------
@@ -183,25 +210,25 @@ def frame_features(motion: Motion, weights: SimilarityWeights | None = None) -> 
     w = SimilarityWeights() if weights is None else weights
     if not isinstance(w, SimilarityWeights):
         raise TypeError(f"Expected `weights` to be SimilarityWeights, got {type(w).__name__}")
+    motion = with_roles(motion, roles)
     rot = np.asarray(motion.rotations, dtype=float)
     F = rot.shape[0]
-    jw = joint_weights(motion.skeleton)
-    keep = np.flatnonzero(jw >= w.min_joint_weight)
-    keep = keep[keep > 0]
+    pj = motion.path_joint
+    jw = joint_weights(motion.skeleton, path_joint=pj)
+    keep = np.flatnonzero((jw >= w.min_joint_weight) & ~_above(np.asarray(motion.skeleton.parents), pj))
     sj = np.sqrt(jw[keep])
     local = rot[:, keep]
     parts = [2.0 * _canonical(local) * (np.sqrt(w.joint_angles) * sj)[None, :, None]]
-    root_q = rot[:, 0]
+    root_q = np.asarray(motion.pelvis_rotations, dtype=float)
+    root_p = np.asarray(motion.pelvis_positions, dtype=float)
     heading = quat.yaw(root_q)
     unyaw = quat.from_yaw(-heading)
     tilt = quat.mul(unyaw, root_q)
     parts.append(2.0 * _canonical(tilt)[:, None, :] * np.sqrt(w.root_tilt))
-    parts.append(np.asarray(motion.root_positions[:, 1:2], dtype=float)[:, None, :] * np.sqrt(w.root_height))
+    parts.append(root_p[:, 1:2, None] * np.sqrt(w.root_height))
     qu = quat.unroll(local, axis=0)
     parts.append(_rate(qu, motion.fps) * (np.sqrt(w.joint_velocities) * sj)[None, :, None])
-    vel = (
-        np.gradient(np.asarray(motion.root_positions, dtype=float), axis=0) * motion.fps if F > 1 else np.zeros((F, 3))
-    )
+    vel = np.gradient(root_p, axis=0) * motion.fps if F > 1 else np.zeros((F, 3))
     parts.append(quat.rotate(unyaw, vel)[:, None, :] * np.sqrt(w.root_velocity))
     omega = _rate(quat.unroll(root_q, axis=0), motion.fps)
     parts.append(quat.rotate(unyaw, omega)[:, None, :] * np.sqrt(w.root_angular_velocity))
@@ -320,13 +347,26 @@ class MotionGraph:
         )
 
     def clip_index(self, motion: Motion) -> int | None:
-        """Index of the clip whose poses equal ``motion``'s (up to its ground placement), or None."""
+        """Index of the clip whose poses equal ``motion``'s (up to its ground placement), or None.
+
+        Compared: the local rotations (and per-joint translations) of the
+        joints below the path joint and the path joint's height.
+        """
         for c, m in enumerate(self.clips):
             if m.n_frames != motion.n_frames or m.skeleton.names != motion.skeleton.names:
                 continue
-            if not np.allclose(m.rotations[:, 1:], motion.rotations[:, 1:], atol=1e-9):
+            pj = m.path_joint
+            if motion.path_joint != pj:
                 continue
-            if not np.allclose(m.root_positions[:, 1], motion.root_positions[:, 1], atol=1e-9):
+            body = ~_above(np.asarray(m.skeleton.parents), pj)
+            if not np.allclose(m.rotations[:, body], motion.rotations[:, body], atol=1e-9):
+                continue
+            if (m.translations is None) != (motion.translations is None):
+                continue
+            if m.translations is not None and motion.translations is not None:
+                if not np.allclose(m.translations[:, body], motion.translations[:, body], atol=1e-9):
+                    continue
+            if not np.allclose(m.pelvis_positions[:, 1], motion.pelvis_positions[:, 1], atol=1e-9):
                 continue
             return c
         return None
@@ -346,6 +386,7 @@ def build_graph(
     window: float = 0.5,
     min_gap: float = 0.3,
     chunk: int = 1024,
+    roles: Mapping[str, Any] | None = None,
 ) -> MotionGraph:
     """Build a motion graph over ``clips`` (section 5.1; see the module docstring).
 
@@ -363,6 +404,9 @@ def build_graph(
         Pairs closer than this (seconds) in the same clip are dropped.
     chunk : int
         Rows of ``D`` computed at once (memory ``~ 4 chunk N`` bytes).
+    roles : mapping, optional
+        Joint roles fixed by hand, given to every clip
+        (:func:`~mocaplab.editing.paths.with_roles`; the graph's clips carry them).
 
     Returns
     -------
@@ -371,6 +415,8 @@ def build_graph(
     if isinstance(clips, Motion):
         clips = (clips,)
     clips = tuple(clips)
+    if roles is not None:
+        clips = tuple(with_roles(m, roles) if isinstance(m, Motion) else m for m in clips)
     if not clips:
         raise ValueError("Expected at least one clip in `clips`, got none")
     for k, m in enumerate(clips):

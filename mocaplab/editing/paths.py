@@ -1,17 +1,22 @@
-"""Motion paths: the root projected on the ground (Kim et al. 2009, section 3.1).
+"""Motion paths: the pelvis projected on the ground (Kim et al. 2009, section 3.1).
+
+The path follows the motion's *path joint*, :attr:`mocaplab.motion.Motion.path_joint`
+(the ``pelvis`` role of :mod:`mocaplab.roles`): joint 0 for CMU clips, the
+travelling pelvis below a static reference joint for the common export
+layout that has one.  "Root" below means that joint, whatever its index.
 
 A :class:`MotionPath` holds, per frame ``i``,
 
-* ``positions[i] = p_i``: the root's ground position ``(x, z)``, metres;
+* ``positions[i] = p_i``: the path joint's ground position ``(x, z)``, metres;
 * ``tangents[i] = t_i = p_{i+1} - p_{i-1}`` (central difference; at the two
   ends ``2 (p_1 - p_0)`` and ``2 (p_{F-1} - p_{F-2})`` so every tangent spans
   two frame steps);
 * ``normals[i] = n_i = R t_i`` with ``R`` the +90 degree turn about +Y:
   ``R (x, z) = (z, -x)`` (a character walking along ``t`` has ``n`` on its
   left);
-* ``directions[i] = theta_i``: the root heading (yaw of the root rotation,
-  :func:`mocaplab.quat.yaw`) measured from the tangent direction, so the
-  heading follows a deformed path.
+* ``directions[i] = theta_i``: the root heading (yaw of the path joint's
+  world rotation, :func:`mocaplab.quat.yaw`) measured from the tangent
+  direction, so the heading follows a deformed path.
 
 Angles of ground vectors use the yaw convention ``atan2(x, z)``.
 
@@ -26,11 +31,20 @@ relative constraints.
 
 Laplacian coordinates (equation 3): ``p_i = p_{i-1} + x_i t_i + y_i R t_i``
 for the interior frames ``1 <= i <= F - 2``.
+
+Back from a path to a motion: :func:`apply_path` moves the whole body by one
+rigid ground motion per frame (a turn ``dyaw_i`` about the vertical axis and
+a horizontal translation, applied at joint 0 by
+:meth:`~mocaplab.motion.Motion.transformed`) chosen so that the path joint
+lands on the new path point, ``t_i = p'_i - R(dyaw_i) p_i``, height kept.
+Every joint, per-joint translation channels included, moves with it, so the
+same code serves any skeleton layout.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping, Sequence
 from functools import cached_property
 from typing import Any
 
@@ -41,9 +55,13 @@ from scipy.ndimage import gaussian_filter1d
 
 from .. import quat
 from ..motion import Motion
+from ..roles import Roles, parse_name, resolve_roles
 
 __all__ = [
     "MotionPath",
+    "apply_path",
+    "contact_joints",
+    "with_roles",
     "rot90",
     "ground_angle",
     "central_tangents",
@@ -200,14 +218,22 @@ class MotionPath:
         object.__setattr__(self, "min_speed", float(self.min_speed))
 
     @classmethod
-    def from_motion(cls, motion: Motion, *, min_speed: float = 0.1) -> MotionPath:
-        """The ground path of ``motion``'s root (x, z) with its root headings."""
+    def from_motion(
+        cls, motion: Motion, *, min_speed: float = 0.1, roles: Mapping[str, Any] | None = None
+    ) -> MotionPath:
+        """The ground path of ``motion``'s path joint (x, z) with its headings.
+
+        The path joint is :attr:`~mocaplab.motion.Motion.path_joint` (the
+        pelvis role; ``roles`` overrides roles, see :func:`with_roles`), its
+        heading the yaw of its world rotation.
+        """
         if not isinstance(motion, Motion):
             raise TypeError(f"Expected a Motion, got {type(motion).__name__}")
         if motion.n_frames < 3:
             raise ValueError(f"Expected a motion of at least 3 frames for a path, got {motion.n_frames}")
-        pos = motion.root_positions[:, [0, 2]]
-        head = quat.yaw(motion.rotations[:, 0])
+        motion = with_roles(motion, roles)
+        pos = motion.pelvis_positions[:, [0, 2]]
+        head = quat.yaw(motion.pelvis_rotations)
         return cls(pos, head, motion.fps, min_speed)
 
     # ------------------------------------------------------------ frames
@@ -324,6 +350,115 @@ class MotionPath:
         return MotionPath(p, heads, self.fps, self.min_speed)
 
 
+def with_roles(motion: Motion, roles: Mapping[str, Any] | None) -> Motion:
+    """``motion`` with joint roles fixed by hand (``roles=None``: ``motion`` itself).
+
+    The editing entry points (``edit``, ``SceneEditor``, ``build_graph``,
+    the widgets) accept ``roles=`` and call this once on their inputs: the
+    skeleton gets the overrides (:meth:`~mocaplab.motion.Skeleton.with_roles`),
+    so :attr:`~mocaplab.motion.Motion.path_joint` and every role the editing
+    code asks for follow them, and the edited motions carry them on.
+
+    Parameters
+    ----------
+    motion : Motion
+    roles : mapping of role name to joint name, or Roles, optional
+        See :func:`mocaplab.roles.resolve_roles`.
+
+    Returns
+    -------
+    Motion
+        Same arrays, a skeleton with ``role_overrides``.
+    """
+    if roles is None:
+        return motion
+    if not isinstance(roles, Mapping):
+        raise TypeError(f"Expected `roles` to be a mapping of role names to joint names, got {type(roles).__name__}")
+    sk = motion.skeleton.with_roles(**dict(roles))
+    resolve_roles(sk)  # unknown roles or joints raise here, naming them
+    return motion.replace(skeleton=sk)
+
+
+def contact_joints(motion: Motion, joints: Sequence[str] | None = None, *, roles: Any = None) -> tuple[str, ...]:
+    """The joints whose foot contacts are detected: ``joints``, or the feet of the roles.
+
+    Parameters
+    ----------
+    motion : Motion
+    joints : sequence of str, optional
+        Joint names (checked against the skeleton).  Default: the ankle and
+        toe of each foot, :meth:`mocaplab.roles.Roles.foot_joints`.
+    roles : mapping or Roles, optional
+        Role overrides (:func:`mocaplab.roles.resolve_roles`).
+
+    Returns
+    -------
+    tuple of str
+    """
+    if joints is None:
+        return resolve_roles(motion, roles).foot_joints()
+    names = (joints,) if isinstance(joints, str) else tuple(joints)
+    if not names or not all(isinstance(n, str) for n in names):
+        raise ValueError(f"Expected `joints` as a non-empty sequence of joint names, got {joints!r}")
+    missing = [n for n in names if n not in motion.skeleton.names]
+    if missing:
+        raise ValueError(
+            f"Expected `joints` among the skeleton's joints, got {missing} which it does not have; "
+            f"joints are {list(motion.skeleton.names)}"
+        )
+    return names
+
+
+def _side(name: str, roles: Roles | None) -> str | None:
+    """Side of a joint: its limb role's, else the side word of its name (the naming table's)."""
+    side = roles.side_of(name) if roles is not None else None
+    return side if side is not None else parse_name(name)[0]
+
+
+def apply_path(motion: Motion, positions: ArrayLike, heading_change: ArrayLike) -> Motion:
+    """``motion`` moved, frame by frame, rigidly over the ground onto a new path.
+
+    Frame ``i`` turns by ``heading_change[i]`` about the vertical axis and
+    translates by ``t_i = positions[i] - R(heading_change[i]) p_i`` (``p_i``
+    the path joint's ground position, ``y`` unchanged), applied at joint 0
+    (:meth:`~mocaplab.motion.Motion.transformed`): the path joint lands on
+    ``positions[i]`` and every joint moves with it, whatever the layout.
+
+    Parameters
+    ----------
+    motion : Motion
+    positions : array_like, shape (F, 2)
+        New ground positions ``(x, z)`` of the path joint, metres.
+    heading_change : array_like, shape (F,)
+        Yaw added to each frame, radians.
+
+    Returns
+    -------
+    Motion
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab.motion import Motion, Skeleton
+    >>> m = Motion(Skeleton(["hips"], [-1], [[0, 0, 0]]), np.tile([0, 0, 0, 1.0], (2, 1, 1)), [[1, 1, 0], [1, 1, 1]], 30)
+    >>> apply_path(m, [[0, 0], [0, 2]], [0.0, np.pi / 2]).root_positions.round(6).tolist()
+    [[0.0, 1.0, 0.0], [0.0, 1.0, 2.0]]
+    """
+    F = motion.n_frames
+    p = np.asarray(positions, dtype=float)
+    if p.shape != (F, 2):
+        raise ValueError(f"Expected `positions` of shape ({F}, 2), got {p.shape}")
+    dyaw = np.asarray(heading_change, dtype=float)
+    if dyaw.shape != (F,):
+        raise ValueError(f"Expected `heading_change` of shape ({F},), got {dyaw.shape}")
+    old = motion.pelvis_positions
+    turned = quat.rotate(quat.from_yaw(dyaw), old)
+    t = np.zeros((F, 3))
+    t[:, 0] = p[:, 0] - turned[:, 0]
+    t[:, 2] = p[:, 1] - turned[:, 2]
+    return motion.transformed(yaw=dyaw, translation=t)
+
+
 def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
     m = np.concatenate([[False], np.asarray(mask, bool), [False]])
     d = np.diff(m.astype(np.int8))
@@ -339,15 +474,19 @@ def stationary_segments(
     min_duration: float = 0.3,
     contacts: Any = None,
     smoothing: float = 0.05,
+    joints: Sequence[str] | None = None,
+    roles: Mapping[str, Any] | None = None,
 ) -> list[tuple[int, int]]:
-    """Stationary sub-paths (section 4.2): slow root or both feet planted.
+    """Stationary sub-paths (section 4.2): slow path joint or both feet planted.
 
-    A frame is stationary when the root's ground speed, smoothed by a
+    A frame is stationary when the path joint's ground speed, smoothed by a
     Gaussian of ``smoothing`` seconds, is below ``speed`` m/s, or when both
-    feet are firmly planted (every contact joint of each foot, ankle and toe,
-    in contact) (``contacts``: a :class:`mocaplab.contacts.Contacts`
-    whose joint names contain Left/Right, or ``"auto"`` to detect them with
-    :func:`mocaplab.contacts.foot_contacts`).  Runs shorter than
+    feet are firmly planted (every contact joint of each foot, ankle and
+    toe, in contact).  ``contacts``: a :class:`mocaplab.contacts.Contacts`,
+    or ``"auto"`` to detect them with :func:`mocaplab.contacts.foot_contacts`
+    on ``joints`` (default: the feet of the roles, :func:`contact_joints`).
+    A contact joint's side is that of its limb role, else the side word of
+    its name (:func:`mocaplab.roles.parse_name`).  Runs shorter than
     ``min_duration`` seconds (or 3 frames) are dropped: walking has short
     double-support phases that must stay deformable.
 
@@ -358,9 +497,10 @@ def stationary_segments(
     """
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected a Motion, got {type(motion).__name__}")
-    p = motion.root_positions[:, [0, 2]]
     if motion.n_frames < 3:
         return []
+    motion = with_roles(motion, roles)
+    p = motion.pelvis_positions[:, [0, 2]]
     v = np.linalg.norm(np.gradient(p, axis=0), axis=1) * motion.fps
     sigma = smoothing * motion.fps
     if sigma > 0:
@@ -370,26 +510,22 @@ def stationary_segments(
         if isinstance(contacts, str):
             if contacts != "auto":
                 raise ValueError(f"Expected `contacts` to be a Contacts, 'auto' or None, got {contacts!r}")
-            try:
-                from ..contacts import foot_contacts
-            except ImportError:  # pragma: no cover - contacts module missing
-                contacts = None
-            else:
-                contacts = foot_contacts(motion)
-        if contacts is not None:
-            # "firmly planted": every contact joint of the foot (ankle and toe) down
-            left = np.ones(motion.n_frames, bool)
-            right = np.ones(motion.n_frames, bool)
-            n_left = n_right = 0
-            for name in contacts.joints:
-                low = name.lower()
-                if "left" in low or name.startswith("L"):
-                    left &= contacts.of(name)
-                    n_left += 1
-                elif "right" in low or name.startswith("R"):
-                    right &= contacts.of(name)
-                    n_right += 1
-            if n_left and n_right:
-                still = still | (left & right)
+            from ..contacts import foot_contacts
+
+            contacts = foot_contacts(motion, joints=contact_joints(motion, joints))
+        try:
+            found: Roles | None = motion.skeleton.roles
+        except ValueError:  # roles that cannot be inferred: sides from the names alone
+            found = None
+        # "firmly planted": every contact joint of the foot (ankle and toe) down
+        planted = {"left": np.ones(motion.n_frames, bool), "right": np.ones(motion.n_frames, bool)}
+        count = {"left": 0, "right": 0}
+        for name in contacts.joints:
+            side = _side(name, found)
+            if side in planted:
+                planted[side] &= contacts.of(name)
+                count[side] += 1
+        if count["left"] and count["right"]:
+            still = still | (planted["left"] & planted["right"])
     min_len = max(3, int(np.ceil(min_duration * motion.fps)))
     return [(a, b) for a, b in _runs(still) if b - a >= min_len]

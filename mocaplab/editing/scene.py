@@ -9,13 +9,17 @@ so an update costs a few back-substitutions.  ``edit`` is a one-shot
 ``SceneEditor(...).result``; tests check that both agree.
 
 Back to full-body motion (``EditResult.motions``, computed on first access):
-each character's root moves to its edited ground position (height kept), its
-root orientation turns by the change of the path's tangent direction (so the
-heading relative to the path is kept), and the clip is resampled (slerp) on
-one shared reference clock from its time warp, so all characters play
-synchronised: ``motions[k]`` has one frame per clock tick ``clock[n]``,
-holding the first / last pose outside the character's own time span
-(``active[k]`` marks the ticks inside it).
+each frame of each character is moved by one rigid ground motion
+(:func:`~mocaplab.editing.paths.apply_path`): it turns by the change of the
+path's tangent direction (so the heading relative to the path is kept) and
+translates so that the path joint (the pelvis role,
+:attr:`~mocaplab.motion.Motion.path_joint`) lands on its edited ground
+position, height kept; then the clip is resampled (slerp for rotations,
+linear for positions and per-joint translations) on one shared reference
+clock from its time warp, so all characters play synchronised:
+``motions[k]`` has one frame per clock tick ``clock[n]``, holding the first /
+last pose outside the character's own time span (``active[k]`` marks the
+ticks inside it).
 
 Options (keyword-only, for both :func:`edit` and :class:`SceneEditor`)
 ----------------------------------------------------------------------
@@ -45,6 +49,18 @@ discrete : bool, default False
     (``graph.discrete_update(editor, result) -> EditResult``).
 refine : bool, default False
     ``motions`` are the full-body refined ones (:meth:`EditResult.refined`).
+roles : mapping of role name to joint name, or one per character, optional
+    Joint roles fixed by hand (:func:`mocaplab.roles.resolve_roles`), for
+    skeletons whose roles cannot be inferred: the characters' skeletons get
+    them (:func:`~mocaplab.editing.paths.with_roles`), so the path joint
+    (``pelvis``) and the feet follow them.  ``EditResult.characters`` and
+    the edited motions carry them.
+joints : sequence of str, or one per character, optional
+    The joints whose foot contacts are detected and kept: the "both feet
+    planted" test of ``stationary="auto"`` and the plants of full-body
+    refinement (``refine``, :meth:`EditResult.refined`).  Default: the
+    ankle and toe of each foot of the roles
+    (:func:`~mocaplab.editing.paths.contact_joints`).
 """
 
 from __future__ import annotations
@@ -52,19 +68,18 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import OrderedDict
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from functools import cached_property
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import quat
 from ..motion import Motion
 from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint
 from .energy import Energies
 from .laplacian import Rows, SpatialFactors, SpatialSolver, heading_changes, spatial_rows
-from .paths import MotionPath, laplacian_coordinates, stationary_segments
+from .paths import MotionPath, apply_path, contact_joints, laplacian_coordinates, stationary_segments, with_roles
 from .timewarp import TimeFactors, TimeSolver, temporal_rows
 
 __all__ = ["edit", "SceneEditor", "EditResult"]
@@ -85,6 +100,8 @@ _OPTIONS: dict[str, Any] = {
     "clock_fps": None,
     "discrete": False,
     "refine": False,
+    "roles": None,
+    "joints": None,
 }
 
 
@@ -111,6 +128,25 @@ def _effectors(constraints: Sequence[Any], K: int) -> tuple[tuple[Any, ...], ...
         elif _is_effector(c):
             ee[c.character].append(c)
     return tuple(tuple(x) for x in ee)
+
+
+def _per_character(value: Any, K: int, name: str, single: Any) -> list[Any]:
+    """An option given once for every character (``single(value)`` is true) or as one entry per character."""
+    if value is None or single(value):
+        return [value] * K
+    try:
+        items = list(value)
+    except TypeError:
+        raise TypeError(f"Expected `{name}` for every character or one per character, got {value!r}") from None
+    if len(items) != K:
+        raise ValueError(f"Expected `{name}` for every character or one entry per character ({K}), got {len(items)}")
+    return items
+
+
+def _is_names(value: Any) -> bool:
+    return isinstance(value, str) or (
+        isinstance(value, Sequence) and len(value) > 0 and all(isinstance(v, str) for v in value)
+    )
 
 
 def _characters(characters: Any) -> tuple[Motion, ...]:
@@ -239,8 +275,18 @@ class SceneEditor:
         opts = dict(_OPTIONS)
         opts.update(options)
         self.options = opts
-        self.characters = _characters(characters)
-        K = len(self.characters)
+        chars = _characters(characters)
+        K = len(chars)
+        roles = _per_character(opts["roles"], K, "roles", lambda v: isinstance(v, Mapping))
+        self.characters = tuple(with_roles(m, r) for m, r in zip(chars, roles, strict=True))
+        joints = _per_character(opts["joints"], K, "joints", _is_names)
+        for k, (m, j) in enumerate(zip(self.characters, joints, strict=True)):
+            if j is not None:
+                try:
+                    contact_joints(m, j)
+                except ValueError as exc:
+                    raise ValueError(f"character {k}: {exc}") from None
+        self._joints = joints
         self.paths = tuple(MotionPath.from_motion(m, min_speed=opts["min_speed"]) for m in self.characters)
         self.segments = self._stationary(opts["stationary"])
         step = int(opts["variational_step"])
@@ -290,8 +336,9 @@ class SceneEditor:
                     speed=o["stationary_speed"],
                     min_duration=o["stationary_min_duration"],
                     contacts="auto" if spec == "auto" else None,
+                    joints=j,
                 )
-                for m in self.characters
+                for m, j in zip(self.characters, self._joints, strict=True)
             ]
         segs = list(spec)
         if len(segs) != K:
@@ -419,6 +466,10 @@ class SceneEditor:
         assert self._result is not None
         return self._result
 
+    def contact_joints(self, character: int) -> tuple[str, ...]:
+        """The joints whose foot contacts character ``character`` keeps (the ``joints`` option or the roles' feet)."""
+        return contact_joints(self.characters[character], self._joints[character])
+
     @property
     def factorizations(self) -> int:
         """How many factorisations (space + time structures) were computed so far."""
@@ -525,6 +576,15 @@ class _Lazy(Sequence):
         return f"<{self._n} lazily computed items>"
 
 
+def _lerp(x: Array, u: Array) -> Array:
+    """Rows of ``x`` (F, ...) linearly interpolated at fractional frames ``u`` (clamped to the clip)."""
+    u = np.clip(u, 0.0, len(x) - 1)
+    i0 = np.floor(u).astype(np.int64)
+    i1 = np.minimum(i0 + 1, len(x) - 1)
+    a = (u - i0).reshape((-1,) + (1,) * (x.ndim - 1))
+    return (1 - a) * x[i0] + a * x[i1]
+
+
 def _ro(a: NDArray[Any]) -> NDArray[Any]:
     a.flags.writeable = False
     return a
@@ -626,13 +686,7 @@ class EditResult:
 
     # ------------------------------------------------------------ motions
     def _edited_motion(self, k: int) -> Motion:
-        m = self.characters[k]
-        root = np.array(m.root_positions)
-        root[:, 0] = self.paths[k][:, 0]
-        root[:, 2] = self.paths[k][:, 1]
-        rot = np.array(m.rotations)
-        rot[:, 0] = quat.mul(quat.from_yaw(self._headings[k][0]), rot[:, 0])
-        return m.replace(rotations=rot, root_positions=root)
+        return apply_path(self.characters[k], self.paths[k], self._headings[k][0])
 
     @cached_property
     def clock_fps(self) -> float:
@@ -657,6 +711,14 @@ class EditResult:
         t = self.times[k]
         u = np.interp(self.clock, t, np.arange(len(t)))
         out = motion.sample(u / motion.fps, fps=self.clock_fps)
+        if motion.path_joint != 0:
+            # sample() interpolates joint 0's per-frame ground motion and the path joint's own
+            # translation separately, which bends the path joint's course between frames by the
+            # lever arm of that translation (metres: the travel from the static joint 0); move the
+            # whole body, at joint 0, so that the path joint is where interpolating its positions
+            # puts it, as it is when the path joint is joint 0
+            want = _lerp(motion.pelvis_positions, u)
+            out = out.replace(root_positions=out.root_positions + (want - out.pelvis_positions))
         return out.replace(name=motion.name)
 
     def _motion(self, k: int) -> Motion:
@@ -685,11 +747,15 @@ class EditResult:
             from ..refinement import refine_scene
         except ImportError:
             raise NotImplementedError("full-body refinement needs mocaplab.refine, which is not available") from None
+        from ..contacts import foot_contacts
+
         K = len(self.characters)
         warped = [self._plain[k] for k in range(K)]
         refs = [self._warp(k, self.characters[k]) for k in range(K)]
+        # the input's contacts, on the clock, of the roles' feet (or the `joints` option)
+        contacts = [foot_contacts(refs[k], joints=self._ed.contact_joints(k)) for k in range(K)]
         ees = [self._effector_on_clock(ee) for per in self.end_effectors for ee in per]
-        return refine_scene(warped, ees, references=refs)
+        return refine_scene(warped, ees, references=refs, contacts=contacts)
 
     def _refine_all(self) -> list[Motion]:
         return self._refined_list
@@ -699,7 +765,8 @@ class EditResult:
 
         The time-warped motions (:attr:`motions` without refinement) go through
         :func:`mocaplab.refinement.refine_scene` with the input clips warped the
-        same way as references (their foot contacts are planted) and the
+        same way as references (the foot contacts of their
+        :meth:`SceneEditor.contact_joints`, detected on them, are planted) and the
         scene's end-effector constraints, whose frames (each character's own
         frames) are mapped to the nearest clock ticks, so interactions between
         characters happen at the synchronised instant.

@@ -58,6 +58,8 @@ __all__ = [
     "displacement_between",
     "DisplacementMap",
     "blend_ramp",
+    "displace",
+    "rotation_displacement",
 ]
 
 Array = NDArray[np.float64]
@@ -212,6 +214,21 @@ def fit_hierarchical(
     return out
 
 
+def displace(q: ArrayLike, d: ArrayLike) -> Array:
+    """Apply rotation displacements: ``q * exp(d)``, shapes (..., 4) and (..., 3).
+
+    The one displacement convention of mocaplab, in code: ``d`` is a rotation
+    vector in the joint's own (already rotated) frame.  Inverse of
+    :func:`rotation_displacement`.
+    """
+    return quat.normalize(quat.mul(np.asarray(q, dtype=float), quat.exp(np.asarray(d, dtype=float))))
+
+
+def rotation_displacement(q: ArrayLike, q2: ArrayLike) -> Array:
+    """The displacement ``d = log(q^-1 q2)`` taking ``q`` to ``q2`` (``displace(q, d) == q2``), shape (..., 3)."""
+    return quat.log(quat.mul(quat.inv(np.asarray(q, dtype=float)), np.asarray(q2, dtype=float)))
+
+
 def displacement_between(before: Motion, after: Motion) -> tuple[Array, Array]:
     """Exact per-frame displacement taking ``before`` to ``after``.
 
@@ -231,8 +248,7 @@ def displacement_between(before: Motion, after: Motion) -> tuple[Array, Array]:
             f"Expected motions of equal shape, got before {before.rotations.shape} and after {after.rotations.shape}"
         )
     root = after.root_positions - before.root_positions
-    rot = quat.log(quat.mul(quat.inv(before.rotations), after.rotations))
-    return root, rot
+    return root, rotation_displacement(before.rotations, after.rotations)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -371,5 +387,5 @@ class DisplacementMap:
         new_rot = np.array(motion.rotations, copy=True)
         if self.joints:
             js = list(self.joints)
-            new_rot[:, js] = quat.normalize(quat.mul(motion.rotations[:, js], quat.exp(scale * rot[:, js])))
+            new_rot[:, js] = displace(motion.rotations[:, js], scale * rot[:, js])
         return motion.replace(rotations=new_rot, root_positions=motion.root_positions + scale * root)

@@ -133,6 +133,7 @@ from numpy.typing import NDArray
 from scipy.linalg.lapack import dpbsv as _lapack_pbsv
 
 from .. import quat
+from ..displacement import displace, rotation_displacement
 from ..motion import Motion
 from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint, Relative, Sync
 from .energy import deformation_energy
@@ -659,10 +660,10 @@ def _assemble(
         exp_node = prev + 1
         act = int(nodes[a])
         d = np.zeros(rot.shape[1:-1] + (3,))
-        d[body] = quat.log(quat.mul(quat.inv(gd.rot[exp_node, body]), gd.rot[act, body]))
+        d[body] = rotation_displacement(gd.rot[exp_node, body], gd.rot[act, body])
         exp_world = quat.mul(quat.from_yaw(theta[a - 1]), gd.wrot[exp_node])
         act_world = quat.mul(quat.from_yaw(theta[a]), gd.wrot[act])
-        d[pj] = quat.log(quat.mul(quat.inv(exp_world), act_world))
+        d[pj] = rotation_displacement(exp_world, act_world)
         d_h = gd.height[act] - gd.height[exp_node]
         before = a - 1 - np.arange(n)
         after = a + np.arange(n)
@@ -679,7 +680,7 @@ def _assemble(
             dt[before[okb]] += cb[:, None, None] * d_t
             dt[after[oka]] += ca[:, None, None] * d_t
     touched = np.flatnonzero(np.any(dr != 0, axis=(1, 2)) | (dy != 0))
-    rot[touched] = quat.normalize(quat.mul(rot[touched], quat.exp(dr[touched])))
+    rot[touched] = displace(rot[touched], dr[touched])
     root[:, 1] += dy  # at joint 0: the whole body, path joint included, rises
     if tr is not None and dt is not None:
         tr += dt

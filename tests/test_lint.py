@@ -25,5 +25,5 @@ def test_mypy_passes_on_the_core() -> None:
     mypy = shutil.which("mypy") or str(Path(sys.executable).parent / "mypy")
     if not Path(mypy).exists():
         pytest.skip("mypy is not installed (pip install -e '.[dev]')")
-    out = subprocess.run([mypy, "--no-incremental"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    out = subprocess.run([mypy, "--no-incremental", "-p", "mocaplab"], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stdout + out.stderr

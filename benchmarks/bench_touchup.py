@@ -9,20 +9,25 @@ Xeon).  Here:
 2. the paper's Figure 9 protocol on the same clip (5 lower-body, 5 upper-body
    and 2 arm adjustments: 12 steps), which is what the 0.172 s most likely
    covered;
-3. one pass of the default ground schedule on a 1500-frame clip (CMU 02_06 at
+3. the converged protocol on the same clip: ``touch_up`` iterating the default
+   schedule until a pass lowers the best error by less than the stall
+   tolerance (2 %), keeping the best pass; the whole call is timed (setup,
+   passes, error measure), with the number of passes it took and the time per
+   pass beside the paper's 172 ms;
+4. one pass of the default ground schedule on a 1500-frame clip (CMU 02_06 at
    120 fps); target under 0.5 s;
-4. for information, the full default schedule (ground and flight) on 1500
+5. for information, the full default schedule (flight and ground) on 1500
    frames of CMU 49_03 (jumps and hops).
 
-Each is timed with the default footplant goals (``"plant"``: the refinement
-module's plant goals, one plant per contact) and with the ``"ik"`` goals
-(each planted joint back where the input has it, frame by frame, closest to
-the paper's choice of Kovar et al. 2002); both are met by the refinement
-module's IK layer.  Figures are medians of
-repeats, wall-clock and CPU time of this process (they differ when the machine
-is shared: other processes stretch the wall-clock time, so ratios are given
-for both); body, contacts and the bent input are built outside the timed
-region.
+Each of 1, 2, 4, 5 is timed with the default footplant goals (``"auto"``, the
+``"ik"`` goals: each planted joint back where the input has it, frame by frame,
+closest to the paper's choice of Kovar et al. 2002) and with the ``"plant"``
+goals (one plant per contact); both are met by the refinement module's IK layer.
+Figures are medians of repeats, wall-clock and CPU time of this process (they
+differ when the machine is shared: other processes stretch the wall-clock time,
+so ratios are given for both); body, contacts and the bent input (bent, then
+its feet planted again with ``refine``, as the touch-up expects) are built
+outside the timed region.
 Run: ``python benchmarks/bench_touchup.py``.
 """
 
@@ -35,7 +40,9 @@ import numpy as np
 
 from mocaplab import data, quat
 from mocaplab.contacts import foot_contacts
-from mocaplab.physics import GROUND_SCHEDULE, Body, start, step
+from mocaplab.physics import GROUND_SCHEDULE, Body, start, step, touch_up
+from mocaplab.physics.touchup import STALL_TOLERANCE
+from mocaplab.refinement import refine
 
 PAPER_SECONDS = 0.172  # 111 frames, Shin et al. 2003, section 4.3
 
@@ -83,9 +90,9 @@ def main() -> None:
     import os
 
     walk = data.cmu("16_15").resample(30)[:111]
-    bent = bend(walk, 2.0)
     body = Body.from_skeleton(walk)
     contacts = foot_contacts(walk)
+    bent = refine(bend(walk, 2.0), contacts=contacts, reference=walk)
     figure9 = (GROUND_SCHEDULE[0],) * 5 + (GROUND_SCHEDULE[1],) * 5 + (GROUND_SCHEDULE[2],) * 2
 
     long_ground = data.cmu("02_06")[:1500]
@@ -108,7 +115,7 @@ def main() -> None:
     print(f"{'case':58s} {'footplants':>10s} {'setup':>6s} {'steps':>6s} {'total':>7s} {'total CPU':>9s}  ratio (wall; CPU)")
     summary = None
     for name, motion, bdy, con, schedule, n_steps, repeats, kind in cases:
-        for fp in ("plant", "ik"):
+        for fp in ("auto", "plant"):
             setup, steps = run(motion, n_steps, body=bdy, contacts=con, schedule=schedule, footplants=fp)
             ts, cs = median_time(setup, repeats)
             tt, ct = median_time(steps, repeats)
@@ -117,16 +124,39 @@ def main() -> None:
                 ratio = f"{PAPER_SECONDS / total:5.1f}x; {PAPER_SECONDS / cpu:5.1f}x faster than the paper"
                 if n_steps == 3:
                     ratio += " (target >= 20x)"
-                    if fp == "plant":
+                    if fp == "auto":
                         summary = (total, cpu)
             else:
                 ratio = f"{total / 0.5:5.2f}; {cpu / 0.5:5.2f} of the 0.5 s budget"
             print(f"{name:58s} {fp:>10s} {1000 * ts:6.1f} {1000 * tt:6.1f} {1000 * total:7.1f} {1000 * cpu:9.1f}  {ratio}")
     if summary is not None:
         total, cpu = summary
-        print(f"default configuration (ground schedule, 'plant' footplants, 111 frames): {1000 * total:.1f} ms wall, "
+        print(f"default configuration (ground schedule, 'auto' footplants, 111 frames): {1000 * total:.1f} ms wall, "
               f"{1000 * cpu:.1f} ms CPU = {PAPER_SECONDS / total:.1f}x (wall), {PAPER_SECONDS / cpu:.1f}x (CPU) faster "
               f"than the paper's {1000 * PAPER_SECONDS:.0f} ms; target >= 20x")
+    converged(bent, body, contacts)
+
+
+def converged(bent, body, contacts) -> None:
+    """The converged protocol: iterate to the stall tolerance, keep the best pass (the whole call timed)."""
+
+    def run():
+        return touch_up(bent, body=body, contacts=contacts, schedule=GROUND_SCHEDULE, iterations=100)
+
+    history = run()
+    wall, cpu = median_time(run, 9)
+    n = history.passes
+    three = touch_up(bent, body=body, contacts=contacts, schedule=GROUND_SCHEDULE, iterations=3, tol=None)
+    errors = history.errors[:: len(GROUND_SCHEDULE)]
+    print(f"converged protocol, 111 frames: {n} passes ({history.stopped} at {100 * STALL_TOLERANCE:g} %: "
+          f"{3 * n} steps), {1000 * wall:.1f} ms wall, {1000 * cpu:.1f} ms CPU in all = "
+          f"{PAPER_SECONDS / wall:.1f}x (wall), {PAPER_SECONDS / cpu:.1f}x (CPU) faster than the paper's "
+          f"{1000 * PAPER_SECONDS:.0f} ms; per pass {1000 * wall / n:.1f} ms wall, {1000 * cpu / n:.1f} ms CPU = "
+          f"{PAPER_SECONDS * n / wall:.0f}x (wall), {PAPER_SECONDS * n / cpu:.0f}x (CPU) faster than 172 ms a pass")
+    best = history.states[history.best].mean_zmp_distance
+    print(f"  mean ZMP distance: input {1000 * errors[0]:.1f} mm, after 3 passes "
+          f"{1000 * three.states[three.best].mean_zmp_distance:.1f} mm, converged {1000 * best:.1f} mm "
+          f"(best pass {history.best // len(GROUND_SCHEDULE)})")
 
 
 if __name__ == "__main__":

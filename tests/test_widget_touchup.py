@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mocaplab import quat
-from mocaplab.physics import TouchUpSession
+from mocaplab.physics import TouchUpSession, touch_up
 
 pytest.importorskip("ipywidgets")
 from mocaplab.widgets import TouchUpStepper  # noqa: E402
@@ -47,6 +47,20 @@ def test_step_and_back_buttons_move_through_the_session(bent):
     # the figure lines follow the session
     assert np.allclose(w._line_now.get_ydata(), 1000 * w.session.current.zmp_distance, equal_nan=True)
     assert len(w._line_mean.get_xdata()) == 4
+    # the label names the best complete pass so far (the touch-up's result)
+    best = w.session.history.best
+    assert best in (0, 3) and f"best so far: step {best}" in w.mean_label.value
+    assert "without a ZMP" not in w.mean_label.value  # no ground frame lost its ZMP
+
+
+def test_figure9_marks_the_best_pass(bent):
+    from mocaplab.widgets.touchup import plot_mean_distance
+
+    h = touch_up(bent, iterations=2, tol=None, footplants="ik")
+    ax = plot_mean_distance(h)
+    ring = [line for line in ax.get_lines() if line.get_label() == "best pass (the result)"]
+    assert len(ring) == 1 and ring[0].get_xdata()[0] == h.best
+    assert ring[0].get_ydata()[0] == pytest.approx(1000 * h.mean_zmp_distance[h.best])
 
 
 def test_schedule_edits_reach_the_session(bent):

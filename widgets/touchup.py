@@ -15,7 +15,9 @@ The widget is a thin view over :class:`mocaplab.physics.TouchUpSession`:
   stage; an edit applies from the current step on;
 * **Figure 8**: the ZMP's distance outside the support polygon on every
   frame, for the input and for the current step;
-* **Figure 9**: the mean distance after each step so far;
+* **Figure 9**: the mean distance after each step so far (the mean label
+  also names the best complete pass so far and counts ground frames
+  without a ZMP, which the means leave out);
 * a **3D view** (:class:`~mocaplab.widgets.MotionViewer`) of the input (grey)
   and the current motion with its centre of mass, its ZMP and its support
   polygon drawn under it.
@@ -145,17 +147,27 @@ def plot_zmp_distance(curves: dict[str, Any], *, fps: float, ax: Any = None) -> 
     return ax
 
 
-def plot_mean_distance(history: Any, *, ax: Any = None) -> Any:
-    """Figure 9: mean ZMP distance after each step of a touch-up history (mm)."""
+def plot_mean_distance(history: Any, *, ax: Any = None, error: bool = False) -> Any:
+    """Figure 9: mean ZMP distance after each step of a touch-up history (mm).
+
+    With ``error=True`` the touch-up's error measure instead
+    (:attr:`mocaplab.physics.TouchUpState.error`: the ZMP distance on ground
+    frames and the distance of the centre of mass from its parabola on
+    flight frames, averaged); the ring marks the best pass, the result.
+    """
     ax = _axes(ax, (6, 3))
-    mean = 1000 * np.asarray(history.mean_zmp_distance)
+    mean = 1000 * np.asarray(history.errors if error else history.mean_zmp_distance)
     ax.plot(np.arange(len(mean)), mean, "o-", color=CURRENT_COLOR, ms=4)
     n = len(history.states[0].schedule)
     for k in range(n, len(mean), n):
         ax.axvline(k + 0.5, color="0.85", lw=0.8, zorder=0)
+    best = getattr(history, "best", None)
+    if best is not None:
+        ax.plot([best], [mean[best]], "o", mfc="none", mec="#d62728", ms=9, mew=1.5, label="best pass (the result)")
+        ax.legend(fontsize="small", loc="upper right")
     ax.set_xlabel("step (one adjustment each; grey lines end a pass)")
-    ax.set_ylabel("mean distance (mm)")
-    ax.set_title("Average distance at each step (Shin et al., Fig. 9)")
+    ax.set_ylabel("mean error (mm)" if error else "mean distance (mm)")
+    ax.set_title("Touch-up error at each step" if error else "Average distance at each step (Shin et al., Fig. 9)")
     ax.set_ylim(0, None)
     return ax
 
@@ -334,8 +346,12 @@ class TouchUpStepper:
         cur = s.current
         mm = 1000.0 * cur.mean_zmp_distance
         mm0 = 1000.0 * s.input.mean_zmp_distance
+        history = s.history
+        best = history.best
+        dropped = f"; {cur.dropped} ground frames without a ZMP left out" if cur.dropped else ""
         self.mean_label.value = (
-            f"mean ZMP distance <b>{mm:.2f}</b> mm (input {mm0:.2f} mm)"
+            f"mean ZMP distance <b>{mm:.2f}</b> mm (input {mm0:.2f} mm{dropped}) &nbsp;|&nbsp; "
+            f"best so far: step {best}, error {1000.0 * history.states[best].error:.2f} mm"
         )
         nxt = cur.next_adjustment
         self.step_label.value = (
@@ -352,12 +368,13 @@ class TouchUpStepper:
         self._line_now.set_ydata(1000 * cur.zmp_distance)
         top = np.nanmax(np.concatenate([1000 * s.input.zmp_distance, 1000 * cur.zmp_distance, [1.0]]))
         self._ax8.set_ylim(0, 1.08 * top)
-        hist = s.history.mean_zmp_distance * 1000
+        hist = history.mean_zmp_distance * 1000
         steps = np.arange(len(hist))
         self._line_mean.set_data(steps, hist)
         self._dot_mean.set_data([steps[-1]], [hist[-1]])
         self._ax9.set_xlim(-0.5, max(3, len(hist)) - 0.5)
-        self._ax9.set_ylim(0, 1.1 * max(np.nanmax(hist), 1e-3))
+        finite = hist[np.isfinite(hist)]
+        self._ax9.set_ylim(0, 1.1 * max(float(finite.max()) if finite.size else 0.0, 1e-3))
         self._plot8.draw()
         self._plot9.draw()
         if viewer:

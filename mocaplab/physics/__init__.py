@@ -9,6 +9,7 @@
 :func:`touch_up`               the touch-up (s3.3, s3.4) -> TouchUpHistory
 :func:`start`, :func:`step`    the same, one adjustment at a time
 :class:`TouchUpSession`        stateful stepper behind the widget
+:class:`TouchUpWarning`        suspicious input (long flights, sliding feet)
 =============================  ===============================================
 """
 
@@ -34,6 +35,7 @@ from .touchup import (
     TouchUpHistory,
     TouchUpSession,
     TouchUpState,
+    TouchUpWarning,
     default_schedule,
     flight_stages,
     link_sets,
@@ -63,6 +65,7 @@ __all__ = [
     "TouchUpHistory",
     "TouchUpSession",
     "TouchUpState",
+    "TouchUpWarning",
     "default_schedule",
     "flight_stages",
     "link_sets",

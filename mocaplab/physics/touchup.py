@@ -12,10 +12,9 @@ carried along by S2 but keeps its global orientation; a time scale
      its projection on the support polygon, about a horizontal axis
      perpendicular to the correction, by the closed form of equations 6-7
      (coefficients of the Appendix, computed here as per-link sums);
-   * **flight frames** (section 3.4): first the rotation giving the
-     average angular momentum of the flight (equations 8-9), then the
-     translation or rotation putting the centre of mass on the parabola
-     with ``v0 = d / T - g T / 2``;
+   * **flight frames** (section 3.4): first the rotation giving a constant
+     angular momentum (equations 8-9), then the translation and rotation
+     putting the centre of mass on the parabola with ``v0 = d / T - g T / 2``;
 
 2. scale it by ``rho`` and smooth it over time with a Gaussian kernel of
    width ``sigma`` (the rotation as a world rotation vector, i.e. the
@@ -24,6 +23,11 @@ carried along by S2 but keeps its global orientation; a time scale
    linearly);
 3. apply it as a displacement map (S2's top joint rotated, S3's top joint
    counter-rotated) and re-enforce the footplants.
+
+:func:`touch_up` repeats passes over the schedule, keeps the best pass by
+its error measure (:attr:`TouchUpState.error`) and stops when a pass no
+longer pays (``tol``); :func:`start` and :func:`step` are the same one
+adjustment at a time, and every state is recorded for the stepper.
 
 Choices made where the paper leaves them open
 ---------------------------------------------
@@ -45,58 +49,117 @@ Choices made where the paper leaves them open
   smoothed displacement of that joint, whether or not it is joint 0: a
   skeleton with a static reference joint above the pelvis is touched up
   exactly like the same skeleton without it.
-* The per-frame ground angle is clamped to +-0.35 rad (20 degrees), a guard
-  against frames with absurd accelerations.
+* The per-frame rotation of an adjustment is clamped to +-0.35 rad
+  (:data:`MAX_ANGLE`, 20 degrees) on ground and flight frames alike, a
+  guard against frames with absurd accelerations or momenta.
 * Kernel widths and windows are stored in seconds: the paper's 40/20/10 and
-  10/10/5 frames and its 15-frame flight window were at 30 fps.  A kernel of
-  width ``w`` is a Gaussian of standard deviation ``w / 4`` truncated at two
-  standard deviations.  Near the ends of the clip the kernel is cut at the
-  first or last frame and renormalised (a weighted mean over the frames
-  that exist): extending the edge value instead (``mode="nearest"``) gives
-  an end frame up to half the kernel's weight, so one badly balanced end
-  frame (a foot landing or taking off as the capture starts or stops, an
-  acceleration estimated from one side) leaned the whole start or end of
-  a captured walk by many centimetres (CMU 02_01: joints moved 2.5 cm on
-  average after three passes instead of 1.2 cm).
+  10/10/5 frames were at 30 fps.  A kernel of width ``w`` is a Gaussian of
+  standard deviation ``w / 4`` (``w`` spans +-2 std), truncated at **4**
+  std (:data:`KERNEL_TRUNCATE`).  Cut at 2 std, its edges jump to 13.5 %
+  of its peak, and the frame-to-frame noise of the per-frame corrections
+  went through those jumps into the accelerations that the ZMP depends on
+  (several m/s^2 out of corrections of millimetres); every pass added more,
+  and on CMU walks bent into curves 12 passes ended up worse than 3 (16_15
+  at 120 fps bent by 0.4 of its length, ground schedule, the frame weights
+  below switched off: mean ZMP distance 6.4 cm, 1.6 cm after 3 passes and
+  2.7 cm after 12 with the 2-std cut, 1.6 and 1.0 cm with the 4-std one;
+  the frame weights alone also stop that drift, and both are kept).  Near the ends
+  of the clip the kernel is cut at the first or last frame and renormalised
+  (a weighted mean over the frames that exist): extending the edge value
+  instead (``mode="nearest"``) gives an end frame up to half the kernel's
+  weight, so one badly balanced end frame leaned the whole start or end
+  of a captured walk by many centimetres.
+* Frames that cannot be fixed are not pushed again and again (they wound
+  the displacement up to tens of centimetres): in a ground adjustment a
+  frame's own correction counts with a weight (:func:`_ground_weights`):
+  0 for the clip's first and last frames, whose accelerations come from a
+  one-sided window; 0 where the closed form has no exact solution within
+  the clamp (the adjustment's links cannot bring the ZMP onto the polygon:
+  the arms, on most frames of a curved walk); 0 on ground frames without a
+  ZMP; and a spike the kernel cannot follow (the few frames before a heel
+  strike, whose smoothed accelerations already feel the impact) in
+  proportion to the share of its correction that survives the smoothing,
+  up to :data:`SPIKE_SHARE`.
 * Equation 9 relates consecutive frames; the angular-velocity correction
-  ``I^-1 (h* - h)`` is therefore **integrated** over the flight (from the
-  middle of the flight outwards) to give each frame's rotation, so that the
-  corrected motion really has the target angular velocity.  The paper's
-  footnote writes the inertia of point masses as ``sum m r r^T``; the
-  inertia tensor ``sum m (|r|^2 I - r r^T)`` is used here.
-* Ground frames within ``flight_window`` (0.5 s) of a flight, and no
-  further than half-way to the next flight, keep the flight's boundary
-  adjustment, blended to zero with a raised cosine (Figure 4); the ground
-  adjustments still apply to them.  The parabola's correction is zero at
-  both ends of a flight, so only the angular-momentum rotation and the
-  S2 rotation of a non-empty S1 are carried into the windows.  (Continuing
-  them with their boundary slope was tried: it makes take-off and landing
-  far less balanced.)
+  ``I^-1 (D - h)`` is therefore **integrated** over the flight to give each
+  frame's rotation, so that the corrected motion really has the constant
+  angular momentum ``D``.  The paper's target ``D`` is the flight's mean;
+  here it is the constant for which the integrated rotation vanishes at
+  take-off and landing (:func:`_momentum_rotation`), so that the body
+  leaves and meets the ground oriented as it was and no rotation has to be
+  carried into the ground frames.  The paper's footnote writes the inertia
+  of point masses as ``sum m r r^T``; the inertia tensor
+  ``sum m (|r|^2 I - r r^T)`` is used here.
+* The centre of mass is put on its parabola by **translation first**: every
+  flight adjustment translates the whole body by ``rho`` times the
+  distance to the parabola (a translation leaves the angular momentum
+  about the centre of mass unchanged, and it needs no large turn: moving
+  the centre of mass 10 cm by turning the legs alone takes some 40
+  degrees); an adjustment with a non-empty S1 then turns S2 about the
+  S1/S2 boundary (equation 10) towards what is left, clamped like the rest.
+* The flight adjustments keep the take-off and landing points, so they
+  change the velocities there.  Ground frames within ``flight_window`` of
+  a flight (and no further than half-way to the next flight) take that
+  change (Figure 4): each flight field (the translation and both
+  rotations) is continued with its boundary value and slope, faded out
+  with the one blend ramp (:func:`_carry_into_windows`), so the change of
+  take-off velocity is pushed off over the window instead of in one
+  frame.  The default window is 0.1 s (:data:`FLIGHT_WINDOW`), shorter than
+  the paper's 0.5 s: a velocity change over a longer window needs a
+  counter-movement whose ZMP excursions unbalance the whole window (CMU
+  16_05 at 30 fps, its flight bent 15 cm sideways: with 0.5 s no pass beats
+  the input's error of 8.8 mm, with 0.1 s it falls to 3.9 mm), and without
+  a window the change lands on the take-off frame (CMU 16_01 at 120 fps
+  with its flight slowed x1.4: the angular momentum's spread over the
+  flight 0.19 -> 0.28 kg m^2/s with no window, 0.32 with 0.5 s, 0.06 with
+  0.1 s).
+* Stretches without contact that touch the first or last frame of the clip
+  are no flights (their take-off or landing is outside the clip:
+  :func:`flight_stages`); a clip with no planted frame is an error.
+* The default schedule for a clip with flights is the flight schedule and
+  then the ground one (:func:`default_schedule`), so every pass ends with
+  a ground pass that balances the take-off and landing windows again.
 * Footplants are re-enforced after every step that can move a contact
   joint (an adjustment of the upper body or the arms leaves the feet
-  alone), per frame like the paper's choice (Kovar et al. 2002, "because
-  of its efficiency").  There is one correction layer: footplants are
-  goals (:class:`mocaplab.refinement.Goal`), built once from the input's
+  alone on ground frames; a flight adjustment translates the whole body),
+  per frame like the paper's choice (Kovar et al. 2002, "because of its
+  efficiency").  There is one correction layer: footplants are goals
+  (:class:`mocaplab.refinement.Goal`), built once from the input's
   contacts in :func:`start`, and met after each step by the refinement
   module's IK layer (:func:`mocaplab.refinement.solve_goals`: two-bone IK
   of the legs, then each foot turned about its ankle toward its toe goal)
-  without root lowering.  The options differ in the goals only:
+  without root lowering.  Every goal's weight is 0 on flight frames and
+  fades in and out over :data:`PLANT_BLEND` on the ground frames next to
+  them (a goal reaching into a flight pulls the airborne legs back after
+  the flight adjustments).  The options differ in the goals only:
 
-  - ``"plant"`` (what ``"auto"`` picks): the plant goals of
-    :func:`mocaplab.refinement.foot_goals`, one plant position per contact
-    interval of the input, blended in and out over 0.05 s (shorter than
-    refine's default, so that corrections leak little into flight frames);
-  - ``"ik"``: each planted joint back where the input motion had it, frame
-    by frame (targets the input's positions, weights
-    :func:`mocaplab.refinement.blend_weights` over 0.2 s around the frames
-    where its foot is planted); the ankle's orientation is the IK layer's
-    (the foot keeps its turn about the ankle-to-toe axis);
+  - ``"ik"`` (what ``"auto"`` picks): each planted joint back where the
+    input motion had it, frame by frame (targets the input's positions,
+    weights :func:`mocaplab.refinement.blend_weights` over 0.2 s around the
+    frames where its foot is planted); the ankle's orientation is the IK
+    layer's (the foot keeps its turn about the ankle-to-toe axis).  On the
+    input itself it changes nothing, so a touch-up of a good motion starts
+    from that motion;
+  - ``"plant"``: the plant goals of :func:`mocaplab.refinement.foot_goals`,
+    one plant position per contact interval of the input.  It re-plants
+    the input's feet as well: on the captured walk CMU 16_15 the step alone
+    moves the knees by up to 8 cm at heel-off (the ankle held on one spot
+    while the captured heel rolls) and raises the mean ZMP distance from
+    1.26 to 1.61 cm, so it is no longer the default; plant an edited
+    motion's feet with :func:`mocaplab.refinement.refine` first;
   - ``"refine"``: the full :func:`mocaplab.refinement.refine`, which also
     lowers the root where a leg cannot reach and smooths the corrections
     with a displacement map; both leak into flight frames and bend the
-    ballistic centre-of-mass path again (on the CMU hops of 49_03 the fitted
-    gravity of a short flight drops by about 15 %), so it is not the default;
+    ballistic centre-of-mass path again;
   - ``None`` skips the step.
+
+* The error measure (:attr:`TouchUpState.error`) is the mean over frames of
+  the distance of the ZMP outside the support polygon (ground frames) and
+  of the centre of mass from its parabola (flight frames), in metres; on a
+  walk it is the mean ZMP distance of Figure 9.  Ground frames without a
+  ZMP (negative vertical ground force) are counted (``dropped``), never
+  silently left out: the input warns about them, and a pass that drops
+  more of them than the input cannot be the best.
 
 * Speed: the forward kinematics of the current motion travel with the
   state; after an adjustment they follow in closed form (S2 moves rigidly,
@@ -121,8 +184,9 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Callable, Mapping, Sequence
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import TYPE_CHECKING, Any, Literal, NamedTuple
 
 import numpy as np
@@ -131,6 +195,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from .. import quat
 from ..contacts import intervals_from_mask
+from ..displacement import blend_ramp
 from ..motion import Motion, Skeleton, _owned
 from ..refinement import Goal, _solve_goals, blend_weights, foot_goals, refine
 from ..roles import Roles, RolesError, resolve_roles
@@ -142,6 +207,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "Adjustment",
+    "TouchUpWarning",
     "GROUND_SCHEDULE",
     "FLIGHT_SCHEDULE",
     "default_schedule",
@@ -161,13 +227,40 @@ Array = NDArray[np.float64]
 Stage = Literal["ground", "flight"]
 Footplants = Literal["auto", "plant", "refine", "ik"] | Callable[[Motion, "Contacts", Motion], Motion] | None
 
-#: Largest per-frame ground rotation, radians.
-MAX_GROUND_ANGLE = 0.35
+#: Largest per-frame rotation of one adjustment, radians (20 degrees), on
+#: ground and flight frames alike: a guard against frames with absurd
+#: accelerations or momenta.
+MAX_ANGLE = 0.35
+#: Width of the smoothing kernels in standard deviations on each side (see
+#: the module notes: a kernel cut at 2 std let frame-to-frame noise of the
+#: per-frame corrections into the accelerations, and passes diverged).
+KERNEL_TRUNCATE = 4.0
+#: A frame whose need survives the smoothing with less than this share of
+#: itself (a spike the kernel cannot follow) is down-weighted in proportion.
+SPIKE_SHARE = 0.3
+#: Default stall tolerance of :func:`touch_up`: it stops after a pass that
+#: lowers the best error by less than this share of it.
+STALL_TOLERANCE = 0.02
+#: Default ``flight_window``: seconds of ground frames on each side of a
+#: flight that take the flight adjustments' changes of velocity (see the
+#: module notes; the paper used 0.5 s).
+FLIGHT_WINDOW = 0.1
+#: Flights longer than this (seconds) are suspicious (contacts missing?): a warning.
+LONG_FLIGHT = 1.5
+#: A median slide of the planted joints over their contact intervals above
+#: this (metres) warns that the feet slide ("run refine first").
+SLIDE_WARNING = 0.05
 #: Blend window of the ``"ik"`` footplant goals on each side of a plant, seconds.
 FOOT_BLEND = 0.2
-#: Blend window of the plant goals on each side of a contact, seconds (short,
-#: so that plant corrections leak little into flight frames).
+#: Blend window of the ``"plant"`` goals on each side of a contact, and the
+#: ramp by which every footplant goal fades out on the ground frames next to
+#: a flight (goal weights are 0 on flight frames), seconds.
 PLANT_BLEND = 0.05
+
+
+class TouchUpWarning(UserWarning):
+    """Suspicious input to a touch-up (long flights, sliding feet, frames without a ZMP)."""
+
 
 
 # ======================================================================
@@ -186,7 +279,7 @@ class Adjustment:
         Links carried by S2 that keep their global orientation (empty in
         flight).  S1 is every joint in neither set.
     sigma : float
-        Width of the smoothing kernel in seconds (the paper's 40 frames at
+        Width of the smoothing kernel in seconds, > 0 (the paper's 40 frames at
         30 fps is 4/3 s).
     rho : float
         Damping factor in (0, 1]: the share of the computed adjustment used.
@@ -208,8 +301,12 @@ class Adjustment:
         s3 = (self.s3,) if isinstance(self.s3, str) else tuple(str(s) for s in self.s3)
         if not s2:
             raise ValueError("Expected at least one joint name or preset in `s2`, got none")
-        if not (np.isfinite(self.sigma) and self.sigma >= 0):
-            raise ValueError(f"Expected `sigma` >= 0 seconds, got {self.sigma!r}")
+        if not (np.isfinite(self.sigma) and self.sigma > 0):
+            raise ValueError(
+                f"Expected `sigma` > 0 seconds (the width of the smoothing kernel), got {self.sigma!r}: without "
+                "smoothing the per-frame corrections jump from frame to frame, their accelerations throw the ZMP "
+                "about and frames lose it (negative vertical force)"
+            )
         if not (np.isfinite(self.rho) and 0 < self.rho <= 1):
             raise ValueError(f"Expected `rho` in (0, 1], got {self.rho!r}")
         if self.stage not in ("ground", "flight"):
@@ -257,9 +354,11 @@ def default_schedule(
 ) -> tuple[Adjustment, ...]:
     """The paper's default schedules.
 
-    ``stage="both"`` gives the ground schedule followed by the flight one;
-    with ``contacts`` given, the flight part is left out when the clip has
-    no flight frame.
+    ``stage="both"`` gives the flight schedule followed by the ground one,
+    so that every pass ends by balancing the ground frames, the take-off
+    and landing windows that the flight adjustments moved included; with
+    ``contacts`` given, the flight part is left out when the clip has no
+    flight frame.
     """
     if stage == "ground":
         return GROUND_SCHEDULE
@@ -269,7 +368,7 @@ def default_schedule(
         raise ValueError(f"Expected `stage` 'ground', 'flight' or 'both', got {stage!r}")
     if contacts is not None and not flight_stages(contacts):
         return GROUND_SCHEDULE
-    return GROUND_SCHEDULE + FLIGHT_SCHEDULE
+    return FLIGHT_SCHEDULE + GROUND_SCHEDULE
 
 
 def _as_schedule(schedule: str | Adjustment | Sequence[Adjustment], contacts: Contacts) -> tuple[Adjustment, ...]:
@@ -455,12 +554,25 @@ def _link_sets(
 # ======================================================================
 # stages
 # ======================================================================
-def flight_stages(contacts: Contacts, *, min_frames: int = 2) -> list[tuple[int, int]]:
-    """Half-open frame intervals with no joint planted (at least ``min_frames`` long)."""
+def flight_stages(contacts: Contacts, *, min_frames: int = 2, at_ends: bool = False) -> list[tuple[int, int]]:
+    """Half-open frame intervals with no joint planted (at least ``min_frames`` long).
+
+    With ``at_ends=False`` (default) a stretch without contact that touches
+    the clip's first or last frame is left out: its take-off or its landing
+    lies outside the clip, so there is no flight between known ends to fit
+    a parabola to (a clip that starts or stops in the air, or a contact
+    detection gap there).  The touch-up adjusts neither ground nor flight
+    constraints on such frames.
+    """
     ground = np.asarray(contacts.mask, dtype=bool).any(axis=1)
     edges = np.diff(np.concatenate(([0], (~ground).astype(np.int8), [0])))
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    return [(int(a), int(b)) for a, b in zip(starts, stops, strict=True) if b - a >= min_frames]
+    n = ground.shape[0]
+    return [
+        (int(a), int(b))
+        for a, b in zip(starts, stops, strict=True)
+        if b - a >= min_frames and (at_ends or (a > 0 and b < n))
+    ]
 
 
 def _flight_windows(n: int, stages: list[tuple[int, int]], window: int) -> list[tuple[int, int, int, int]]:
@@ -479,23 +591,11 @@ def _flight_windows(n: int, stages: list[tuple[int, int]], window: int) -> list[
     return out
 
 
-def _flight_weights(n: int, stages: list[tuple[int, int]], window: int) -> Array:
-    """1 on flight frames, a raised cosine down to 0 over the ground windows around them."""
-    w = np.zeros(n)
-    for lo, a, b, hi in _flight_windows(n, stages, window):
-        w[a:b] = 1.0
-        k = np.arange(a - lo, 0, -1)  # distance of frames lo..a-1 from the flight
-        w[lo:a] = 0.5 * (1.0 + np.cos(np.pi * k / (window + 1)))
-        k = np.arange(1, hi - b + 1)
-        w[b:hi] = 0.5 * (1.0 + np.cos(np.pi * k / (window + 1)))
-    return w
-
-
 # ======================================================================
 # displacement maps
 # ======================================================================
 def _smooth(x: Array, width: float) -> Array:
-    """Gaussian smoothing over frames (std ``width / 4``, two-std truncation).
+    """Gaussian smoothing over frames: std ``width / 4``, truncated at 4 std.
 
     At the ends the kernel is cut to the existing frames and renormalised
     (see the module notes): a normalised convolution, the zero-padded
@@ -505,7 +605,7 @@ def _smooth(x: Array, width: float) -> Array:
     std = width / 4.0
     if std <= 0 or n < 2:
         return x
-    out = gaussian_filter1d(x, std, axis=0, mode="constant", truncate=2.0)
+    out = gaussian_filter1d(x, std, axis=0, mode="constant", truncate=KERNEL_TRUNCATE)
     out /= _kernel_mass(n, float(std)).reshape((n,) + (1,) * (x.ndim - 1))
     return out
 
@@ -513,7 +613,7 @@ def _smooth(x: Array, width: float) -> Array:
 @lru_cache(maxsize=32)
 def _kernel_mass(n: int, std: float) -> Array:
     """Weight of the truncated Gaussian kernel that falls inside ``n`` frames, per frame (n,)."""
-    mass = gaussian_filter1d(np.ones(n), std, mode="constant", truncate=2.0)
+    mass = gaussian_filter1d(np.ones(n), std, mode="constant", truncate=KERNEL_TRUNCATE)
     mass.flags.writeable = False
     return mass
 
@@ -665,7 +765,7 @@ def _lever_layout(sets: LinkSets, body: Body) -> tuple[NDArray[np.int64], NDArra
 
 def _ground_rotation(
     motion: Motion, body: Body, sets: LinkSets, bal: Balance, weight: Array, gpos: Array | None = None
-) -> tuple[Array, Array]:
+) -> tuple[Array, Array, NDArray[np.bool_]]:
     """Per-frame world rotation vectors (F, 3) and S2 centres of the root part (F, 3).
 
     Closed form of equations 6 and 7 in the frame whose x axis ``x'`` points
@@ -689,7 +789,7 @@ def _ground_rotation(
     omega = np.zeros((n, 3))
     root_centre = np.zeros((n, 3))
     if not np.any(todo):
-        return omega, root_centre
+        return omega, root_centre, np.zeros(n, dtype=bool)
     idx = np.flatnonzero(todo)
     # x': horizontal unit vector towards the polygon, (cx, 0, cz)
     dx = target[idx, 0] - z[idx, 0]
@@ -732,11 +832,55 @@ def _ground_rotation(
     t1 = (acs - phi + np.pi) % (2.0 * np.pi) - np.pi
     t2 = (-acs - phi + np.pi) % (2.0 * np.pi) - np.pi
     theta = np.where(np.abs(t1) <= np.abs(t2), t1, t2)  # the smaller solution
-    theta = np.where(radius > 0, np.clip(theta, -MAX_GROUND_ANGLE, MAX_GROUND_ANGLE), 0.0) * weight[idx]
+    exact = np.zeros(n, dtype=bool)
+    exact[idx] = (radius > 0) & (np.abs(want) <= radius) & (np.abs(theta) <= MAX_ANGLE)
+    theta = np.where(radius > 0, np.clip(theta, -MAX_ANGLE, MAX_ANGLE), 0.0) * weight[idx]
     # z' = x' x y = (-cz, 0, cx): +theta turns x' into y
     omega[idx, 0] = -cz[:, 0] * theta
     omega[idx, 2] = cx[:, 0] * theta
-    return omega, root_centre
+    return omega, root_centre, exact
+
+
+def _edge_frames(n: int, fps: float) -> int:
+    """Frames at each end of a clip whose accelerations come from a one-sided window.
+
+    The radius of the ZMP's acceleration kernel (5 frames at 30 fps, see
+    :func:`mocaplab.physics.body.smoothed_derivatives`): within it the
+    kernel reaches past the clip's end, into the extrapolated padding.
+    """
+    std = paper_width(5.0, fps) / 4.0
+    return min(int(2.0 * std + 0.5), n // 2)
+
+
+def _ground_weights(bal: Balance, omega: Array, exact: NDArray[np.bool_], width: float, fps: float) -> Array:
+    """How much each frame's own ground correction counts, in [0, 1], shape (F,).
+
+    0 for the frames that cannot be fixed or should not be trusted: the
+    clip's first and last frames, whose accelerations come from a one-sided
+    window (:func:`_edge_frames`); frames whose closed form has no exact
+    solution within :data:`MAX_ANGLE` (the adjustment's links cannot bring
+    the ZMP onto the polygon: pushing them every pass winds the
+    displacement up); ground frames without a ZMP.  Then a spike the
+    kernel cannot follow (a frame whose smoothed correction keeps less than
+    :data:`SPIKE_SHARE` of its own, like the few frames before a heel
+    strike whose smoothed accelerations already feel the impact) counts
+    that share divided by :data:`SPIKE_SHARE`.  Frames inside the polygon
+    count fully, with a correction of zero.
+    """
+    n = omega.shape[0]
+    w = np.ones(n)
+    edge = _edge_frames(n, fps)
+    w[:edge] = 0.0
+    w[n - edge :] = 0.0
+    w[(bal.distance > 0) & ~exact] = 0.0
+    w[bal.ground & ~np.isfinite(bal.distance)] = 0.0
+    need = np.linalg.norm(omega, axis=1)
+    asked = need > 0
+    if np.any(asked):
+        kept = np.sum(_smooth(omega * w[:, None], width) * omega, axis=1)  # smoothed correction along the need
+        share = kept[asked] / (SPIKE_SHARE * need[asked] ** 2)
+        w[asked] *= np.clip(share, 0.0, 1.0)
+    return w
 
 
 def _root_pivot(sets: LinkSets, path_joint: int) -> int:
@@ -754,21 +898,36 @@ def _root_pivot(sets: LinkSets, path_joint: int) -> int:
 
 def _ground_step(posed: _Posed, body: Body, adj: Adjustment, sets: LinkSets, bal: Balance, path_joint: int) -> _Posed:
     motion = posed.motion
-    omega, centre = _ground_rotation(motion, body, sets, bal, np.ones(motion.n_frames), posed.gpos)
-    omega *= adj.rho
+    n = motion.n_frames
+    width = adj.width(motion.fps)
+    omega, centre, exact = _ground_rotation(motion, body, sets, bal, np.ones(n), posed.gpos)
+    w = _ground_weights(bal, omega, exact, width, motion.fps)[:, None] * adj.rho
     root_delta = None
     pivot = _root_pivot(sets, path_joint)
     if 0 in sets.s2_tops:
         p = posed.gpos[:, pivot]
-        root_delta = np.where(np.any(omega != 0, axis=1)[:, None], _rotate_about(omega, centre, p) - p, 0.0)
-        root_delta = _smooth(root_delta, adj.width(motion.fps))
-    omega = _smooth(omega, adj.width(motion.fps))
-    return _apply(posed, sets, omega, root_delta, pivot)
+        root_delta = np.where(np.any(omega != 0, axis=1)[:, None], _rotate_about(omega * adj.rho, centre, p) - p, 0.0)
+        root_delta = _smooth(root_delta * (w / adj.rho), width)
+    return _apply(posed, sets, _smooth(omega * w, width), root_delta, pivot)
 
 
 # ======================================================================
 # flight frames (section 3.4)
 # ======================================================================
+def _ballistic(c0: Array, c1: Array, n: int, dt: float) -> Array:
+    """The ballistic path over ``n`` frames from ``c0`` (first frame) to ``c1`` (last), shape (n, 3).
+
+    Section 3.4.2: ``c*(t) = c0 + v0 t + g t^2 / 2`` with ``v0 = d / T - g T / 2``,
+    ``d = c1 - c0`` and ``T = (n - 1) dt``.
+    """
+    t = np.arange(n)[:, None] * dt
+    if n < 2:
+        return np.broadcast_to(c0, (n, 3)).copy()
+    big_t = (n - 1) * dt
+    v0 = (c1 - c0) / big_t - GRAVITY * big_t / 2.0
+    return c0 + v0 * t + 0.5 * GRAVITY * t**2
+
+
 def _flight_centre(motion: Motion, body: Body, sets: LinkSets, positions: Array, gpos: Array) -> Array:
     """Rotation centre of the (single) S2 part on every frame, shape (F, 3)."""
     top = sets.s2_tops[0]
@@ -783,12 +942,78 @@ def _flight_centre(motion: Motion, body: Body, sets: LinkSets, positions: Array,
     return np.einsum("l,flc->fc", body.masses, positions) / body.total_mass
 
 
-def _hold_into_windows(field: Array, stages: list[tuple[int, int]], flight_w: Array, window: int) -> Array:
-    """Carry each flight's boundary values into its ground windows, times the window weight."""
-    out = np.array(field, copy=True)
-    for lo, a, b, hi in _flight_windows(field.shape[0], stages, window):
-        out[lo:a] = field[a] * flight_w[lo:a, None]
-        out[b:hi] = field[b - 1] * flight_w[b:hi, None]
+def _clamp_angle(omega: Array) -> Array:
+    """Rotation vectors (F, 3) with their angles clamped to :data:`MAX_ANGLE`."""
+    angle = np.linalg.norm(omega, axis=1, keepdims=True)
+    return omega * np.minimum(1.0, MAX_ANGLE / np.where(angle > 0, angle, 1.0))
+
+
+def _carry_into_windows(field: Array, stages: list[tuple[int, int]], window: int, fps: float) -> Array:
+    """Continue a flight's field (F, 3) into the ground windows around it (:func:`_flight_windows`).
+
+    On a window frame at ``t`` frames from the flight's boundary frame the
+    field is ``(f_b + f'_b t) R(u)``: the boundary value ``f_b`` and slope
+    ``f'_b`` (over the flight's first or last 0.05 s) continued, times the
+    one blend ramp ``R`` (:func:`mocaplab.displacement.blend_ramp`) falling
+    from 1 at the flight to 0 at the window's far end.  The field keeps its
+    value and velocity across take-off and landing (a changed take-off
+    velocity is pushed off over the window, not in one frame) and fades
+    out with no velocity or acceleration jump.  Frames outside flights and
+    windows get 0.
+    """
+    n = field.shape[0]
+    out = np.zeros_like(field)
+    k = max(2, int(round(0.05 * fps)))
+    for lo, a, b, hi in _flight_windows(n, stages, window):
+        out[a:b] = field[a:b]
+        q = min(k, b - a)
+        if lo < a:
+            slope = (field[a + q - 1] - field[a]) / (q - 1) if q > 1 else np.zeros(3)
+            t = np.arange(lo, a) - a
+            ramp = blend_ramp((np.arange(lo, a) - (lo - 1)) / (a - lo + 1))
+            out[lo:a] = (field[a] + slope * t[:, None]) * ramp[:, None]
+        if b < hi:
+            slope = (field[b - 1] - field[b - q]) / (q - 1) if q > 1 else np.zeros(3)
+            t = np.arange(b, hi) - (b - 1)
+            ramp = blend_ramp((hi - np.arange(b, hi)) / (hi - b + 1))
+            out[b:hi] = (field[b - 1] + slope * t[:, None]) * ramp[:, None]
+    return out
+
+
+def _momentum_rotation(q: Array, masses: Array, h: Array, dt: float) -> Array:
+    """Rotations (n, 3) of S2 over one flight that make its angular momentum constant (section 3.4.1).
+
+    ``q`` (n, L, 3) are S2's link centres relative to the rotation centre,
+    ``h`` (n, 3) the angular momentum of the flight's frames.  Equation 8
+    gives the angular-velocity change ``I^-1 (D - h)`` on each frame (``I``
+    the inertia tensor of S2's point masses about the centre); integrated
+    over the flight (trapezoids) it is the rotation of each frame.  The
+    constant ``D`` is the one for which the rotation is zero at take-off and
+    at landing, ``D = (sum w I^-1)^-1 sum w I^-1 h`` (trapezoid weights
+    ``w``): the flight's angular momentum becomes constant, as equation 2
+    asks, while the body leaves and meets the ground as oriented as it was
+    (the paper's target, the flight's mean, turns the landing pose and
+    leaves a rotation to carry into the ground).
+    """
+    n = q.shape[0]
+    qq = np.einsum("l,flc,flc->f", masses, q, q)
+    inertia = qq[:, None, None] * np.eye(3) - np.einsum("l,flc,fld->fcd", masses, q, q) + 1e-9 * np.eye(3)
+    inv = np.linalg.inv(inertia)  # (n, 3, 3)
+    w = np.full(n, dt)
+    if n > 1:
+        w[[0, -1]] = dt / 2.0
+    target = np.linalg.solve(np.einsum("f,fij->ij", w, inv), np.einsum("f,fij,fj->i", w, inv, h))
+    domega = np.einsum("fij,fj->fi", inv, target - h)  # equation 8, minus the current angular velocity
+    out = np.zeros((n, 3))
+    if n > 1:
+        out[1:] = np.cumsum(0.5 * (domega[1:] + domega[:-1]), axis=0) * dt
+    return out
+
+
+def _flight_mask(n: int, stages: list[tuple[int, int]]) -> NDArray[np.bool_]:
+    out = np.zeros(n, dtype=bool)
+    for a, b in stages:
+        out[a:b] = True
     return out
 
 
@@ -798,7 +1023,6 @@ def _flight_step(
     adj: Adjustment,
     sets: LinkSets,
     stages: list[tuple[int, int]],
-    flight_w: Array,
     window: int,
     path_joint: int,
 ) -> _Posed:
@@ -809,67 +1033,59 @@ def _flight_step(
         raise ValueError(f"A flight adjustment needs S2 to be one connected part, got parts at {names}")
     n = motion.n_frames
     dt = motion.dt
-    width = adj.width(motion.fps)
+    fps = motion.fps
+    width = adj.width(fps)
     # S3 is empty in flight: S2 links rotate, S1 links (above or below) stay
     in_s2 = sets.roles[body.owners] == 2
     m = body.masses
 
     # ---- 3.4.1 angular momentum: average of the flight, by rotating S2
-    width5 = paper_width(5.0, motion.fps)
-    s, v, _ = smoothed_derivatives(link_positions(motion, body, fk=posed[1:]), motion.fps, width=width5)
+    width5 = paper_width(5.0, fps)
+    s, v, _ = smoothed_derivatives(link_positions(motion, body, fk=posed[1:]), fps, width=width5)
     com = np.einsum("l,flc->fc", m, s) / m.sum()
     h = np.einsum("l,flc->fc", m, np.cross(s - com[:, None], v))
     centre = _flight_centre(motion, body, sets, s, posed.gpos)
     phi = np.zeros((n, 3))
     for a, b in stages:
-        target = h[a:b].mean(axis=0)
-        q = s[a:b][:, in_s2] - centre[a:b, None]
-        ms = m[in_s2]
-        qq = np.einsum("l,flc,flc->f", ms, q, q)
-        inertia = qq[:, None, None] * np.eye(3) - np.einsum("l,flc,fld->fcd", ms, q, q)
-        inertia += 1e-9 * np.eye(3)
-        domega = np.linalg.solve(inertia, (target - h[a:b])[..., None])[..., 0]  # equation 8, minus current
-        cum = np.cumsum(domega, axis=0) * dt
-        phi[a:b] = cum - cum[(b - a) // 2]
-    phi = _hold_into_windows(phi, stages, flight_w, window) * adj.rho
+        phi[a:b] = _momentum_rotation(s[a:b][:, in_s2] - centre[a:b, None], m[in_s2], h[a:b], dt)
+    phi = _clamp_angle(_carry_into_windows(_clamp_angle(phi), stages, window, fps)) * adj.rho
     root_delta = None
     if 0 in sets.s2_tops:
         p = posed.gpos[:, pivot]
         root_delta = _smooth(_rotate_about(phi, centre, p) - p, width)
     out = _apply(posed, sets, _smooth(phi, width), root_delta, pivot)
 
-    # ---- 3.4.2 parabolic centre of mass, on the adjusted motion
+    # ---- 3.4.2 parabolic centre of mass: translation first (the whole body,
+    # which leaves the angular momentum about the centre of mass as it is)
+    r = link_positions(out.motion, body, fk=out[1:])
+    com = np.einsum("l,flc->fc", m, r) / m.sum()
+    error = np.zeros((n, 3))
+    for a, b in stages:
+        error[a:b] = _ballistic(com[a], com[b - 1], b - a, dt) - com[a:b]
+    delta = _smooth(_carry_into_windows(error, stages, window, fps) * adj.rho, width)
+    moved = out.motion.replace(root_positions=_owned(out.motion.root_positions + delta))
+    out = _Posed(moved, out.grot, out.gpos + delta[:, None, :])
+    if np.all(sets.roles == 2):
+        return out
+    # then rotate S2 about the S1/S2 boundary so its centre of mass moves
+    # towards c*_M2 (equation 10) for what the translation left
     r = link_positions(out.motion, body, fk=out[1:])
     com = np.einsum("l,flc->fc", m, r) / m.sum()
     wanted = com.copy()
     for a, b in stages:
-        t = (np.arange(a, b) - a) * dt
-        big_t = (b - 1 - a) * dt
-        d = com[b - 1] - com[a]
-        v0 = d / big_t - GRAVITY * big_t / 2.0
-        wanted[a:b] = com[a] + v0 * t[:, None] + 0.5 * GRAVITY * t[:, None] ** 2
-    flight = np.zeros(n, dtype=bool)
-    for a, b in stages:
-        flight[a:b] = True
-    if np.all(sets.roles == 2):
-        # S1 empty: translate the root
-        delta = np.where(flight[:, None], wanted - com, 0.0)
-        delta = _smooth(delta * adj.rho, width)  # zero at both ends of the flight: nothing to carry into windows
-        moved = out.motion.replace(root_positions=out.motion.root_positions + delta)
-        return _Posed(moved, out.grot, out.gpos + delta[:, None, :])
-    # rotate S2 about the S1/S2 boundary so its centre of mass moves towards c*_M2
+        wanted[a:b] = _ballistic(com[a], com[b - 1], b - a, dt)
     centre = _flight_centre(out.motion, body, sets, r, out.gpos)
     m2 = m[in_s2].sum()
     c2 = np.einsum("l,flc->fc", m[in_s2], r[:, in_s2]) / m2
-    c1m1 = com * m.sum() - c2 * m2
-    c2_star = (wanted * m.sum() - c1m1) / m2
-    rot = quat.log(quat.between(c2 - centre, c2_star - centre))
-    rot = _hold_into_windows(np.where(flight[:, None], rot, 0.0), stages, flight_w, window) * adj.rho
+    c2_star = c2 + (wanted - com) * m.sum() / m2
+    rot = np.where(_flight_mask(n, stages)[:, None], quat.log(quat.between(c2 - centre, c2_star - centre)), 0.0)
+    rot = _clamp_angle(_carry_into_windows(_clamp_angle(rot), stages, window, fps)) * adj.rho
     root_delta = None
     if 0 in sets.s2_tops:
         p = out.gpos[:, pivot]
         root_delta = _smooth(_rotate_about(rot, centre, p) - p, width)
     return _apply(out, sets, _smooth(rot, width), root_delta, pivot)
+
 
 
 # ======================================================================
@@ -905,6 +1121,23 @@ def _reference_goals(reference: Motion, contacts: Contacts, *, blend: float) -> 
     return goals
 
 
+def _outside_flights(goals: Sequence[Goal], contacts: Contacts, fps: float) -> list[Goal]:
+    """The goals with weights 0 on flight frames, fading in and out over :data:`PLANT_BLEND` next to them.
+
+    A footplant goal that reaches into a flight pulls the airborne feet
+    back toward the input after the flight adjustments and breaks the
+    conserved angular momentum and the parabola they made; the fade lies
+    on the ground frames (the one blend ramp, through
+    :func:`mocaplab.refinement.blend_weights`).
+    """
+    stages = flight_stages(contacts)
+    if not stages:
+        return list(goals)
+    n = contacts.n_frames
+    keep = 1.0 - blend_weights(n, stages, window=int(round(PLANT_BLEND * fps)))
+    return [dataclasses.replace(g, weights=np.asarray(g.weights) * keep) for g in goals]
+
+
 def _footplant_fn(
     footplants: Footplants, contacts: Contacts, reference: Motion
 ) -> Callable[[_Posed], _Posed] | None:
@@ -918,10 +1151,11 @@ def _footplant_fn(
         raise ValueError(f"Expected `footplants` 'auto', 'plant', 'refine', 'ik', a callable or None, got {footplants!r}")
     if footplants == "refine":
         return lambda p: _posed(refine(p.motion, contacts=contacts, reference=reference))
-    if footplants == "ik":
-        goals = _reference_goals(reference, contacts, blend=FOOT_BLEND)
-    else:  # "plant", "auto"
+    if footplants == "plant":
         goals = foot_goals(reference, contacts, reference=reference, blend=PLANT_BLEND)
+    else:  # "ik", "auto"
+        goals = _reference_goals(reference, contacts, blend=FOOT_BLEND)
+    goals = _outside_flights(goals, contacts, reference.fps)
 
     def plant(p: _Posed) -> _Posed:
         # solve_goals without root lowering; it turns the legs' joints only
@@ -986,7 +1220,7 @@ class TouchUpState:
     index: int
     balance: Balance
     label: str = "input"
-    flight_window: float = 0.5
+    flight_window: float = FLIGHT_WINDOW
     footplants: Footplants = "auto"
     fix: Callable[[_Posed], _Posed] | None = None
     kinematics: tuple[Array, Array] | None = None
@@ -1010,8 +1244,44 @@ class TouchUpState:
 
     @property
     def mean_zmp_distance(self) -> float:
-        """Mean of :attr:`zmp_distance` over frames with a ZMP, metres."""
+        """Mean of :attr:`zmp_distance` over the ground frames with a ZMP, metres (Figure 9).
+
+        :attr:`dropped` ground frames without a ZMP are left out (never NaN:
+        see :attr:`mocaplab.physics.Balance.mean_distance`).
+        """
         return self.balance.mean_distance
+
+    @property
+    def dropped(self) -> int:
+        """Ground frames without a ZMP (negative vertical ground force), left out of the means."""
+        return self.balance.dropped
+
+    @cached_property
+    def violation(self) -> Array:
+        """How far each frame is from its physical law, metres, shape (F,).
+
+        Ground frames: the ZMP's distance outside the support polygon
+        (:attr:`zmp_distance`; NaN where there is no ZMP, see
+        :attr:`dropped`).  Flight frames: the distance of the centre of mass
+        from the flight's ballistic path with the same take-off and landing
+        points (the target of section 3.4.2).
+        """
+        out = np.array(self.balance.distance, copy=True)
+        com, dt = self.balance.com, self.motion.dt
+        for a, b in flight_stages(self.contacts):
+            out[a:b] = np.linalg.norm(com[a:b] - _ballistic(com[a], com[b - 1], b - a, dt), axis=1)
+        return out
+
+    @property
+    def error(self) -> float:
+        """The touch-up's error measure: the mean of :attr:`violation`, metres.
+
+        Frames without a ZMP (:attr:`dropped`) are left out; on a clip
+        without flights it is :attr:`mean_zmp_distance`.
+        """
+        v = self.violation
+        ok = np.isfinite(v)
+        return float(v[ok].mean()) if ok.any() else float("inf")
 
     def with_schedule(self, schedule: Sequence[Adjustment]) -> TouchUpState:
         """The same state with another schedule (applied from the next step on; link sets checked)."""
@@ -1027,11 +1297,20 @@ def start(
     body: Body | None = None,
     schedule: str | Adjustment | Sequence[Adjustment] = "default",
     contacts: Contacts | None = None,
-    flight_window: float = 0.5,
+    flight_window: float = FLIGHT_WINDOW,
     footplants: Footplants = "auto",
     roles: Mapping[str, Any] | None = None,
 ) -> TouchUpState:
-    """The initial state of a touch-up (no step done).  See :func:`touch_up`."""
+    """The initial state of a touch-up (no step done).  See :func:`touch_up`.
+
+    Raises ValueError when no frame has a planted joint (nothing to balance,
+    no take-off or landing to fit a flight to); warns
+    (:class:`TouchUpWarning`) about flights longer than :data:`LONG_FLIGHT`,
+    feet that slide during their contacts (more than :data:`SLIDE_WARNING`
+    over a median contact: the touch-up keeps the feet where the input has
+    them, so plant them first with :func:`mocaplab.refinement.refine`) and
+    ground frames without a ZMP.
+    """
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
     known = resolve_roles(motion, roles)
@@ -1043,17 +1322,82 @@ def start(
     _check_contacts(contacts, motion)
     if not (np.isfinite(flight_window) and flight_window >= 0):
         raise ValueError(f"Expected `flight_window` >= 0 seconds, got {flight_window!r}")
+    _check_stages(motion, contacts)
     fix = _footplant_fn(footplants, contacts, motion)
     sched = _as_schedule(schedule, contacts)
     for adj in sched:
         link_sets(motion.skeleton, adj, roles=known)  # validate the link sets early
     posed = _posed(motion)
     bal = balance(motion, body, contacts=contacts, fk=posed[1:])
+    _check_input(motion, contacts, bal, posed.gpos)
     path = known.index("pelvis") if "pelvis" in known else motion.path_joint
     return TouchUpState(
         motion, motion, body, contacts, sched, 0, bal, "input", float(flight_window), footplants, fix, posed[1:],
         known, int(path),
     )
+
+
+def _check_stages(motion: Motion, contacts: Contacts) -> None:
+    """No planted frame at all is an error; flights longer than :data:`LONG_FLIGHT` warn."""
+    ground = np.asarray(contacts.mask, dtype=bool).any(axis=1)
+    if not ground.any():
+        raise ValueError(
+            f"Expected `contacts` with a planted joint on at least one frame, got none on any of the "
+            f"{motion.n_frames} frames: without ground frames there is no ZMP to balance and no take-off or "
+            "landing to fit a flight to. Check the contact detection (mocaplab.contacts.foot_contacts: its "
+            "`height` and `speed` thresholds, the clip's units) or pass `contacts=`"
+        )
+    long = [(a, b) for a, b in flight_stages(contacts, at_ends=True) if (b - a) / motion.fps > LONG_FLIGHT]
+    if long:
+        spans = ", ".join(f"frames {a}-{b - 1} ({(b - a) / motion.fps:.2f} s)" for a, b in long)
+        warnings.warn(
+            f"Flights longer than {LONG_FLIGHT:g} s: {spans}. A human jump lasts well under a second; are the "
+            "contacts right (a walk whose feet are not detected as planted)? Each is touched up as one "
+            "ballistic flight (one that touches the first or last frame is left alone)",
+            TouchUpWarning,
+            stacklevel=3,
+        )
+
+
+def _median_slide(gpos: Array, skeleton: Skeleton, contacts: Contacts) -> float:
+    """Median horizontal slide of the planted joints over a contact interval, metres.
+
+    Measured over the middle half of each interval of at least 4 frames and
+    scaled to the whole interval: the detected intervals include the slow
+    ends of a foot's landing and take-off, where even a captured foot still
+    moves a few centimetres; its middle stays put.
+    """
+    slides = []
+    for name in contacts.joints:
+        j = skeleton.index(name)
+        for a, b in contacts.intervals(name):
+            if b - a < 4:
+                continue
+            q1, q3 = a + (b - a) // 4, a + (3 * (b - a)) // 4
+            step_xz = (gpos[q3, j] - gpos[q1, j])[[0, 2]]
+            slides.append(float(np.linalg.norm(step_xz)) * (b - a) / (q3 - q1))
+    return float(np.median(slides)) if slides else 0.0
+
+
+def _check_input(motion: Motion, contacts: Contacts, bal: Balance, gpos: Array) -> None:
+    """Warn about sliding feet and ground frames without a ZMP."""
+    slide = _median_slide(gpos, motion.skeleton, contacts)
+    if slide > SLIDE_WARNING:
+        warnings.warn(
+            f"The planted joints slide by {100 * slide:.0f} cm over a median contact (more than "
+            f"{100 * SLIDE_WARNING:.0f} cm): the touch-up keeps the feet where the input has them and measures "
+            "balance against where they are. Run refine first: mocaplab.refine(edited, reference=original)",
+            TouchUpWarning,
+            stacklevel=3,
+        )
+    if bal.dropped:
+        warnings.warn(
+            f"{bal.dropped} of {int(bal.ground.sum())} ground frames have no ZMP (the vertical ground force "
+            "would be negative: the body accelerates down faster than gravity); they are left out of the mean "
+            "ZMP distance and of the corrections (TouchUpState.dropped counts them)",
+            TouchUpWarning,
+            stacklevel=3,
+        )
 
 
 def step(state: TouchUpState) -> TouchUpState:
@@ -1068,11 +1412,13 @@ def step(state: TouchUpState) -> TouchUpState:
         new = _ground_step(posed, body, adj, sets, state.balance, state.path_joint)
     elif stages := flight_stages(contacts):
         window = int(round(state.flight_window * motion.fps))
-        weights = _flight_weights(motion.n_frames, stages, window)
-        new = _flight_step(posed, body, adj, sets, stages, weights, window, state.path_joint)
+        new = _flight_step(posed, body, adj, sets, stages, window, state.path_joint)
     else:
         new = posed
-    if state.fix is not None and new is not posed and _moves_contacts(motion.skeleton, sets, contacts):
+    # a flight adjustment translates the whole body (section 3.4.2 here), so
+    # it can move the feet whatever its link sets
+    moves_feet = adj.stage == "flight" or _moves_contacts(motion.skeleton, sets, contacts)
+    if state.fix is not None and new is not posed and moves_feet:
         new = state.fix(new)
     if new is posed:
         bal = state.balance
@@ -1097,9 +1443,15 @@ class TouchUpHistory:
     Attributes
     ----------
     states : tuple of TouchUpState
+    stopped : str
+        Why the touch-up stopped: ``"iterations"`` (the passes asked for
+        were done), ``"stalled"`` (a pass lowered the best error by less than
+        the tolerance), ``"solved"`` (the error reached 0) or ``""`` (a
+        history built from a session).
     """
 
     states: tuple[TouchUpState, ...]
+    stopped: str = ""
 
     @property
     def motions(self) -> list[Motion]:
@@ -1107,9 +1459,35 @@ class TouchUpHistory:
         return [s.motion for s in self.states]
 
     @property
+    def best(self) -> int:
+        """Index of the best state: the complete pass (or the input) with the lowest :attr:`TouchUpState.error`.
+
+        Only states that end a pass over the schedule are candidates (inside
+        a pass some link sets are not adjusted yet), and only those with no
+        more ground frames without a ZMP than the input (dropping a frame
+        must not pass for fixing it).  The earliest wins a tie.
+        """
+        first = self.states[0]
+        best, err = 0, first.error
+        for k, st in enumerate(self.states[1:], start=1):
+            if st.index % len(st.schedule) == 0 and st.dropped <= first.dropped and st.error < err:
+                best, err = k, st.error
+        return best
+
+    @property
     def final(self) -> Motion:
-        """The touched-up motion."""
+        """The touched-up motion: the :attr:`best` state's (more passes never make it worse)."""
+        return self.states[self.best].motion
+
+    @property
+    def last(self) -> Motion:
+        """The motion of the last state (what the stepper shows after the last step)."""
         return self.states[-1].motion
+
+    @property
+    def passes(self) -> int:
+        """Complete passes over the schedule in the history."""
+        return self.states[-1].iteration
 
     @property
     def labels(self) -> list[str]:
@@ -1126,6 +1504,16 @@ class TouchUpHistory:
         """Mean ZMP distance per step (Figure 9), metres, shape (S + 1,); index 0 the input."""
         return np.array([s.mean_zmp_distance for s in self.states])
 
+    @property
+    def errors(self) -> Array:
+        """:attr:`TouchUpState.error` per step, metres, shape (S + 1,); index 0 the input."""
+        return np.array([s.error for s in self.states])
+
+    @property
+    def dropped(self) -> NDArray[np.int64]:
+        """Ground frames without a ZMP per step (left out of the means), shape (S + 1,)."""
+        return np.array([s.dropped for s in self.states], dtype=np.int64)
+
     def __len__(self) -> int:
         return len(self.states)
 
@@ -1137,7 +1525,8 @@ def touch_up(
     schedule: str | Adjustment | Sequence[Adjustment] = "default",
     contacts: Contacts | None = None,
     iterations: int = 3,
-    flight_window: float = 0.5,
+    tol: float | None = STALL_TOLERANCE,
+    flight_window: float = FLIGHT_WINDOW,
     footplants: Footplants = "auto",
     roles: Mapping[str, Any] | None = None,
 ) -> TouchUpHistory:
@@ -1146,21 +1535,30 @@ def touch_up(
     Parameters
     ----------
     motion : Motion
-        The (edited) motion; never modified.
+        The (edited) motion; never modified.  Its feet should be planted
+        (:func:`mocaplab.refinement.refine`): the touch-up keeps them where
+        they are and warns when they slide.
     body : Body, optional
         Masses; default :meth:`Body.from_skeleton` (de Leva table).  Fitted
         masses (:func:`mocaplab.physics.fit_masses`) make a captured clip
         change less.
     schedule : "default", "ground", "flight", Adjustment or sequence of Adjustment
-        ``"default"``: the paper's ground schedule, plus its flight schedule
-        when the clip has flight frames.
+        ``"default"``: the paper's flight schedule followed by its ground
+        schedule when the clip has flight frames (each pass ends balancing
+        the ground frames, landings included), else the ground schedule.
     contacts : Contacts, optional
         Planted joints of the input (default
         :func:`mocaplab.contacts.foot_contacts`); they decide ground versus
         flight frames and the support polygons.
     iterations : int
-        Passes over the schedule; the history has
-        ``iterations * len(schedule) + 1`` states.
+        Passes over the schedule, at most.
+    tol : float or None
+        Stall tolerance: stop after a pass that lowers the best
+        :attr:`TouchUpState.error` so far by less than ``tol`` times it
+        (default :data:`STALL_TOLERANCE`, 2 %: a pass then buys less than a
+        millimetre on a walk balanced to a few centimetres).  A pass that
+        makes the error worse always stops.  ``None`` runs all
+        ``iterations`` passes.
     flight_window : float
         Seconds of ground frames on each side of a flight adjusted as flight
         and blended to zero (0.5 s in the paper).
@@ -1175,19 +1573,39 @@ def touch_up(
     Returns
     -------
     TouchUpHistory
-        ``.motions``, ``.zmp_distance``, ``.mean_zmp_distance``, ``.final``.
+        Every state, the input first (``.motions``, ``.zmp_distance``,
+        ``.mean_zmp_distance``, ``.errors``); ``.final`` is the best complete
+        pass (``.best``), never worse than the input, ``.last`` the last state.
+
+    Examples
+    --------
+    >>> history = touch_up(bent_walk, iterations=12)           # doctest: +SKIP
+    >>> history.passes, history.stopped, history.errors[history.best]  # doctest: +SKIP
     """
     if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
         raise ValueError(f"Expected `iterations` to be an integer >= 0, got {iterations!r}")
+    if tol is not None and not (np.isfinite(tol) and tol >= 0):
+        raise ValueError(f"Expected `tol` >= 0 (a share of the error) or None, got {tol!r}")
     state = start(
         motion, body=body, schedule=schedule, contacts=contacts, flight_window=flight_window, footplants=footplants,
         roles=roles,
     )
     states = [state]
-    for _ in range(int(iterations) * len(state.schedule)):
-        state = step(state)
-        states.append(state)
-    return TouchUpHistory(tuple(states))
+    best = state.error
+    stopped = "iterations"
+    for _ in range(int(iterations)):
+        if best == 0.0:
+            stopped = "solved"
+            break
+        for _ in range(len(state.schedule)):
+            state = step(state)
+            states.append(state)
+        err = state.error if state.dropped <= states[0].dropped else float("inf")
+        before, best = best, min(best, err)
+        if tol is not None and before - err < tol * before:
+            stopped = "stalled"
+            break
+    return TouchUpHistory(tuple(states), stopped)
 
 
 # ======================================================================

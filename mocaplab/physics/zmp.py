@@ -344,13 +344,14 @@ class Balance:
     Attributes
     ----------
     zmp : ndarray, shape (F, 3)
-        Equation 4 (``y = 0``); NaN on flight frames.
+        Equation 4 (``y = 0``); NaN on flight frames and on ground frames
+        whose vertical ground force would be negative (see :attr:`dropped`).
     projection : ndarray, shape (F, 3)
         Nearest point of the support polygon to the ZMP (``y = 0``; the ZMP
         itself when inside).
     distance : ndarray, shape (F,)
         The paper's error ``f``: distance of the ZMP outside the support
-        polygon, 0 inside, NaN on flight frames.
+        polygon, 0 inside, NaN where :attr:`zmp` is.
     com : ndarray, shape (F, 3)
         Centre of mass.
     ground : ndarray of bool, shape (F,)
@@ -387,11 +388,26 @@ class Balance:
         return signed
 
     @property
+    def dropped(self) -> int:
+        """Ground frames without a ZMP (vertical ground force at most 0.1 % of the weight, or negative).
+
+        They are left out of :attr:`mean_distance`; this is how many.
+        """
+        return int(np.count_nonzero(self.ground & ~np.isfinite(self.distance)))
+
+    @property
     def mean_distance(self) -> float:
-        """Mean of :attr:`distance` over the frames that have a ZMP (metres)."""
+        """Mean of :attr:`distance` over the ground frames that have a ZMP (metres).
+
+        Never NaN: 0.0 when the clip has no ground frame (nothing to
+        balance), infinity when it has ground frames but none with a ZMP.
+        :attr:`dropped` counts the ground frames left out.
+        """
         d = self.distance
         ok = np.isfinite(d)
-        return float(d[ok].mean()) if ok.any() else float("nan")
+        if ok.any():
+            return float(d[ok].mean())
+        return float("inf") if self.ground.any() else 0.0
 
     def polygon(self, frame: int) -> Array:
         """Support polygon of one frame as ground points ``(V, 3)`` (``y = 0``), via ConvexHull."""

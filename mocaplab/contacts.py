@@ -8,8 +8,9 @@ mask over frames:
   *slow*.  Thresholds are in metres and metres per second.
 * :func:`stillness_contacts`, after Coleman et al. 2008 Appendix B: scanning
   forward in time, a joint whose world position stays within a tolerance for
-  at least a minimum time (0.25 s) starts a contact, which is then expanded
-  over the neighbouring frames that stay within the tolerance.
+  at least a minimum time (0.25 s, or scaled to the gait for runs) starts a
+  contact, which is then expanded over the neighbouring frames that stay
+  within the tolerance.
 
 Frame intervals are half-open ``(start, stop)`` pairs: frames
 ``start, ..., stop - 1``.  :func:`intervals_from_mask` and
@@ -354,14 +355,19 @@ def foot_contacts(
 # --------------------------------------------------------------------------
 # Coleman et al. 2008 Appendix B: still within a tolerance for 0.25 s
 # --------------------------------------------------------------------------
+GAIT_TRAVEL = 0.3
+"""Metres the body travels over a planted foot in ``min_duration="gait"`` (0.25 s at a brisk 1.2 m/s walk)."""
+
+
 def stillness_contacts(
     motion: Motion,
     *,
     joints: Sequence[str] | None = None,
     roles: Mapping[str, Any] | None = None,
     tolerance: float = 0.03,
-    min_duration: float = 0.25,
+    min_duration: float | Literal["gait"] = 0.25,
     max_height: float | None = None,
+    travel: float = GAIT_TRAVEL,
 ) -> Contacts:
     """Environmental contacts: joints that stay still for long enough.
 
@@ -392,11 +398,21 @@ def stillness_contacts(
         Radius in metres.  The paper sets it "slightly larger than the
         apparent error introduced by noise"; 3 cm suits CMU feet at 120 fps
         (a planted ankle drifts 1-2 cm as the foot rolls).
-    min_duration : float
-        Minimum still time in seconds (0.25 s in the paper).
+    min_duration : float or "gait"
+        Minimum still time in seconds (0.25 s in the paper).  ``"gait"``
+        scales it to the gait: a window starting at a frame must last
+        ``min(0.25 s, travel / v)``, ``v`` being the pelvis's mean horizontal
+        speed over the next 0.25 s (at least 2 frames).  The paper's 0.25 s
+        holds up to a brisk walk; in a run a planted foot is still for only
+        0.07-0.13 s (CMU 09_06, 16_35) and 0.25 s finds no contact at all.
+        Jumps in place keep 0.25 s, so a foot briefly still at the top of a
+        vertical jump is not taken for a contact; and a joint moving with a
+        fast body cannot be still in the world, whatever the window.
     max_height : float, optional
         If given, frames where the joint is higher than this (metres, absolute
         y) cannot be in contact: a way to ignore a foot held still in the air.
+    travel : float
+        Metres of pelvis travel for ``min_duration="gait"`` (default 0.3 m).
 
     Returns
     -------
@@ -405,21 +421,38 @@ def stillness_contacts(
     names, idx = _resolve(motion, joints, roles)
     if not np.isfinite(tolerance) or tolerance <= 0:
         raise ValueError(f"Expected `tolerance` > 0 metres, got {tolerance!r}")
-    window = max(2, _frames(min_duration, motion.fps, "min_duration"))
-    pos = motion.global_positions()[:, idx]  # (F, n, 3)
     n_frames = motion.n_frames
+    if isinstance(min_duration, str):
+        if min_duration != "gait":
+            raise ValueError(f"Expected `min_duration` in seconds or 'gait', got {min_duration!r}")
+        if not np.isfinite(travel) or travel <= 0:
+            raise ValueError(f"Expected `travel` > 0 metres, got {travel!r}")
+        lengths = _gait_windows(motion, travel)
+    else:
+        lengths = np.full(n_frames, max(2, _frames(min_duration, motion.fps, "min_duration")))
+    pos = motion.global_positions()[:, idx]  # (F, n, 3)
     mask = np.zeros((n_frames, len(names)), dtype=bool)
     allowed = np.ones((n_frames, len(names)), dtype=bool)
     if max_height is not None:
         allowed = pos[..., 1] <= float(max_height)
-    if n_frames < window:
-        return Contacts(names, mask, motion.fps)
-    # (W, n, 3, window): every window of every joint at once
-    windows = np.lib.stride_tricks.sliding_window_view(pos, window, axis=0)
-    anchors = windows.mean(axis=-1)  # (W, n, 3)
-    spread = np.linalg.norm(windows - anchors[..., None], axis=2).max(axis=-1)  # (W, n)
-    ok_window = np.lib.stride_tricks.sliding_window_view(allowed, window, axis=0).all(axis=-1)
-    still = (spread <= tolerance) & ok_window  # (W, n)
+    # still[s, k]: the window of lengths[s] frames from s stays within tolerance of its mean, the anchor
+    still = np.zeros((n_frames, len(names)), dtype=bool)
+    anchors = np.zeros((n_frames, len(names), 3))
+    for window in np.unique(lengths):
+        if n_frames < window:
+            continue
+        rows = np.flatnonzero(lengths[: n_frames - window + 1] == window)
+        if rows.size == 0:
+            continue
+        # (W, n, 3, window): every window of every joint at once
+        windows = np.lib.stride_tricks.sliding_window_view(pos, window, axis=0)
+        ok_window = np.lib.stride_tricks.sliding_window_view(allowed, window, axis=0)
+        if rows.size < windows.shape[0]:
+            windows, ok_window = windows[rows], ok_window[rows]
+        anchor = windows.mean(axis=-1)  # (W, n, 3)
+        spread = np.linalg.norm(windows - anchor[..., None], axis=2).max(axis=-1)  # (W, n)
+        still[rows] = (spread <= tolerance) & ok_window.all(axis=-1)
+        anchors[rows] = anchor
     for k in range(len(names)):
         starts = np.flatnonzero(still[:, k])
         done = 0  # frames before `done` belong to earlier contacts or were searched
@@ -428,6 +461,7 @@ def stillness_contacts(
             if starts.size == 0:
                 break
             s = int(starts[0])
+            window = int(lengths[s])
             anchor = anchors[s, k]
             inside = (np.linalg.norm(pos[:, k] - anchor, axis=-1) <= tolerance) & allowed[:, k]
             outside_after = np.flatnonzero(~inside[s + window :])
@@ -437,3 +471,23 @@ def stillness_contacts(
             mask[start:stop, k] = True
             done = stop
     return Contacts(names, mask, motion.fps)
+
+
+def _gait_windows(motion: Motion, travel: float, cap: float = 0.25) -> NDArray[np.int64]:
+    """Frames a still window starting at each frame must last, scaled to the gait, shape (F,).
+
+    ``min(cap, travel / v)`` seconds (at least 2 frames), ``v`` the pelvis's
+    mean horizontal speed over the ``cap`` seconds from that frame (Y up).
+    """
+    fps = motion.fps
+    longest = max(2, _frames(cap, fps, "min_duration"))
+    p = np.asarray(motion.pelvis_positions)[:, [0, 2]]
+    n = p.shape[0]
+    if n < 2:
+        return np.full(n, longest)
+    speed = np.linalg.norm(np.gradient(p, axis=0), axis=-1) * fps  # (F,) m/s
+    c = np.concatenate([[0.0], np.cumsum(speed)])
+    stop = np.minimum(np.arange(n) + longest, n)
+    mean = (c[stop] - c[np.arange(n)]) / (stop - np.arange(n))
+    seconds = np.minimum(cap, travel / np.maximum(mean, 1e-9))
+    return np.clip(np.round(seconds * fps).astype(np.int64), 2, longest)

@@ -592,6 +592,7 @@ def solve_goals(
     drop_window: float = 0.15,
     dls_options: dict[str, Any] | None = None,
     fk: tuple[Array, Array] | None = None,
+    hinges: Mapping[JointRef, Any] | None = None,
 ) -> Motion:
     """The IK layer: meet every goal on every frame (no temporal smoothing).
 
@@ -618,6 +619,13 @@ def solve_goals(
     fk : (global_rotations, global_positions), optional
         The motion's forward kinematics when already at hand (saves a pass;
         physical touch-up carries them along).
+    hinges : mapping, optional
+        For two-bone goals (``"foot"`` and ``"limb"`` without a chain), keyed
+        by the goal's joint: the hinge of the limb's middle joint in that
+        joint's local frame, shape (3,) (see :func:`~mocaplab.ik.hinge_axes`),
+        for instance measured on the motion before an edit so a knee keeps
+        the input's bending direction.  Default: estimated from ``motion``
+        itself.
 
     Returns
     -------
@@ -640,7 +648,7 @@ def solve_goals(
     """
     return _solve_goals(
         motion, goals, adjust_root=adjust_root, reach=reach, max_drop=max_drop, drop_window=drop_window,
-        dls_options=dls_options, fk=fk,
+        dls_options=dls_options, fk=fk, hinges=hinges,
     )[0]
 
 
@@ -654,6 +662,7 @@ def _solve_goals(
     drop_window: float,
     dls_options: dict[str, Any] | None,
     fk: tuple[Array, Array] | None,
+    hinges: Mapping[JointRef, Any] | None = None,
 ) -> tuple[Motion, tuple[Array, Array]]:
     """:func:`solve_goals`, also returning the new motion's forward kinematics.
 
@@ -666,6 +675,10 @@ def _solve_goals(
     sk = motion.skeleton
     n = motion.n_frames
     dls, limbs, feet, toes = _resolve_goals(sk, goals, n)
+    given = {} if hinges is None else {_joint(sk, j, "hinges"): np.asarray(h, dtype=float) for j, h in hinges.items()}
+    for j, h in given.items():
+        if h.shape != (3,) or not np.all(np.isfinite(h)):
+            raise ValueError(f"Expected a finite hinge axis of shape (3,) for {sk.names[j]!r}, got shape {h.shape}")
     foot_of = {j: g for j, g in feet}
     foot_joints = sorted(set(foot_of) | set(toes))
     rot = np.array(motion.rotations, copy=True)
@@ -705,7 +718,9 @@ def _solve_goals(
     if limbs:
         fk = (grot, gpos)
         for j, g in limbs:
-            rot = two_bone_ik(rot, root, sk, j, _blend(gpos[:, j], g), end_rotation=grot[:, j], fk=fk)
+            rot = two_bone_ik(
+                rot, root, sk, j, _blend(gpos[:, j], g), end_rotation=grot[:, j], fk=fk, bend_axis=given.get(j)
+            )
         grot, gpos = _fk(rot, root, motion)
     if foot_joints:
         legs = [limb_joints(sk, ankle) for ankle in foot_joints]
@@ -718,7 +733,11 @@ def _solve_goals(
             ju, jm, je = (np.array(j) for j in zip(*legs, strict=True))
             a, b, c = gpos[:, ju], gpos[:, jm], gpos[:, je]
             # each knee bends about its own hinge over the clip, never backwards
-            hinge = quat.rotate(grot[:, jm], hinge_axes(grot, gpos, legs))
+            local = hinge_axes(grot, gpos, legs)
+            for k, ankle in enumerate(foot_joints):
+                if ankle in given:
+                    local[k] = given[ankle]
+            hinge = quat.rotate(grot[:, jm], local)
             q_up, q_mid = two_bone_deltas(a, b, c, np.stack(targets, axis=1), hinge=hinge)
             rot = _two_bone_locals(rot, grot, sk.parents, (ju, jm, je), q_up, q_mid, grot[:, je])
             if toes:
@@ -732,7 +751,10 @@ def _solve_goals(
                 g_ankle = grot[:, ankles]
         else:
             for ankle, target in zip(foot_joints, targets, strict=True):
-                rot = two_bone_ik(rot, root, sk, ankle, target, end_rotation=grot[:, ankle], fk=(grot, gpos))
+                rot = two_bone_ik(
+                    rot, root, sk, ankle, target, end_rotation=grot[:, ankle], fk=(grot, gpos),
+                    bend_axis=given.get(ankle),
+                )
             if toes:
                 grot2, gpos2 = _refresh(rot, (grot, gpos), motion, [leg[0] for leg in legs])
                 ankle_pos, toe_pos = gpos2[:, ankles], gpos2[:, tips]

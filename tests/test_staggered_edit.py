@@ -104,6 +104,38 @@ def test_random_timing_is_seeded_bounded_and_selective(walk_sm) -> None:
     assert np.all(others == 0.0)
 
 
+def test_random_timing_per_limb(walk_sm) -> None:
+    """by="limb": one offset per pose and limb (the legs, the arms, the trunk), shared down the limb."""
+    from mocaplab.staggered import limb_groups
+    from mocaplab.staggered.edit import LIMBS
+
+    walk, sm = walk_sm
+    sk, roles = walk.skeleton, walk.skeleton.roles
+    group = limb_groups(sk)
+    name = {v: LIMBS[g] for v, g in zip(sm.variables, group, strict=True)}
+    assert name["root_position"] == name[roles["pelvis"]] == name[roles["head"]] == "trunk"
+    assert name[roles["left_ankle"]] == name[roles["left_toe"]] == name[roles["left_hip"]] == "left_leg"
+    assert name[roles["right_wrist"]] == name[roles["right_clavicle"]] == "right_arm"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StaggeredTimingWarning)
+        tau = 0.004  # small: no knot is stopped short by a neighbour, every offset shows whole
+        limb = sm.randomize(tau, seed=3, by="limb")
+        per_var = sm.randomize(tau, seed=3)
+    d = (limb.refinements - sm.refinements)[1:-1]
+    moving = ~np.all(sm.rotation_values == sm.rotation_values[:1], axis=(0, 2))  # still joints change nothing
+    for g in range(len(LIMBS)):
+        cols = np.flatnonzero((group == g) & np.r_[False, moving])
+        assert np.allclose(d[:, cols], d[:, cols[:1]]), LIMBS[g]  # one offset for the whole limb
+    arms = [np.flatnonzero(group == LIMBS.index(a))[1] for a in ("left_arm", "right_arm")]
+    assert not np.allclose(d[:, arms[0]], d[:, arms[1]])  # limbs differ: asymmetric timing
+    dv = (per_var.refinements - sm.refinements)[1:-1]
+    leg = np.flatnonzero(group == LIMBS.index("left_leg"))
+    assert np.ptp(dv[:, leg], axis=1).max() > 0  # per variable, a limb's joints differ
+    assert np.abs(d).max() <= tau + 1e-12
+    with pytest.raises(ValueError, match="by"):
+        sm.randomize(0.01, by="joint")  # type: ignore[arg-type]
+
+
 def test_retime_moves_the_pose_and_its_knots(walk_sm) -> None:
     walk, sm = walk_sm
     k = 5
@@ -112,14 +144,14 @@ def test_retime_moves_the_pose_and_its_knots(walk_sm) -> None:
         warnings.simplefilter("ignore", StaggeredTimingWarning)
         out = sm.retime(k, float(sm.times[k] + shift))
     assert out.times[k] == pytest.approx(sm.times[k] + shift)
-    # the refined knot values are reached at the shifted knot times
-    m = out.evaluate()
+    # the refined knot values are reached at the shifted knot times (the noise layer aside)
+    m = out.evaluate(noise=False)
     j = sm.variable_index("RightLeg")
     f = int(round((sm.times[k] + sm.refinements[k, j] + shift) * walk.fps))
     assert angle(m.rotations[f, j - 1], sm.rotation_values[k, j - 1]) < 1e-9
     # far from the pose nothing changes
     far = (walk.times < sm.times[k - 1] - 0.3) | (walk.times > sm.times[k + 1] + 0.3)
-    assert angle(m.rotations[far], walk.rotations[far]).max() < 1e-9
+    assert angle(out.evaluate().rotations[far], walk.rotations[far]).max() < 1e-9
     with pytest.raises(ValueError, match="strictly between"):
         sm.retime(k, float(sm.times[k + 1] + 0.01))
     with pytest.raises(ValueError, match="first pose"):
@@ -162,6 +194,26 @@ def test_editing_the_non_staggered_pose_offsets_the_editing_knot(walk_sm) -> Non
     assert angle(before, after) == pytest.approx(0.2, abs=1e-6)
     others = np.delete(np.arange(walk.n_joints), j)
     assert angle(out.rotation_values[:, others], sm.rotation_values[:, others]).max() < 1e-12
+
+
+def test_edit_offsets_blend_with_the_one_ramp(walk_sm) -> None:
+    """Section 5.1's change of a knot fades to the neighbour's by displacement.blend_ramp (C2, no acceleration jump)."""
+    from mocaplab.displacement import blend_ramp
+
+    walk, _ = walk_sm
+    # no refinements: the editing knots are the extreme knots, the ramp spans whole segments
+    flat = extract(walk, max_poses=14, max_refinement=0.0, optimize=False)
+    k, j = 6, walk.skeleton.index("LeftArm")
+    turn = quat.from_axis_angle([0, 0, 1], 0.3)
+    out = flat.edit_pose(k, rotations={"LeftArm": quat.mul(flat.rotation_values[k, j], turn)})
+    t = walk.times[(walk.times > flat.times[k]) & (walk.times < flat.times[k + 1])]
+    k0, k1, tn = flat.locate(t)
+    s_old = flat.spline_values(k0, k1, tn)[1][:, j]
+    d_old = quat.exp(flat.displacement_values(k0 + tn * (k1 - k0))[1][:, j])
+    new = out.evaluate(t, noise=False).rotations[:, j]
+    offset = quat.mul(quat.mul(quat.inv(s_old), new), quat.inv(d_old))  # new = s (+) offset (+) d
+    x = tn[:, j + 1]
+    assert np.allclose(quat.angle(offset), 0.3 * (1.0 - blend_ramp(x)), atol=1e-9)
 
 
 def test_relative_exaggeration(walk_sm) -> None:
@@ -284,6 +336,168 @@ def test_constraint_layer_holds_the_whole_foot(cmu) -> None:
     assert held[on[:, ankles]].mean() < 0.8 * even[on[:, ankles]].mean()
     with pytest.raises(ValueError, match="ankles, toes"):
         type(layer).from_contacts(walk, sm_contacts(walk), sm.times, joints=[walk.skeleton.roles["head"]])
+
+
+def _knee_flexion(m, hinges, legs) -> np.ndarray:
+    """Signed knee flexion (degrees) about the input's hinges, shape (F, 2): negative bends backwards."""
+    g, p = m.global_rotations(), m.global_positions()
+    out = []
+    for (u, k, a), h in zip(legs, hinges, strict=True):
+        thigh, shank = p[:, u] - p[:, k], p[:, a] - p[:, k]
+        axis = quat.rotate(g[:, k], h)
+        out.append(np.degrees(np.arctan2(np.einsum("ij,ij->i", np.cross(thigh, shank), axis), -np.sum(thigh * shank, -1))))
+    return np.stack(out, axis=1)
+
+
+def _peak_acceleration(deg: np.ndarray, fps: float) -> float:
+    return float(np.abs(np.diff(np.radians(deg), 2, axis=0)).max() * fps**2)
+
+
+@pytest.fixture(scope="module")
+def walk_layer(mocap_dir):
+    from mocaplab import data
+    from mocaplab.ik import hinge_axes, limb_joints
+
+    walk = data.cmu("16_15")
+    sm = extract(walk, constraints=True)
+    legs = [limb_joints(walk.skeleton, walk.skeleton.roles[f"{s}_ankle"]) for s in ("left", "right")]
+    return walk, sm, legs, hinge_axes(walk.global_rotations(), walk.global_positions(), legs)
+
+
+def test_constraint_layer_keeps_the_input_knee_bend(walk_layer) -> None:
+    """Exaggerated legs (w_r = 0.5) straighten the knees; the layer never bends one backwards, nor snaps it."""
+    walk, sm, legs, hinges = walk_layer
+    layer = sm.constraints
+    assert layer.hinges is not None and np.allclose(layer.hinges[[0, 2]], hinges)  # measured on the input
+    roles = walk.skeleton.roles
+    edited = sm.exaggerate(0.5, joints=[roles[f"{s}_{p}"] for s in ("left", "right") for p in ("hip", "knee", "ankle")])
+    before = _knee_flexion(walk, hinges, legs)
+    free = _knee_flexion(edited.evaluate(constraints=False), hinges, legs)
+    held = _knee_flexion(edited.evaluate(), hinges, legs)
+    assert before.min() > 10.0 and free.min() < 5.0  # the edit straightens the knees
+    assert held.min() > 0.0
+    assert _peak_acceleration(held, walk.fps) < 3.0 * _peak_acceleration(free, walk.fps)
+    # the hinge of the input, not of the edited frames: a leg solved on hyperextended frames bends forward
+    from mocaplab.refinement import Goal, solve_goals
+
+    ankle = roles["left_ankle"]
+    j = walk.skeleton.index(ankle)
+    bent_back = walk[100:140]
+    rot = np.array(bent_back.rotations)
+    knee = legs[0][1]
+    rot[:, knee] = quat.mul(rot[:, knee], quat.from_axis_angle(hinges[0], np.radians(before[100:140, 0] + 5.0)))
+    bent_back = bent_back.replace(rotations=rot)  # every frame 5 degrees backwards
+    assert _knee_flexion(bent_back, hinges, legs)[:, 0].max() < 0
+    target = bent_back.global_positions()[:, j] + [0.0, 0.05, 0.0]  # lift the ankle 5 cm: the knee must bend
+    goal = [Goal(ankle, target, np.ones(40), kind="foot")]
+    own = solve_goals(bent_back, goal, adjust_root=False)
+    given = solve_goals(bent_back, goal, adjust_root=False, hinges={ankle: hinges[0]})
+    assert _knee_flexion(own, hinges, legs)[:, 0].max() < 0  # estimated on these frames: further backwards
+    assert _knee_flexion(given, hinges, legs)[:, 0].min() > 0
+    with pytest.raises(ValueError, match="hinge"):
+        solve_goals(bent_back, goal, hinges={ankle: np.zeros(2)})
+
+
+def test_constraint_layer_does_not_fight_succession(walk_layer) -> None:
+    """Whole-body succession delays the legs; holding the plants adds little knee acceleration (root lowered)."""
+    import dataclasses
+
+    walk, sm, legs, hinges = walk_layer
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StaggeredTimingWarning)  # sparse poses: some knots pass halfway
+        edited = sm.succession(0.01, 1.0)
+    free = _peak_acceleration(_knee_flexion(edited.evaluate(constraints=False), hinges, legs), walk.fps)
+    held = _peak_acceleration(_knee_flexion(edited.evaluate(), hinges, legs), walk.fps)
+    assert held < 2.0 * free
+    # with the root held, the push-off legs snap straight and back
+    stiff = dataclasses.replace(edited, constraints=dataclasses.replace(sm.constraints, adjust_root=False))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        snapped = _peak_acceleration(_knee_flexion(stiff.evaluate(), hinges, legs), walk.fps)
+    assert snapped > 5.0 * free
+
+
+def test_unreachable_targets_warn_with_their_frames(walk_layer) -> None:
+    import dataclasses
+
+    from mocaplab.staggered import UnreachableTargetWarning
+
+    walk, sm, _, _ = walk_layer
+    k = 8
+    raised = sm.edit_pose(k, root_position=sm.root_values[k] + [0.0, 0.15, 0.0])
+    stiff = dataclasses.replace(raised, constraints=dataclasses.replace(sm.constraints, adjust_root=False))
+    with pytest.warns(UnreachableTargetWarning, match=r"out of reach on frames \d+-\d+") as caught:
+        out = stiff.evaluate()
+    frames = [int(x) for x in str(caught[0].message).split("frames ")[1].split(" ")[0].rstrip(",").split("-")]
+    w, tg = sm.constraints.weights_and_targets(stiff, out.times)
+    idx = [walk.skeleton.index(n) for n in sm.constraints.joints]
+    miss = np.linalg.norm(out.global_positions()[:, idx] - tg, axis=-1)
+    assert miss[frames[0] : frames[1] + 1].max() > 0.05  # the named frames are where the feet leave their plants
+    # by default the root comes down instead: the plants hold, no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UnreachableTargetWarning)
+        held = raised.evaluate()
+    on = w == 1.0
+    assert np.linalg.norm(held.global_positions()[:, idx] - tg, axis=-1)[on].max() < 0.003
+
+
+@pytest.mark.filterwarnings("ignore::mocaplab.staggered.StaggeredTimingWarning")
+def test_constraint_layer_follows_pose_edits_and_structure(walk_layer) -> None:
+    walk, sm, _, _ = walk_layer
+    roles = walk.skeleton.roles
+    edited = sm.exaggerate(0.5, joints=[roles[f"{s}_{p}"] for s in ("left", "right") for p in ("hip", "knee")])
+    out = edited.evaluate()
+    # inserting or deleting a pose leaves the layer where it was in time: the motion is unchanged
+    T = edited.knot_times
+    ins = edited.insert_pose(float(0.5 * (T[4].max() + T[5].min())))
+    assert max_diff(ins.evaluate(), out)[0] < 1e-6
+    assert np.allclose(ins.constraints.frame_times(ins), sm.constraints.frame_times(sm))
+    # retiming a pose carries its contacts; a variable's timing carries them with its knots
+    layer = sm.constraints
+    moved = sm.retime(6, float(sm.times[6] + 0.02))
+    f = int(round(sm.times[6] * walk.fps))
+    assert np.allclose(layer.frame_times(moved)[f], moved.times[6])
+    import dataclasses
+
+    own = dataclasses.replace(layer, timing=layer.joints)  # each foot joint's own refinements
+    late = sm.succession(0.01, 1.0)
+    e = layer.joints.index(roles["left_ankle"])
+    i = sm.variable_index(roles["left_ankle"])
+    k = 5
+    f = int(round((sm.times[k] + sm.refinements[k, i]) * walk.fps))  # the ankle's knot of pose k
+    assert np.isclose(own.frame_times(late)[f, e], late.times[k] + late.refinements[k, i])
+    assert np.isclose(layer.frame_times(late)[f, e], f / walk.fps)  # pose timing: succession leaves it
+
+
+def test_runs_get_a_constraint_layer(cmu) -> None:
+    run = cmu("09_06")
+    sm = extract(run, constraints=True)
+    assert sm.constraints.masks.any(axis=0).all()  # every foot joint has a stance
+    assert max_diff(sm.evaluate(), run)[0] < 1e-6
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StaggeredTimingWarning)
+        edited = sm.succession(0.01, 1.0)
+    w, tg = sm.constraints.weights_and_targets(edited, edited.evaluate().times)
+    idx = [run.skeleton.index(n) for n in sm.constraints.joints]
+    on = w == 1.0
+    free = np.linalg.norm(edited.evaluate(constraints=False).global_positions()[:, idx] - tg, axis=-1)[on]
+    held = np.linalg.norm(edited.evaluate().global_positions()[:, idx] - tg, axis=-1)[on]
+    assert free.max() > 0.01 and held.max() < 0.005
+
+
+def test_constraint_layer_validation(walk_layer) -> None:
+    import dataclasses
+
+    _, sm, _, _ = walk_layer
+    layer = sm.constraints
+    with pytest.raises(ValueError, match="timing"):
+        dataclasses.replace(layer, timing=("LeftFoot",))
+    with pytest.raises(ValueError, match="reach_tolerance"):
+        dataclasses.replace(layer, reach_tolerance=0.0)
+    with pytest.raises(ValueError, match="hinges"):
+        dataclasses.replace(layer, hinges=np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="masks"):
+        dataclasses.replace(layer, masks=layer.masks[:-1])
 
 
 def sm_contacts(walk):

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
+from mocaplab import data
 from mocaplab.contacts import Contacts, stillness_contacts
 from mocaplab.staggered import analyze, extract
 from mocaplab.staggered.features import (
@@ -83,6 +86,55 @@ def test_candidates_priorities_and_culling() -> None:
         cull_poses(cand, w, 1.0, fraction=1.5)
 
 
+def test_candidates_merge_ripples_and_close_maxima() -> None:
+    # a peak with a ripple on its flank (a dip of 2 %), a second peak, a bump near the end
+    P = np.array([0.0, 0.3, 0.5, 0.48, 0.49, 0.2, 0.1, 0.3, 0.6, 0.3, 0.2, 0.25, 0.1])
+    assert candidate_poses(P).tolist() == [0, 2, 4, 8, 11, 12]
+    assert candidate_poses(P, min_prominence=0.1).tolist() == [0, 2, 8, 11, 12]
+    # the lower of two maxima closer than `separation` goes; so do maxima that close to an end
+    assert candidate_poses(P, separation=3).tolist() == [0, 8, 12]
+    assert candidate_poses(P, separation=2).tolist() == [0, 2, 4, 8, 12]
+    with pytest.raises(ValueError, match="min_prominence"):
+        candidate_poses(P, min_prominence=2.0)
+    with pytest.raises(ValueError, match="separation"):
+        candidate_poses(P, separation=-1)
+
+
+def test_literal_candidates_are_every_local_maximum(cmu) -> None:
+    """With both rules off the candidates are the paper's literal ones: every maximum of P."""
+    walk = cmu("16_15")
+    a = analyze(walk, min_separation=0.0, min_prominence=0.0)
+    assert a.candidates.tolist() == [0, *local_maxima(a.probability).tolist(), walk.n_frames - 1]
+    gaps = np.diff(a.candidates[1:-1]) / walk.fps
+    assert np.mean(gaps < 0.05) > 0.1  # the ripples the default rules remove
+    with pytest.raises(ValueError, match="min_separation"):
+        analyze(walk, min_separation=-0.1)
+
+
+@pytest.mark.parametrize("trial", data.clips())
+def test_no_two_poses_closer_than_50_ms(cmu, trial: str) -> None:
+    """Every CMU clip of the mirror: candidates are distinct maxima, at least the filter's half-width apart."""
+    m = cmu(trial)
+    a = analyze(m)
+    gaps = np.diff(a.candidates) / m.fps
+    assert gaps.min() >= 0.075 - 1e-9 > 0.05
+    assert a.candidates.size - 2 < 6.0 * m.duration  # sparse: fewer than 6 interior poses per second
+
+
+def test_physical_motion_has_sparse_poses(cmu) -> None:
+    """Section 4.1: "physical motion tends to have very sparse poses"; looser motion has more."""
+
+    def per_second(trial: str, **kw) -> float:
+        m = cmu(trial)
+        return (analyze(m, **kw).candidates.size - 2) / m.duration
+
+    walk, dance, jump = per_second("16_15"), per_second("05_02"), per_second("16_01")
+    assert walk < 4.0 and jump < 4.0 and dance > 1.2 * walk
+    # the literal rule (every maximum) gives the walk as many poses as the dance
+    literal = {"min_separation": 0.0, "min_prominence": 0.0}
+    assert per_second("16_15", **literal) > 0.9 * per_second("05_02", **literal)
+
+
 def test_refinements_from_local_peaks_within_bounds() -> None:
     fps = 100.0
     F = 200
@@ -145,3 +197,71 @@ def test_walk_poses_fall_near_contact_changes(cmu) -> None:
     baseline = np.median(np.abs(grid[:, None] - ev[None]).min(axis=1))
     assert np.median(d) < 0.5 * baseline
     assert np.mean(d < 0.05) >= 0.6
+
+
+# ------------------------------------------- Appendix B on fast motion
+def _foot_under_a_moving_pelvis(pelvis_speed: float, still_frames: int, fps: float = 120.0):
+    """A pelvis travelling along x at ``pelvis_speed``; a foot pausing for ``still_frames`` from frame 60."""
+    from mocaplab.motion import Motion, Skeleton
+
+    F = 240
+    t = np.arange(F) / fps
+    v = np.full(F, 2.0 / fps)
+    v[60 : 60 + still_frames] = 0.0
+    foot = np.stack([np.concatenate([[0.0], np.cumsum(v[1:])]), np.zeros(F), np.zeros(F)], axis=1)
+    root = np.stack([pelvis_speed * t, np.full(F, 1.0), np.zeros(F)], axis=1)
+    sk = Skeleton(["Hips", "LeftFoot"], [-1, 0], np.zeros((2, 3)))
+    tr = np.zeros((F, 2, 3))
+    tr[:, 1] = foot - root  # the foot's world track, whatever the pelvis does
+    rot = np.tile([0.0, 0.0, 0.0, 1.0], (F, 2, 1))
+    return Motion(sk, rot, root, fps, translations=tr)
+
+
+def test_gait_scaled_stillness_finds_short_stances() -> None:
+    """A 0.12 s stance under a body at 3.6 m/s counts; 0.25 s (the paper's) misses it."""
+    run = _foot_under_a_moving_pelvis(3.6, 14)
+    assert stillness_contacts(run, joints=["LeftFoot"], tolerance=0.01).intervals("LeftFoot") == []
+    gait = stillness_contacts(run, joints=["LeftFoot"], tolerance=0.01, min_duration="gait")
+    assert gait.intervals("LeftFoot") == [(59, 74)]
+    # at walking speed and below the 0.25 s holds: a foot still for 0.17 s (the top of a jump) is no contact
+    for speed in (0.0, 1.0):
+        slow = _foot_under_a_moving_pelvis(speed, 20)
+        assert stillness_contacts(slow, joints=["LeftFoot"], tolerance=0.01, min_duration="gait").intervals(
+            "LeftFoot"
+        ) == []
+    with pytest.raises(ValueError, match="min_duration"):
+        stillness_contacts(run, joints=["LeftFoot"], min_duration="fast")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="travel"):
+        stillness_contacts(run, joints=["LeftFoot"], min_duration="gait", travel=0.0)
+
+
+@pytest.mark.parametrize("trial", ["09_06", "16_35"])
+def test_runs_get_contacts(cmu, trial: str) -> None:
+    """Appendix B on fast motion: every foot of a run gets its stances (none with a fixed 0.25 s)."""
+    run = cmu(trial)
+    assert not stillness_contacts(run).mask.any()
+    a = analyze(run)
+    assert all(a.contacts.intervals(j) for j in a.contacts.joints)
+    stance = [(b - s) / run.fps for j in a.contacts.joints for s, b in a.contacts.intervals(j)]
+    assert 0.05 < np.median(stance) < 0.3
+    assert a.events.any()
+
+
+@pytest.mark.parametrize("trial", ["16_15", "16_01", "49_03", "05_02"])
+def test_gait_scaling_leaves_slower_motion_alone(cmu, trial: str) -> None:
+    m = cmu(trial)
+    assert np.array_equal(stillness_contacts(m, min_duration="gait").mask, stillness_contacts(m).mask)
+
+
+def test_a_clip_without_contacts_warns(cmu) -> None:
+    from mocaplab.staggered import NoContactsWarning
+
+    walk = cmu("16_15")
+    head = walk.skeleton.roles["head"]  # never still
+    with pytest.warns(NoContactsWarning, match="No environmental contacts"):
+        analyze(walk, contact_joints=[head])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", NoContactsWarning)
+        analyze(walk)
+        analyze(walk, contacts=None)
+

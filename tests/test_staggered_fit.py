@@ -89,12 +89,14 @@ def test_appendix_a_objective_terms() -> None:
     assert W_F == 1000 * W_C
 
 
+@pytest.mark.parametrize("method", ["gauss-newton", "nelder-mead"])
 @pytest.mark.parametrize("start", ["tangent", "linear"])
-def test_rotation_tangents_fit_a_spherical_cubic(start: str) -> None:
+def test_rotation_tangents_fit_a_spherical_cubic(start: str, method: str) -> None:
     q1, q2, q3, q4, t, q = _spherical_samples()
     seg = np.zeros(t.size, dtype=np.int64)
     alpha, beta, info = fit_rotation_tangents(
-        seg, t, q, q1[None], q4[None], start=start, maxiter=3000, polish_tol=0.0
+        seg, t, q, q1[None], q4[None], start=start, method=method,
+        maxiter=3000 if method == "nelder-mead" else 50, polish_tol=0.0,
     )
     # unit (renormalised) tangent quaternions
     assert np.allclose(np.linalg.norm(alpha, axis=-1), 1.0) and np.allclose(np.linalg.norm(beta, axis=-1), 1.0)
@@ -103,8 +105,39 @@ def test_rotation_tangents_fit_a_spherical_cubic(start: str) -> None:
     assert err.max() < np.deg2rad(1.0)
     assert info["error"][0] <= info["start_error"][0] + 1e-12
     if start == "linear":
-        # Nelder-Mead improves substantially on the linear spline it starts from
+        # the polish improves substantially on the linear spline it starts from
         assert info["nfev"] > 0 and info["error"][0] < 0.3 * info["start_error"][0]
+    with pytest.raises(ValueError, match="method"):
+        fit_rotation_tangents(seg, t, q, q1[None], q4[None], method="bfgs")  # type: ignore[arg-type]
+
+
+def _fit_errors(monkeypatch, m, **options) -> np.ndarray:
+    """RMS angle (radians) between the samples and their spline, per rotation segment of ``extract(m)``."""
+    from mocaplab.staggered import fit
+
+    seen = []
+    real = fit.fit_rotation_tangents
+
+    def spy(seg, tn, q, q1, q4, **kw):
+        alpha, beta, info = real(seg, tn, q, q1, q4, **kw)
+        seen.append(fit._segment_rms(seg, tn, q, q1, quat.mul(q1, alpha), quat.mul(q4, beta), q4))
+        return alpha, beta, info
+
+    monkeypatch.setattr(fit, "fit_rotation_tangents", spy)
+    extract(m, **options)
+    return seen[-1]
+
+
+def test_gauss_newton_polish_earns_its_cost(cmu, monkeypatch) -> None:
+    """The default polish fits the rotation splines better than the start and than Nelder-Mead, never worse."""
+    m = cmu("05_02")[:600]  # a dance: looser segments than a walk's, where the tangent start is already close
+    start = _fit_errors(monkeypatch, m, optimize=False)
+    polished = _fit_errors(monkeypatch, m)
+    nelder = _fit_errors(monkeypatch, m, method="nelder-mead")
+    moving = start > 1e-9
+    assert np.all(polished <= start + 1e-7)  # per segment: a step is taken only if it helps
+    assert polished[moving].mean() < 0.95 * start[moving].mean()
+    assert polished[moving].mean() < nelder[moving].mean()
 
 
 def test_tangent_start_is_close_on_real_data(cmu) -> None:
@@ -160,3 +193,39 @@ def test_random_clips_round_trip() -> None:
         assert np.all(np.diff(T, axis=0) > 0)
 
     check()
+
+
+def test_splines_carry_the_motion_better_than_baselines(cmu) -> None:
+    """The fit needs far smaller displacements than the slerp and ease-in/out splines through the same knots."""
+    from mocaplab.staggered import fit_representation
+
+    m = cmu("16_15")
+    sm = extract(m)
+    moving = ~sm.static_joints()
+
+    def median(rep) -> float:
+        return float(np.degrees(np.median(np.linalg.norm(rep.rotation_displacement[:, moving], axis=-1))))
+
+    slerp = fit_representation(m, sm.times, sm.refinements, start="linear", optimize=False)
+    ease = fit_representation(m, sm.times, sm.refinements, start="ease", optimize=False)
+    assert np.allclose(ease.rotation_tangents[..., 3], 1.0)  # identity tangents
+    assert median(sm) < 0.5  # degrees: the displacement maps keep small detail
+    assert median(sm) < 0.4 * min(median(slerp), median(ease))
+    for rep in (slerp, ease):
+        rot, pos = reconstruction_error(rep.evaluate(), m)
+        assert rot < 1e-6 and pos < 1e-6
+    with pytest.raises(ValueError, match="start"):
+        fit_representation(m, sm.times, sm.refinements, start="cubic")  # type: ignore[arg-type]
+
+
+def test_explicit_contacts_without_any_contact_warn(cmu) -> None:
+    from mocaplab.contacts import Contacts
+    from mocaplab.staggered import NoContactsWarning
+
+    m = cmu("16_05")
+    joints = m.skeleton.roles.foot_joints()
+    empty = Contacts(joints, np.zeros((m.n_frames, len(joints)), dtype=bool), m.fps)
+    with pytest.warns(NoContactsWarning, match="holds nothing"):
+        sm = extract(m, contacts=empty, constraints=True, max_poses=6)
+    assert not sm.constraints.masks.any()
+

@@ -185,7 +185,8 @@ def test_retiming_keeps_the_travel_below_a_static_root(clips) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
         for layout, s in (("cmu", sm), ("static", smb)):
-            longer[layout] = s.retime(s.n_poses - 1, float(s.times[-1] + 0.25)).evaluate()  # a longer clip
+            # a longer clip (without the constraint layer, which may lower the root where a stretched leg cannot reach)
+            longer[layout] = s.retime(s.n_poses - 1, float(s.times[-1] + 0.25)).evaluate(constraints=False)
     out = longer["static"]
     assert out.n_frames > mb.n_frames and out.translations is not None
     pelvis = out.global_positions()[:, 1]

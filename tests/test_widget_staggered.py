@@ -48,6 +48,9 @@ def test_sliders_forward_to_the_editor(explorer) -> None:
     assert not np.array_equal(x.editor.current.refinements, r0)
     x.tau_slider.value = 0.03
     assert x.editor.tau == 0.03
+    per_variable = np.array(x.editor.current.refinements)
+    x.limb_check.value = True
+    assert x.editor.random_by == "limb" and not np.array_equal(x.editor.current.refinements, per_variable)
     x.wr_slider.value = 0.3
     assert x.editor.w_r == 0.3
     x.succession_dropdown.value = "LeftArm"

@@ -13,7 +13,8 @@ timing refinements.  :class:`StaggeredExplorer` shows, for one clip:
 * sliders for the **succession** offset ``s`` and exponent ``l``
   (``r + s d(i)^l``, depth measured from a chosen joint, by default the
   pelvis of the skeleton's joint roles), the **random**
-  timing bound ``tau`` (seeded), relative **exaggeration** ``w_r`` against
+  timing bound ``tau`` (seeded; per variable, or per limb with the
+  *random per limb* box), relative **exaggeration** ``w_r`` against
   the average pose, and the **pose count** (culling by priority);
 * the **pose list** with the priorities ``w_k`` and number of refined knots;
 * one 3D view (:class:`~mocaplab.widgets.MotionViewer`) playing the current
@@ -92,6 +93,8 @@ class StaggeredExplorer:
     toggle : ipywidgets.ToggleButton
         Staggered (pressed) or non-staggered playback.
     s_slider, l_slider, tau_slider, wr_slider : ipywidgets.FloatSlider
+    limb_check : ipywidgets.Checkbox
+        Random timing per limb (checked) or per variable.
     count_slider : ipywidgets.IntSlider
     pose_list : ipywidgets.Select
     joint_dropdown, succession_dropdown : ipywidgets.Dropdown
@@ -150,6 +153,7 @@ class StaggeredExplorer:
         self.tau_slider = W.FloatSlider(
             value=ed.tau, min=0.0, max=0.1, step=0.005, readout_format=".3f", description="random tau", **slider
         )
+        self.limb_check = W.Checkbox(value=ed.random_by == "limb", description="random per limb", indent=False)
         self.wr_slider = W.FloatSlider(value=ed.w_r, min=-0.5, max=1.0, step=0.05, description="exaggerate w_r", **slider)
         n_cand = ed.n_candidates
         self.count_slider = W.IntSlider(
@@ -167,6 +171,9 @@ class StaggeredExplorer:
         self.s_slider.observe(self._guard(lambda v: self.editor.set_succession(s=v)), names="value")
         self.l_slider.observe(self._guard(lambda v: self.editor.set_succession(l=v)), names="value")
         self.tau_slider.observe(self._guard(lambda v: self.editor.set_random(tau=v)), names="value")
+        self.limb_check.observe(
+            self._guard(lambda v: self.editor.set_random(by="limb" if v else "variable")), names="value"
+        )
         self.wr_slider.observe(self._guard(lambda v: self.editor.set_exaggeration(v)), names="value")
         self.count_slider.observe(self._guard(lambda v: self.editor.set_pose_count(v)), names="value")
         self.succession_dropdown.observe(self._guard(lambda v: self.editor.set_succession(joint=v)), names="value")
@@ -312,6 +319,7 @@ class StaggeredExplorer:
                     self.l_slider,
                     self.succession_dropdown,
                     self.tau_slider,
+                    self.limb_check,
                     self.wr_slider,
                     self.count_slider,
                     self.pose_list,

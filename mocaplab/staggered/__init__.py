@@ -8,7 +8,8 @@
 Modules: :mod:`.representation` (section 3, the :class:`StaggeredMotion`
 container and its evaluation), :mod:`.features` (section 4.1, locating
 poses and refinements), :mod:`.fit` (section 4.1.1 and Appendix A, splines and
-displacement maps), :mod:`.edit` (section 5, geometric and timing edits, the
+displacement maps), :mod:`.noise` (section 6, filtering rotations before
+timing edits), :mod:`.edit` (section 5, geometric and timing edits, the
 contact constraint layer and the :class:`StaggeredEditor` used by the widget).
 """
 
@@ -17,6 +18,7 @@ from __future__ import annotations
 from .edit import (
     ConstraintLayer,
     StaggeredEditor,
+    UnreachableTargetWarning,
     apply_knot_deltas,
     average_pose,
     constraint_joints,
@@ -26,14 +28,23 @@ from .edit import (
     exaggerate,
     insert_pose,
     keep_knot_order,
+    limb_groups,
     randomize,
     retime,
     set_refinements,
     succession,
     succession_depths,
 )
-from .features import PoseAnalysis, analyze
-from .fit import extract, fit_representation, fit_rotation_tangents, fit_translation_tangents, rotation_objective
+from .features import NoContactsWarning, PoseAnalysis, analyze
+from .fit import (
+    extract,
+    fit_representation,
+    fit_rotation_tangents,
+    fit_translation_tangents,
+    gauss_newton_tangents,
+    rotation_objective,
+)
+from .noise import jitter, orientation_filter
 from .representation import (
     ROOT_POSITION,
     TRANSLATION_SUFFIX,
@@ -56,14 +67,19 @@ __all__ = [
     "StaggeredMotion",
     "StaggeredTimingWarning",
     "PoseAnalysis",
+    "NoContactsWarning",
     "ConstraintLayer",
+    "UnreachableTargetWarning",
     "StaggeredEditor",
     "analyze",
     "extract",
     "fit_representation",
     "fit_translation_tangents",
     "fit_rotation_tangents",
+    "gauss_newton_tangents",
     "rotation_objective",
+    "orientation_filter",
+    "jitter",
     "bezier",
     "quat_bezier",
     "compose_rotation",
@@ -74,6 +90,7 @@ __all__ = [
     "succession",
     "succession_depths",
     "randomize",
+    "limb_groups",
     "edit_pose",
     "exaggerate",
     "insert_pose",

@@ -7,49 +7,67 @@ its refined knot times.  Between two knots:
   distance to the samples, a linear least-squares problem solved in closed
   form for all segments at once (:func:`fit_translation_tangents`).
 * **Rotations (Appendix A):** the tangent orientations ``q2, q3`` of the
-  recursive-slerp cubic minimise ``f = w_f f_f + w_c f_c`` with
-  ``f_f = mean_k arccos(q_k . s(t_k))^2`` over the interior samples and the
-  unit-length penalty ``f_c = | |q2|^2 + |q3|^2 - 2 |``, ``w_f = 1000 w_c``,
-  by Nelder-Mead (``scipy.optimize.minimize``), then renormalised
-  (:func:`fit_rotation_tangents`).
+  recursive-slerp cubic minimise the fitting term
+  ``f_f = mean_k arccos(q_k . s(t_k))^2`` over the interior samples
+  (:func:`fit_rotation_tangents`).  The paper adds the unit-length penalty
+  ``f_c = | |q2|^2 + |q3|^2 - 2 |`` (``w_f = 1000 w_c``) because it moves raw
+  quaternion components with Nelder-Mead; that method is kept
+  (``method="nelder-mead"``, :func:`rotation_objective`), but the default
+  moves the tangents on the rotation group itself, where they stay unit and
+  ``f_c`` is zero by construction (see below).
 * **Displacements:** ``d = v (-) s`` on every sample (:func:`fit_representation`).
 
 Because the displacement maps absorb whatever the splines miss, the fit
-quality never affects reconstruction, only how edits look; this is what
-makes the speed options below safe.
+quality never affects reconstruction, only how edits look (and how much the
+displacement maps must carry: lessons 11-13 check that the splines carry the
+motion, so a broken fit fails them).
 
-Speed choices (documented approximations)
------------------------------------------
-Nelder-Mead over every segment of every joint is the cost centre.  By
-default (``start="tangent"``):
+How the tangents are found
+--------------------------
+1. **Start** (``start="tangent"``, default): a *tangent-space
+   least-squares* solution.  The samples are mapped to rotation vectors
+   relative to the segment's first knot, a Euclidean cubic Bezier is fitted
+   there by the same linear least squares as translations, and its control
+   points are mapped back with ``exp``.  ``start="linear"`` is the paper's
+   linear (slerp) spline, ``start="ease"`` the ease-in/out spline (identity
+   tangents); unpolished, these two are the baselines a fit must beat, since
+   they ignore the samples (lessons 11-13 assert that the fit needs much
+   smaller displacements than both).
+2. **Polish** (``method="gauss-newton"``, default): Gauss-Newton steps on the
+   spherical residuals ``log(s(t_k)^-1 q_k)`` of every segment at once.  A
+   step solves the same 2 x 2 Bernstein least squares as the start, now for
+   corrections ``q2 <- q2 exp(da)``, ``q3 <- q3 exp(db)`` (the Jacobian of
+   the Euclidean cubic, exact to first order for the arcs between poses); a
+   segment takes its step only if its squared error goes down, else the step
+   is halved for the next iteration, so no segment ever fits worse than its
+   start.  ``maxiter`` (default 2) steps.
+3. ``method="nelder-mead"``: the paper's optimiser on ``w_f f_f + w_c f_c``
+   (``scipy.optimize.minimize``, ``adaptive=True``, which converges in 8
+   dimensions where the classic coefficients stall), renormalised, kept only
+   if it fits all the segment's samples better.  From the tangent start it
+   runs only on segments whose RMS error exceeds ``polish_tol`` (2 degrees),
+   from a small simplex, on at most ``max_samples`` (16) samples, for
+   ``maxiter`` (default 30) iterations.
 
-* the search starts from a *tangent-space least-squares* solution: the
-  samples are mapped to rotation vectors relative to the segment's first
-  knot, a Euclidean cubic Bezier is fitted there by the same linear least
-  squares as translations, and its control points are mapped back with
-  ``exp``.  For the small arcs between poses this is already close to the
-  optimum (the spherical and Euclidean constructions agree to first order);
-* Nelder-Mead then runs only on segments whose starting RMS angular error
-  exceeds ``polish_tol`` (default 2 degrees), from a small simplex around
-  the start, with at most ``maxiter`` iterations (default 30);
-* the objective is vectorised over a segment's samples, subsampled to at most
-  ``max_samples`` (default 16) evenly spaced interior samples;
-* a Nelder-Mead result is kept only if, renormalised, it fits *all* the
-  segment's samples better than the start.
+Measured on the hops 49_03 (``benchmarks/bench_staggered.py``; fit error:
+the mean RMS angle between the samples and their segment's spline over the
+segments that move, degrees; extraction time on this machine):
 
-``start="linear"`` follows the paper literally: every segment starts from
-the linear (slerp) spline with scipy's default simplex and runs Nelder-Mead
-with no skipping (``maxiter`` still bounds it).  Nelder-Mead uses scipy's
-``adaptive=True`` coefficients (Gao and Han), which converge in 8 dimensions
-where the classic ones stall.
+==================================================  =========  ===========
+extraction of 49_03                                 fit error  time
+==================================================  =========  ===========
+former default (every maximum of P, no filter,      0.958      977 ms
+Nelder-Mead polish)
+the same poses and data, Gauss-Newton polish        0.928      133 ms
+default (distinct poses, filtered, Gauss-Newton)    0.726      186 ms
+  without the polish                                0.781      118 ms
+  with Nelder-Mead instead                          0.758      641 ms
+==================================================  =========  ===========
 
-Measured on CMU clips (16_15, 16_05), Nelder-Mead started from the tangent
-solution lowers the Appendix A objective by less than 1e-4 relative: the
-tangent start is already at the optimum to that precision, and segments with
-a large residual are those a cubic cannot follow (their detail goes to the
-displacement map).  From the linear start, ``maxiter=200`` costs about 150
-times more CPU on 16_15 (40 s against 0.27 s for its 930 segments) and ends
-with a larger mean RMS error (0.46 against 0.41 degrees).
+Nelder-Mead also left the run 09_06 and the walk 16_15 unchanged (0.917 and
+0.516 degrees before and after on the former poses) at about ten times the
+cost of the rest of the extraction.  From the linear start it took 40 s on
+16_15 (``maxiter=200``) and ended worse than the tangent start.
 """
 
 from __future__ import annotations
@@ -65,13 +83,15 @@ from scipy.optimize import minimize
 from .. import quat
 from ..motion import Motion
 from ..roles import resolve_roles
-from .representation import StaggeredMotion, locate, next_active, quat_bezier, translation_joints
+from .noise import FILTER_SIGMA, orientation_filter
+from .representation import StaggeredMotion, locate, next_active, pose_u, quat_bezier, translation_joints
 
 __all__ = [
     "W_F",
     "W_C",
     "fit_translation_tangents",
     "fit_rotation_tangents",
+    "gauss_newton_tangents",
     "rotation_objective",
     "fit_representation",
     "extract",
@@ -217,6 +237,104 @@ def _segment_rms(seg: NDArray[np.int64], tn: Array, q: Array, q1: Array, q2: Arr
     return np.sqrt(np.bincount(g, ang * ang, minlength=S) / np.maximum(n, 1))
 
 
+def _bernstein_normal(seg: NDArray[np.int64], tn: Array, S: int) -> tuple[Any, ...]:
+    """Inner Bernstein weights ``b1, b2`` (n,) and the per-segment normal matrix entries and determinant (S,)."""
+    s = 1.0 - tn
+    b1, b2 = 3.0 * s * s * tn, 3.0 * s * tn * tn
+    a11 = np.bincount(seg, b1 * b1, minlength=S) + _RIDGE
+    a12 = np.bincount(seg, b1 * b2, minlength=S)
+    a22 = np.bincount(seg, b2 * b2, minlength=S) + _RIDGE
+    return b1, b2, a11, a12, a22, a11 * a22 - a12 * a12
+
+
+def _spherical_residuals(
+    seg: NDArray[np.int64], tn: Array, q: Array, q1: Array, q2: Array, q3: Array, q4: Array
+) -> tuple[Array, Array]:
+    """Residual rotation vectors ``log(s(t)^-1 q)`` (n, 3) of the samples and the squared error per segment (S,)."""
+    from .representation import casteljau
+
+    ctrl = np.stack([q1[seg], q2[seg], q3[seg], q4[seg]], axis=1)  # (n, 4, 4)
+    theta = np.arccos(np.clip(np.einsum("...i,...i->...", ctrl[:, :3], ctrl[:, 1:]), -1.0, 1.0))
+    r = quat.log(quat.mul(quat.inv(casteljau(ctrl, theta, tn)), q))
+    return r, np.bincount(seg, np.einsum("ij,ij->i", r, r), minlength=q1.shape[0]).astype(float)
+
+
+def _hemisphere(q: Array, ref: Array) -> Array:
+    """``q`` with the sign that puts it in the hemisphere of ``ref`` (spline controls never flip)."""
+    return np.where(np.sum(q * ref, axis=-1, keepdims=True) < 0, -q, q)
+
+
+def gauss_newton_tangents(
+    seg: NDArray[np.int64],
+    tn: Array,
+    q: Array,
+    q1: Array,
+    q2: Array,
+    q3: Array,
+    q4: Array,
+    *,
+    iterations: int = 2,
+    residuals: tuple[Array, Array] | None = None,
+) -> tuple[Array, Array, Array, int]:
+    """Polish tangent orientations by Gauss-Newton steps on the spherical residuals (all segments at once).
+
+    Parameters
+    ----------
+    seg : ndarray of int, shape (n,)
+        Segment of each *interior* sample, in ``[0, S)``.
+    tn : ndarray, shape (n,)
+        Normalised times, strictly inside (0, 1).
+    q : ndarray, shape (n, 4)
+        Sample orientations.
+    q1, q2, q3, q4 : ndarray, shape (S, 4)
+        Control orientations (unit, one hemisphere); ``q2, q3`` are the start.
+    iterations : int
+        Number of steps.
+    residuals : (ndarray (n, 3), ndarray (S,)), optional
+        The start's residuals and squared errors when already computed.
+
+    Returns
+    -------
+    q2, q3 : ndarray, shape (S, 4)
+        Unit control orientations; every segment's squared error is at most
+        its starting one.
+    sse : ndarray, shape (S,)
+        Sum of squared residual angles of each segment (radians^2).
+    improved : int
+        Segments that took at least one step.
+
+    Notes
+    -----
+    One step minimises ``sum_k |b1(t_k) da + b2(t_k) db - r_k|^2`` over the
+    corrections ``da, db`` (rotation vectors, ``q2 exp(da)``, ``q3 exp(db)``)
+    given the residuals ``r_k = log(s(t_k)^-1 q_k)``: the Euclidean Bezier
+    Jacobian, exact to first order when the segment's controls are close.
+    A segment whose error would not go down keeps its controls and halves
+    its next step.
+    """
+    S = q1.shape[0]
+    b1, b2, a11, a12, a22, det = _bernstein_normal(seg, tn, S)
+    r, err = _spherical_residuals(seg, tn, q, q1, q2, q3, q4) if residuals is None else residuals
+    scale = np.ones(S)
+    took = np.zeros(S, dtype=bool)
+    for _ in range(int(iterations)):
+        r1 = np.stack([np.bincount(seg, b1 * r[:, d], minlength=S) for d in range(3)], axis=1)
+        r2 = np.stack([np.bincount(seg, b2 * r[:, d], minlength=S) for d in range(3)], axis=1)
+        da = scale[:, None] * (a22[:, None] * r1 - a12[:, None] * r2) / det[:, None]
+        db = scale[:, None] * (a11[:, None] * r2 - a12[:, None] * r1) / det[:, None]
+        n2 = _hemisphere(quat.normalize(quat.mul(q2, quat.exp(da))), q1)
+        n3 = _hemisphere(quat.normalize(quat.mul(q3, quat.exp(db))), q1)
+        r_new, err_new = _spherical_residuals(seg, tn, q, q1, n2, n3, q4)
+        ok = err_new < err
+        q2 = np.where(ok[:, None], n2, q2)
+        q3 = np.where(ok[:, None], n3, q3)
+        r = np.where(ok[seg, None], r_new, r)
+        err = np.where(ok, err_new, err)
+        scale = np.where(ok, 1.0, 0.5 * scale)
+        took |= ok
+    return q2, q3, err, int(took.sum())
+
+
 def fit_rotation_tangents(
     seg: NDArray[np.int64],
     tn: Array,
@@ -224,9 +342,10 @@ def fit_rotation_tangents(
     q1: Array,
     q4: Array,
     *,
-    start: Literal["tangent", "linear"] = "tangent",
+    start: Literal["tangent", "linear", "ease"] = "tangent",
     optimize: bool = True,
-    maxiter: int = 30,
+    method: Literal["gauss-newton", "nelder-mead"] = "gauss-newton",
+    maxiter: int | None = None,
     polish_tol: float = np.deg2rad(2.0),
     max_samples: int = 16,
     w_f: float = W_F,
@@ -244,32 +363,48 @@ def fit_rotation_tangents(
         Sample orientations, sign-continuous with the end orientations.
     q1, q4 : ndarray, shape (S, 4)
         End orientations of the segments.
-    start : {"tangent", "linear"}
+    start : {"tangent", "linear", "ease"}
         Starting solution: tangent-space least squares (default, see the
-        module notes) or the linear slerp spline of the paper.
+        module notes), the linear slerp spline of the paper, or the
+        ease-in/out spline (identity tangents: ``q2 = q1``, ``q3 = q4``, zero
+        velocity at the knots).  The last two ignore the samples: with
+        ``optimize=False`` they are the baselines a fit must beat.
     optimize : bool
-        Run Nelder-Mead (False keeps the starting solution).
-    maxiter : int
-        Nelder-Mead iteration bound per segment.
+        Polish the start (False keeps it).
+    method : {"gauss-newton", "nelder-mead"}
+        The polish: Gauss-Newton steps on the rotation group for every
+        segment at once (default, :func:`gauss_newton_tangents`), or the
+        paper's Nelder-Mead per segment on :func:`rotation_objective`.
+    maxiter : int, optional
+        Gauss-Newton steps (default 2), or the Nelder-Mead iteration bound
+        per segment (default 30).
     polish_tol : float
-        With ``start="tangent"``, only segments whose starting RMS rotation
-        error (radians) exceeds this are optimised (default 2 degrees).
+        Nelder-Mead from ``start="tangent"`` runs only on segments whose
+        starting RMS rotation error (radians) exceeds this (default 2 degrees).
     max_samples : int
-        Interior samples used by the objective (evenly subsampled).
+        Interior samples used by the Nelder-Mead objective (evenly subsampled).
     w_f, w_c : float
-        Appendix A weights.
+        Appendix A weights (Nelder-Mead).
 
     Returns
     -------
     alpha, beta : ndarray, shape (S, 4)
         Unit quaternions with ``q2 = q1 (+) alpha`` and ``q3 = q4 (+) beta``.
     info : dict
-        ``"optimized"`` (segments run through Nelder-Mead), ``"nfev"`` (total
-        objective evaluations), ``"start_error"`` and ``"error"`` (RMS
-        rotation angle per segment over all its interior samples, radians).
+        ``"optimized"`` (segments the polish improved, or ran Nelder-Mead
+        on), ``"nfev"`` (objective evaluations: per segment for Nelder-Mead,
+        one evaluation of every segment per Gauss-Newton step),
+        ``"start_error"`` and ``"error"`` (RMS rotation angle per segment
+        over all its interior samples, radians).
     """
-    if start not in ("tangent", "linear"):
-        raise ValueError(f"Expected `start` in ('tangent', 'linear'), got {start!r}")
+    if start not in ("tangent", "linear", "ease"):
+        raise ValueError(f"Expected `start` in ('tangent', 'linear', 'ease'), got {start!r}")
+    if method not in ("gauss-newton", "nelder-mead"):
+        raise ValueError(f"Expected `method` in ('gauss-newton', 'nelder-mead'), got {method!r}")
+    if maxiter is None:
+        maxiter = 2 if method == "gauss-newton" else 30
+    if int(maxiter) != maxiter or maxiter < 0:
+        raise ValueError(f"Expected `maxiter` to be an integer >= 0, got {maxiter!r}")
     S = q1.shape[0]
     if start == "tangent":
         rel = quat.log(quat.mul(quat.inv(q1[seg]), q))  # (N, 3)
@@ -277,15 +412,38 @@ def fit_rotation_tangents(
         a, b = fit_translation_tangents(seg, tn, rel, np.zeros_like(end), end)
         q2 = quat.mul(q1, quat.exp(a))
         q3 = quat.mul(q1, quat.exp(end + b))
-    else:
+    elif start == "linear":
         q2 = quat.slerp(q1, q4, np.full(S, 1.0 / 3.0))
         q3 = quat.slerp(q1, q4, np.full(S, 2.0 / 3.0))
+    else:
+        q2, q3 = np.array(q1, copy=True), np.array(q4, copy=True)
     # keep every control orientation in the hemisphere of the first knot
-    q2 = np.where(np.sum(q2 * q1, axis=-1, keepdims=True) < 0, -q2, q2)
-    q3 = np.where(np.sum(q3 * q1, axis=-1, keepdims=True) < 0, -q3, q3)
-    err0 = _segment_rms(seg, tn, q, q1, q2, q3, q4)
+    q2 = _hemisphere(q2, q1)
+    q3 = _hemisphere(q3, q1)
     inner = (tn > 0.0) & (tn < 1.0)
     counts = np.bincount(seg[inner], minlength=S)
+    if optimize and method == "gauss-newton" and maxiter > 0:
+        g = seg[inner]
+        r, sse = _spherical_residuals(g, tn[inner], q[inner], q1, q2, q3, q4)
+        n = np.maximum(counts, 1)
+        err0 = np.sqrt(sse / n)
+        # segments that fit exactly already (still joints) are left out of the work
+        rows = np.flatnonzero(sse > 1e-24)
+        if rows.size == 0:
+            return _result(q1, q2, q3, q4, err0, err0, 0, 0)
+        local = np.full(S, -1, dtype=np.int64)
+        local[rows] = np.arange(rows.size)
+        take = local[g] >= 0
+        gl = local[g[take]]
+        n2, n3, sse_rows, improved = gauss_newton_tangents(
+            gl, tn[inner][take], q[inner][take], q1[rows], q2[rows], q3[rows], q4[rows],
+            iterations=int(maxiter), residuals=(r[take], sse[rows]),
+        )
+        q2[rows], q3[rows] = n2, n3
+        err = np.array(err0, copy=True)
+        err[rows] = np.sqrt(sse_rows / n[rows])
+        return _result(q1, q2, q3, q4, err0, err, improved, (int(maxiter) + 1) * rows.size)
+    err0 = _segment_rms(seg, tn, q, q1, q2, q3, q4)
     todo = np.flatnonzero(counts > 0) if optimize else np.zeros(0, dtype=np.int64)
     if start == "tangent":
         todo = todo[err0[todo] > polish_tol]
@@ -319,9 +477,15 @@ def fit_rotation_tangents(
             if new_err < err0[s]:
                 q2[s], q3[s] = c2, c3
     err = _segment_rms(seg, tn, q, q1, q2, q3, q4) if todo.size else err0
+    return _result(q1, q2, q3, q4, err0, err, int(todo.size), nfev)
+
+
+def _result(
+    q1: Array, q2: Array, q3: Array, q4: Array, err0: Array, err: Array, optimized: int, nfev: int
+) -> tuple[Array, Array, dict[str, Any]]:
     alpha = quat.mul(quat.inv(q1), quat.normalize(q2))
     beta = quat.mul(quat.inv(q4), quat.normalize(q3))
-    return alpha, beta, {"optimized": int(todo.size), "nfev": nfev, "start_error": err0, "error": err}
+    return alpha, beta, {"optimized": optimized, "nfev": nfev, "start_error": err0, "error": err}
 
 
 def knot_values(
@@ -365,10 +529,12 @@ def fit_representation(
     *,
     active: NDArray[np.bool_] | None = None,
     priorities: Array | None = None,
-    start: Literal["tangent", "linear"] = "tangent",
+    start: Literal["tangent", "linear", "ease"] = "tangent",
     optimize: bool = True,
-    maxiter: int = 30,
+    method: Literal["gauss-newton", "nelder-mead"] = "gauss-newton",
+    maxiter: int | None = None,
     polish_tol: float = np.deg2rad(2.0),
+    filter_sigma: float | None = FILTER_SIGMA,
 ) -> StaggeredMotion:
     """Build the staggered representation of a clip from pose times and refinements.
 
@@ -388,8 +554,15 @@ def fit_representation(
     active : ndarray of bool, shape (K, V), optional
         Partial poses (default: every pose controls every variable).
     priorities : ndarray, shape (K,), optional
-    start, optimize, maxiter, polish_tol
+    start, optimize, method, maxiter, polish_tol
         Rotation fitting options, see :func:`fit_rotation_tangents`.
+    filter_sigma : float or None
+        Fit the poses, splines and displacement maps to the rotations
+        filtered by :func:`~mocaplab.staggered.noise.orientation_filter`
+        (Gaussian sigma in seconds, default 0.03 s) and keep the rest as the
+        noise layer on the pose timing (section 6, see
+        :mod:`mocaplab.staggered.noise`).  ``None`` or 0: no filter, no
+        noise layer.
 
     Returns
     -------
@@ -414,7 +587,14 @@ def fit_representation(
             f"{times[0] if K else None} .. {times[-1] if K else None}"
         )
     act = np.ones((K, V), dtype=bool) if active is None else np.asarray(active, dtype=bool)
-    rotations = quat.unroll(motion.rotations, axis=0)
+    captured = quat.unroll(motion.rotations, axis=0)
+    noise = None
+    if filter_sigma:
+        # section 6: the layers that timing edits move are fitted to filtered rotations
+        rotations = orientation_filter(captured, float(filter_sigma), motion.fps)
+        noise = quat.log(quat.mul(quat.inv(rotations), captured))
+    else:
+        rotations = captured
     positions = np.asarray(motion.root_positions)[:, None]
     if T:
         positions = np.concatenate([positions, np.asarray(motion.translations)[:, list(tj)]], axis=1)
@@ -438,16 +618,21 @@ def fit_representation(
         position_values[nxt_safe[:, pc], p].reshape(K * P, 3),
     )
     position_tangents = np.stack([a.reshape(K, P, 3), b.reshape(K, P, 3)], axis=2)
-    # rotations: one segment per (start pose, joint)
-    j = np.arange(J)
-    seg = (k0[:, 1 : J + 1] * J + j).reshape(-1)
-    q1 = rotation_values.reshape(K * J, 4)
-    q4 = rotation_values[nxt_safe[:, 1 : J + 1], j].reshape(K * J, 4)
-    alpha, beta, _ = fit_rotation_tangents(
-        seg, tn[:, 1 : J + 1].reshape(-1), rotations.reshape(-1, 4), q1, q4,
-        start=start, optimize=optimize, maxiter=maxiter, polish_tol=polish_tol,
-    )
-    rotation_tangents = np.stack([alpha.reshape(K, J, 4), beta.reshape(K, J, 4)], axis=2)
+    # rotations: one segment per (start pose, joint); joints constant over the
+    # clip (CMU hip joints, clavicles...) keep identity tangents, which fit exactly
+    rotation_tangents = np.zeros((K, J, 2, 4))
+    rotation_tangents[..., 3] = 1.0
+    js = np.flatnonzero(~np.all(rotations == rotations[:1], axis=(0, 2)))
+    if js.size:
+        nj = js.size
+        seg = (k0[:, 1 + js] * nj + np.arange(nj)).reshape(-1)
+        q1 = rotation_values[:, js].reshape(K * nj, 4)
+        q4 = rotation_values[nxt_safe[:, 1 + js], js].reshape(K * nj, 4)
+        alpha, beta, _ = fit_rotation_tangents(
+            seg, tn[:, 1 + js].reshape(-1), rotations[:, js].reshape(-1, 4), q1, q4,
+            start=start, optimize=optimize, method=method, maxiter=maxiter, polish_tol=polish_tol,
+        )
+        rotation_tangents[:, js] = np.stack([alpha.reshape(K, nj, 4), beta.reshape(K, nj, 4)], axis=2)
     rest = None if motion.translations is None else np.asarray(motion.translations[0])
     sm = StaggeredMotion(
         skeleton=motion.skeleton,
@@ -474,7 +659,12 @@ def fit_representation(
     d_pos = positions - s_pos
     d_rot = quat.log(quat.mul(quat.inv(s_rot), rotations))
     return _with(
-        sm, root_displacement=d_pos[:, 0], rotation_displacement=d_rot, translation_displacement=d_pos[:, 1:]
+        sm,
+        root_displacement=d_pos[:, 0],
+        rotation_displacement=d_rot,
+        translation_displacement=d_pos[:, 1:],
+        noise_u=None if noise is None else pose_u(times, t),
+        rotation_noise=noise,
     )
 
 
@@ -492,9 +682,11 @@ def extract(
     interval: tuple[float, float] | None = None,
     contacts: Any = "auto",
     max_refinement: float = 0.25,
-    start: Literal["tangent", "linear"] = "tangent",
+    start: Literal["tangent", "linear", "ease"] = "tangent",
     optimize: bool = True,
-    maxiter: int = 30,
+    method: Literal["gauss-newton", "nelder-mead"] = "gauss-newton",
+    maxiter: int | None = None,
+    filter_sigma: float | None = FILTER_SIGMA,
     constraints: bool = False,
     constraint_window: float = 0.1,
     analysis: Any = None,
@@ -514,8 +706,14 @@ def extract(
         Global evidence (see :func:`mocaplab.staggered.features.analyze`).
     max_refinement : float
         Bound on timing refinements, seconds (0.25 in the paper).
-    start, optimize, maxiter
-        Rotation fitting options (see :func:`fit_rotation_tangents`).
+    start, optimize, method, maxiter
+        Rotation fitting options (see :func:`fit_rotation_tangents`): by
+        default the tangent-space start polished by two Gauss-Newton steps.
+    filter_sigma : float or None
+        Filter the rotations before fitting and keep the filtered-out noise
+        on the pose timing (section 6; Gaussian sigma in seconds, default
+        0.03 s, ``None`` turns it off): see :mod:`mocaplab.staggered.noise`.
+        The clip is reproduced exactly either way.
     constraints : bool
         Attach the contact constraint layer
         (:class:`~mocaplab.staggered.edit.ConstraintLayer`: the feet of the
@@ -559,6 +757,7 @@ def extract(
     if roles is not None:
         resolved = resolve_roles(motion, roles)
         motion = motion.replace(skeleton=motion.skeleton.with_roles(**dict(resolved)))
+    analysis_given = analysis is not None
     if analysis is None:
         analysis = analyze(motion, contacts=contacts, **analysis_options)
     elif analysis.n_frames != motion.n_frames:
@@ -574,7 +773,9 @@ def extract(
             priorities=analysis.priorities_of(frames),
             start=start,
             optimize=optimize,
+            method=method,
             maxiter=maxiter,
+            filter_sigma=filter_sigma,
         )
     if constraints:
         from .edit import ConstraintLayer
@@ -582,5 +783,15 @@ def extract(
         if analysis.contacts is None:
             raise ValueError("`constraints=True` needs contacts: pass `contacts` (or keep 'auto')")
         layer = ConstraintLayer.from_contacts(motion, analysis.contacts, sm.times, window=constraint_window)
+        detected_here = isinstance(contacts, str) and not analysis_given  # analyze has warned already
+        if not layer.masks.any() and not detected_here:
+            from .features import NoContactsWarning
+
+            warnings.warn(
+                f"The constraint layer of {motion.name or 'the clip'!r} holds nothing: no contact of "
+                f"{list(layer.joints) or list(analysis.contacts.joints)} in the given contacts",
+                NoContactsWarning,
+                stacklevel=2,
+            )
         sm = _with(sm, constraints=layer)
     return sm

@@ -65,6 +65,21 @@ where ``s_i`` is a cubic spline and ``d_i`` a displacement map, both defined on
   evaluation reproduce a clip to rounding error.
 * Before a variable's first knot and after its last one the value is held.
 
+Noise layer (section 6)
+-----------------------
+Timing edits pull apart the capture noise of sequential joints, which
+otherwise cancels on their descendants; the paper filters rotations before
+editing.  :func:`~mocaplab.staggered.extract` fits the layers above to
+filtered rotations and keeps what the filter removed as a last rotation
+layer ``n_i`` on the *pose timing* shared by all joints,
+
+    v_i(t) = s_i(t') (+) d_i(t') (+) n_i(u(t)),
+    u(t) = k + (t - t_k) / (t_{k+1} - t_k)   for t_k <= t < t_{k+1},
+
+so the clip is still reproduced exactly and the noise moves with the poses
+but not with the refinements (:mod:`mocaplab.staggered.noise`).  The true
+pose at ``t_k`` includes it; extreme values and editing knots do not.
+
 Partial poses (section 6) control a subset of the variables: ``active[k, i]``
 says whether pose ``k`` has a knot for variable ``i``; a variable's spline
 runs between consecutive *active* knots.
@@ -109,6 +124,8 @@ __all__ = [
     "locate",
     "next_active",
     "casteljau",
+    "pose_u",
+    "pose_time",
 ]
 
 Array = NDArray[np.float64]
@@ -243,11 +260,6 @@ def _frame_times(duration: float, fps: float) -> Array:
     return np.arange(n) / fps
 
 
-def _smoothstep(x: Array) -> Array:
-    x = np.clip(x, 0.0, 1.0)
-    return x * x * (3.0 - 2.0 * x)
-
-
 # -------------------------------------------------------------- the container
 @dataclasses.dataclass(frozen=True, eq=False)
 class StaggeredMotion:
@@ -305,6 +317,12 @@ class StaggeredMotion:
         translation variable overrides them (the source clip's constant
         translation channels).  ``None``: the clip had no translation
         channels, and evaluation uses the skeleton offsets.
+    noise_u : ndarray, shape (M,), optional
+        Positions of the noise-layer samples in pose-index units
+        (:func:`pose_u` of the source frames), increasing.
+    rotation_noise : ndarray, shape (M, J, 3), optional
+        The noise layer (module notes): rotation vectors applied last,
+        ``mul(v, exp(n))``.  ``None`` (with ``noise_u``): no noise layer.
     """
 
     skeleton: Skeleton
@@ -327,6 +345,8 @@ class StaggeredMotion:
     translation_tangents: Array = None  # type: ignore[assignment]
     translation_displacement: Array = None  # type: ignore[assignment]
     rest_translations: Array | None = None
+    noise_u: Array | None = None
+    rotation_noise: Array | None = None
 
     def __post_init__(self) -> None:
         J = self.skeleton.n_joints
@@ -400,6 +420,15 @@ class StaggeredMotion:
                 )
         else:
             object.__setattr__(self, "rest_translations", arr(self.rest_translations, (J, 3), "rest_translations"))
+        if (self.noise_u is None) != (self.rotation_noise is None):
+            raise ValueError("Expected both `noise_u` and `rotation_noise`, or neither")
+        if self.noise_u is not None:
+            nu = np.asarray(self.noise_u, dtype=float).reshape(-1)
+            M = nu.size
+            if M < 1 or not np.all(np.diff(nu) > 0):
+                raise ValueError(f"Expected increasing `noise_u` (pose-index units), got {M} values")
+            object.__setattr__(self, "noise_u", arr(nu, (M,), "noise_u"))
+            object.__setattr__(self, "rotation_noise", arr(self.rotation_noise, (M, J, 3), "rotation_noise"))
         pr = np.full(K, np.nan) if self.priorities is None else np.array(self.priorities, dtype=float, copy=True)
         if pr.shape != (K,):
             raise ValueError(f"Expected `priorities` of shape ({K},), got {pr.shape}")
@@ -577,6 +606,7 @@ class StaggeredMotion:
         *,
         staggered: bool = True,
         constraints: bool = True,
+        noise: bool = True,
     ) -> Motion:
         """Evaluate the representation into a dense Motion.
 
@@ -590,22 +620,25 @@ class StaggeredMotion:
             zero (the splines and displacement maps are warped with the knots).
         constraints : bool
             Apply the contact constraint layer if this object has one.
+        noise : bool
+            Apply the noise layer if this object has one (False gives the
+            filtered motion the other layers carry).
 
         Returns
         -------
         Motion
-            At ``fps``.  Rotations are ``s (+) d = mul(s, exp(d))``, the root
-            position and the translation variables ``s + d``; the motion has
-            ``translations`` (F, J, 3) when the source clip had them.
+            At ``fps``.  Rotations are ``s (+) d (+) n = mul(mul(s, exp(d)), exp(n))``,
+            the root position and the translation variables ``s + d``; the
+            motion has ``translations`` (F, J, 3) when the source clip had them.
         """
-        default = times is None
+        default = times is None and noise
         if default and staggered and constraints and "_dense" in self.__dict__:
             return self.__dict__["_dense"]
-        t = _frame_times(self.duration, self.fps) if default else np.asarray(times, dtype=float).reshape(-1)
+        t = _frame_times(self.duration, self.fps) if times is None else np.asarray(times, dtype=float).reshape(-1)
         if default and staggered:
             pos, rot = self._raw()
         else:
-            pos, rot = self._compose(t, staggered=staggered)
+            pos, rot = self._compose(t, staggered=staggered, noise=noise)
         motion = Motion(
             self.skeleton, rot, pos[:, 0], self.fps, translations=self._translations(pos[:, 1:]), name=self.name
         )
@@ -665,14 +698,17 @@ class StaggeredMotion:
             pos, rot, prev = parent.__dict__["_parent_raw"]
             object.__setattr__(self, "_parent_raw", (pos, rot, prev | np.asarray(changed, dtype=bool)))
 
-    def _compose(self, t: Array, *, staggered: bool = True) -> tuple[Array, Array]:
-        """Every variable at times ``t`` (F,): positions (F, P, 3), rotations (F, J, 4)."""
+    def _compose(self, t: Array, *, staggered: bool = True, noise: bool = True) -> tuple[Array, Array]:
+        """Every variable at times ``t`` (F,): positions (F, P, 3), rotations (F, J, 4).
+
+        ``noise=False`` leaves out the noise layer.
+        """
         static = self.static_joints()
         if static.any():
             # joints that never move (CMU hip joints, shoulders...) are their value
             J = self.n_joints
             cols = np.concatenate([self.position_columns, 1 + np.flatnonzero(~static)])
-            pos, _, moving, js = self._compose_columns(t, cols, staggered=staggered)
+            pos, _, moving, js = self._compose_columns(t, cols, staggered=staggered, noise=noise)
             rot = np.empty((t.size, J, 4))
             rot[:] = self.rotation_values[0]
             rot[:, js] = moving
@@ -680,7 +716,36 @@ class StaggeredMotion:
         k0, k1, tn = self.locate(t, staggered=staggered)
         s_pos, s_rot = self._spline_layers(k0, tn)
         d_pos, d_rot = self._displacement_layers(k0 + tn * (k1 - k0))
-        return s_pos + d_pos, quat.mul(s_rot, quat.exp(d_rot))
+        rot = quat.mul(s_rot, quat.exp(d_rot))
+        if noise:
+            rot = self._add_noise(rot, t, np.arange(self.n_joints))
+        return s_pos + d_pos, rot
+
+    def noise_values(self, t: ArrayLike, joints: ArrayLike | None = None) -> Array:
+        """The noise layer at times ``t`` (F,): rotation vectors (F, j, 3) (zeros without one).
+
+        Interpolated linearly between samples, exact on them; ``joints``
+        selects columns (default all).
+        """
+        t = np.asarray(t, dtype=float).reshape(-1)
+        js = np.arange(self.n_joints) if joints is None else np.asarray(joints, dtype=np.int64)
+        if self.rotation_noise is None or self.noise_u is None:
+            return np.zeros((t.size, js.size, 3))
+        u = pose_u(self.times, t)
+        nu = self.noise_u
+        f = self.rotation_noise[:, js]
+        if nu.size == 1:
+            return np.broadcast_to(f[0], (t.size,) + f.shape[1:]).copy()
+        lo = np.clip(np.searchsorted(nu, u, side="right") - 1, 0, nu.size - 2)
+        w = np.clip((u - nu[lo]) / (nu[lo + 1] - nu[lo]), 0.0, 1.0)  # exactly 0 on a sample
+        g0 = f[lo]
+        return g0 + w[:, None, None] * (f[lo + 1] - g0)
+
+    def _add_noise(self, rot: Array, t: Array, js: NDArray[np.int64]) -> Array:
+        """``rot (+) exp(n)`` for the joints ``js`` (rot has shape (F, len(js), 4))."""
+        if self.rotation_noise is None or js.size == 0:
+            return rot
+        return quat.mul(rot, quat.exp(self.noise_values(t, js)))
 
     def static_joints(self) -> NDArray[np.bool_]:
         """Joints whose rotation is constant everywhere, shape (J,) (cached).
@@ -694,15 +759,17 @@ class StaggeredMotion:
             same = np.all(v == v[:1], axis=(0, 2))
             ident = np.all(np.abs(self.rotation_tangents[..., :3]) < 1e-15, axis=(0, 2, 3))
             still = np.all(np.abs(self.rotation_displacement) < 1e-15, axis=(0, 2))
+            if self.rotation_noise is not None:
+                still &= np.all(self.rotation_noise == 0.0, axis=(0, 2))
             st = same & ident & still
             st.flags.writeable = False
             object.__setattr__(self, "_static", st)
         return st
 
     def _compose_columns(
-        self, t: Array, cols: NDArray[np.int64], *, staggered: bool = True
+        self, t: Array, cols: NDArray[np.int64], *, staggered: bool = True, noise: bool = True
     ) -> tuple[Array, NDArray[np.int64], Array, NDArray[np.int64]]:
-        """Composition of a subset of variables at times ``t``.
+        """Composition of a subset of variables at times ``t`` (the noise layer included unless ``noise=False``).
 
         Returns positions (F, p, 3) with their indices into the position
         block (p,), rotations (F, r, 4) and their joint indices (r,).
@@ -724,7 +791,10 @@ class StaggeredMotion:
         kk = k0[:, rc]
         s_rot = casteljau(rot_c[kk, js], rot_th[kk, js], tn[:, rc])
         d_rot = _interp_block(self.sample_u[:, cols[rc]], self.rotation_displacement[:, js], u[:, rc])
-        return s_pos + d_pos, ps, quat.mul(s_rot, quat.exp(d_rot)), js
+        rot = quat.mul(s_rot, quat.exp(d_rot))
+        if noise:
+            rot = self._add_noise(rot, t, js)
+        return s_pos + d_pos, ps, rot, js
 
     def _pose(self, k: int, which: str) -> tuple[Array, Array]:
         """Pose ``k`` (true or non-staggered): positions (P, 3), rotations (J, 4)."""
@@ -848,11 +918,13 @@ class StaggeredMotion:
         joints: Sequence[str] | None = None,
         poses: Sequence[int] | None = None,
         seed: int | None = 0,
+        by: Literal["variable", "limb"] = "variable",
+        roles: Mapping[str, Any] | None = None,
     ) -> StaggeredMotion:
-        """Bounded random refinement offsets ``rand(-tau, tau)`` (section 5.2)."""
+        """Bounded random refinement offsets ``rand(-tau, tau)``, per variable or per limb (section 5.2)."""
         from . import edit
 
-        return edit.randomize(self, tau, joints=joints, poses=poses, seed=seed)
+        return edit.randomize(self, tau, joints=joints, poses=poses, seed=seed, by=by, roles=roles)
 
     def edit_pose(
         self,
@@ -949,6 +1021,26 @@ def locate(
         np.clip(x, 0.0, 1.0, out=x)
         tn[:, c] = x
     return k0, k1, tn
+
+
+def pose_u(times: Array, t: ArrayLike) -> NDArray[np.float64]:
+    """Position of times ``t`` in pose-index units, ``k + (t - t_k) / (t_{k+1} - t_k)``, clamped to the poses.
+
+    The pose timing shared by every variable (refinements ignored): the
+    noise layer and the constraint layer follow it, so they move with
+    retimed poses.  ``times`` (K,) increasing; returns the shape of ``t``.
+    """
+    t = np.asarray(t, dtype=float)
+    k = np.clip(np.searchsorted(times, t, side="right") - 1, 0, times.size - 2)
+    frac = np.clip((t - times[k]) / (times[k + 1] - times[k]), 0.0, 1.0)
+    return np.asarray(k + frac, dtype=np.float64)
+
+
+def pose_time(times: Array, u: ArrayLike) -> NDArray[np.float64]:
+    """Inverse of :func:`pose_u`: seconds of positions ``u`` (pose-index units)."""
+    u = np.asarray(u, dtype=float)
+    k = np.clip(np.floor(u).astype(np.int64), 0, times.size - 2)
+    return np.asarray(times[k] + (u - k) * (times[k + 1] - times[k]), dtype=np.float64)
 
 
 def next_active(active: NDArray[np.bool_]) -> NDArray[np.int64]:

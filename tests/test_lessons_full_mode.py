@@ -1,0 +1,31 @@
+"""Every lesson also runs in full mode, as a student runs it (``jupyter lab lessons/``).
+
+The default test run executes the lessons with nbval under ``MOCAPLAB_FAST=1``
+(set by ``conftest.py``), which shrinks clips and iteration counts.  Students
+run them without it, so each lesson is executed here once more, in a fresh
+kernel with ``MOCAPLAB_FAST=0``: every cell must run and every assert must
+hold on the full-size data too.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import nbformat
+import pytest
+from nbclient import NotebookClient
+
+LESSONS = sorted((Path(__file__).resolve().parent.parent / "lessons").glob("*.ipynb"))
+
+
+@pytest.mark.parametrize("path", LESSONS, ids=[p.name for p in LESSONS])
+def test_lesson_runs_in_full_mode(path: Path) -> None:
+    nb = nbformat.read(path, as_version=4)
+    assert any("MOCAPLAB_FAST" in cell.source for cell in nb.cells), f"{path.name} does not read MOCAPLAB_FAST"
+    # a last cell reports the lesson's own FAST flag, so the test knows the mode it ran in
+    nb.cells.append(nbformat.v4.new_code_cell("print('FAST =', FAST)"))
+    client = NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(path.parent)}})
+    client.execute(env=dict(os.environ, MOCAPLAB_FAST="0"))
+    shown = "".join(o.get("text", "") for o in nb.cells[-1].outputs)
+    assert shown.strip() == "FAST = False", shown

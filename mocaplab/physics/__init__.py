@@ -2,6 +2,8 @@
 
 =============================  ===============================================
 :class:`Body`                  point masses per link (de Leva 1996 table)
+:func:`standing_pose`          the pose a body is measured in when the rest
+                               pose does not stand (:class:`RestPoseWarning`)
 :func:`center_of_mass`         equation 1
 :func:`angular_momentum`       equation 2 (and :func:`linear_momentum`)
 :func:`balance`                ZMP (equation 4), support polygons, distances
@@ -20,11 +22,13 @@ from .body import (
     GRAVITY,
     Body,
     LinkSpec,
+    RestPoseWarning,
     angular_momentum,
     center_of_mass,
     linear_momentum,
     link_positions,
     smoothed_derivatives,
+    standing_pose,
 )
 from .masses import MassFit, fit_masses
 from .touchup import (
@@ -51,11 +55,13 @@ __all__ = [
     "GRAVITY",
     "Body",
     "LinkSpec",
+    "RestPoseWarning",
     "angular_momentum",
     "center_of_mass",
     "link_positions",
     "linear_momentum",
     "smoothed_derivatives",
+    "standing_pose",
     "MassFit",
     "fit_masses",
     "Adjustment",

@@ -23,7 +23,8 @@ Mapping onto skeletons (choices made here, the paper gives none)
 through its joint roles (:mod:`mocaplab.roles`: pelvis, spine, neck, head,
 hips, knees, ankles, toes, shoulders, elbows, wrists), never through joint
 names.  A link is rigidly attached to one joint (its owner); its centre is
-the midpoint of two rest-pose points, expressed in the owner's frame:
+the midpoint of two points of the reference pose (normally the rest pose,
+see "Reference pose" below), expressed in the owner's frame:
 
 * **lower trunk** (link ``pelvis``): owned by the pelvis, centred between
   the pelvis and the midpoint of the two hip joints (de Leva puts it 61 %
@@ -57,8 +58,9 @@ the midpoint of two rest-pose points, expressed in the owner's frame:
   there is no toe joint, to the toe tip below;
 * clavicles, helper joints, fingers and eyes carry no mass of their own.
 
-"Leg length" is the rest-pose hip-to-knee plus knee-to-ankle distance,
-averaged over both sides: the body's scale for the estimated points.
+"Leg length" is the hip-to-knee plus knee-to-ankle distance in the
+reference pose, averaged over both sides: the body's scale for the
+estimated points.
 
 Support-polygon points
 ---------------------
@@ -78,6 +80,59 @@ contributes its own position.  On CMU BVH clips whose end sites have
 been zeroed, the estimated tips lie within 8 mm of the captured ones
 (tested).
 
+Reference pose
+--------------
+Link centres and support points are measured in one pose of the skeleton
+and expressed in their owners' frames: the centre ``c`` of a link owned by
+joint ``o`` is stored as ``G_o^-1 (c - p_o)``, with ``G``, ``p`` the pose's
+global rotations and positions.  A link of one bone does not depend on the
+pose; a link across several joints does (the pelvis across the CMU
+``LHipJoint`` helper, the head from the neck across ``Neck1`` and ``Head``
+to the top of the head, the hand across the finger joints), and so do the
+support points ("at the ankle's height", "horizontal" and "sideways" are
+taken in that pose).
+
+The pose is the **rest pose** (every local rotation the identity) when it
+is a standing pose: the head well above the pelvis (the test of
+:mod:`mocaplab.roles`: rising by more than 0.8 of their distance) and each
+ankle below its hip by more than half the leg's length.  Files with the
+rest rotations baked into the motion (bones laid along +X, as Maya/FBX
+joint orients give) have a zig-zag rest pose that fails this; measured in
+it, CMU 16_15 written that way gets its pelvis and head links off by 6-7 cm,
+its centre of mass by 4 mm and its ZMP distance by up to 35 mm.  For those,
+:meth:`Body.from_skeleton` given a Motion measures the body in
+:func:`standing_pose` of the motion, with a :class:`RestPoseWarning`
+(given a Skeleton alone it can only warn); ``pose=`` gives any pose, and
+``pose="rest"`` the rest pose.  The standing pose is built in two steps:
+
+* per joint, the (chordal) mean of the motion's local rotations, the
+  pelvis' heading (the facing of the hips) taken off frame by frame first
+  so that a turning clip has a mean: the feet stand as they do on the
+  ground on average, and helper joints are as the motion holds them
+  (exactly, for constant ones such as CMU ``LHipJoint``);
+* then every joint *inside* a link's chain (``Neck1`` and ``Head`` in the
+  head link, the finger joints in the hand, helpers within limbs) is
+  turned, by the smallest turn, so that its bone continues the bone into
+  it.  A rigid link gets the geometry of its segment held straight, as rest
+  poses hold necks and fingers, not the clip's habitual bend: the captured
+  CMU subjects hold the neck bent by 20-40 degrees from their rest pose,
+  and the mean alone would move the head link by 2.5-5 cm and the centre
+  of mass by 1.7-3.4 mm.
+
+Both steps use only world positions and rotations up to a constant change
+of each joint's frame, so two files of one clip that differ only in their
+joints' rest frames get the same body, each in its own frames.  Against a
+skeleton's own (standing) rest pose the standing pose differs where the
+rest pose is arbitrary; on CMU 16_15 and 16_05 written with bones along +X
+(``tests/test_physics_conventions.py``): centre of mass within 0.7 mm and
+ZMP within 1 mm of the CMU original, the head link within 1 cm (the CMU
+rest neck is not straight: its bones turn by some 18 degrees), support
+points within 3 cm, because the CMU rest pose holds the legs splayed by 20
+degrees and the feet rolled with them (15-25 degrees from a foot planted
+flat), so that its heel and side points tilt with the foot where the
+standing pose has them level.  ZMP distances agree within 1 mm on average
+and 1 cm on the few frames where the ZMP lies off a heel or a toe's side.
+
 Conventions are those of :mod:`mocaplab.motion`: metres, seconds, Y up,
 ground y = 0, kilograms.
 """
@@ -86,10 +141,11 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from functools import lru_cache
 from types import MappingProxyType
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -97,8 +153,9 @@ from scipy import sparse
 from scipy.ndimage import gaussian_filter1d
 
 from .. import quat
-from ..motion import Motion, Skeleton, mirror_name
-from ..roles import Roles, resolve_roles
+from ..kinematics import fk
+from ..motion import Motion, Skeleton, mirror_name, readonly
+from ..roles import Roles, RolesError, _plausible, resolve_roles
 
 __all__ = [
     "DE_LEVA_MALE",
@@ -111,6 +168,8 @@ __all__ = [
     "HAND",
     "Body",
     "LinkSpec",
+    "RestPoseWarning",
+    "standing_pose",
     "link_positions",
     "center_of_mass",
     "linear_momentum",
@@ -165,7 +224,7 @@ class LinkSpec:
     owner : str
         Joint the link moves with.
     a, b : tuple of str
-        Two skeleton points whose rest-pose midpoint is the link centre; each
+        Two skeleton points whose midpoint in the reference pose is the link centre; each
         point is the mean of the named joints, ``"Joint:end"`` naming the end
         site of ``Joint``.
     """
@@ -179,7 +238,7 @@ class LinkSpec:
 
 
 class _Link(NamedTuple):
-    """One link of a body being built: its centre is a rest-pose point."""
+    """One link of a body being built: its centre is a point of the reference pose."""
 
     name: str
     segment: str
@@ -188,7 +247,7 @@ class _Link(NamedTuple):
     centre: Array
 
 
-# Points a skeleton may lack, estimated from its rest pose (see the module
+# Points a skeleton may lack, estimated from its reference pose (see the module
 # notes); the figures in brackets are those of the CMU BVH skeletons.
 #: Top of the head above the head joint, in leg lengths (0.110-0.125).
 HEAD_TOP = 0.115
@@ -204,13 +263,31 @@ HAND = 0.64
 _UP = np.array([0.0, 1.0, 0.0])
 
 
-def _rest_points(skeleton: Skeleton) -> tuple[Array, Array]:
-    """Rest-pose world positions of the joints (J, 3) and end sites (E, 3)."""
-    pos = np.zeros((skeleton.n_joints, 3))
-    for j in range(1, skeleton.n_joints):
-        pos[j] = pos[skeleton.parents[j]] + skeleton.offsets[j]
-    ends = pos[skeleton.end_site_parents] + skeleton.end_site_offsets
-    return pos, ends
+class _Pose(NamedTuple):
+    """A reference pose in which link geometry is measured (joint 0 at the origin)."""
+
+    joints: Array  # (J, 3) world positions
+    ends: Array  # (E, 3) world positions of the end sites
+    rotations: Array  # (J, 4) global rotations (identities in the rest pose)
+    rest: bool  # whether this is the rest pose (local offsets need no rotation)
+
+
+def _pose_points(skeleton: Skeleton, local: Array | None = None) -> _Pose:
+    """Joint and end-site positions and joint rotations of a pose (local rotations (J, 4); None: the rest pose)."""
+    e = skeleton.end_site_parents
+    if local is None:  # sums of offsets (cheaper than forward kinematics for one pose)
+        pos = np.zeros((skeleton.n_joints, 3))
+        for j in range(1, skeleton.n_joints):
+            pos[j] = pos[skeleton.parents[j]] + skeleton.offsets[j]
+        return _Pose(pos, pos[e] + skeleton.end_site_offsets, quat.identity((skeleton.n_joints,)), True)
+    grot, gpos = fk(np.asarray(local, dtype=float)[None], np.zeros((1, 3)), skeleton.offsets, skeleton.parents)
+    g, pos = np.ascontiguousarray(grot[0]), np.ascontiguousarray(gpos[0])
+    return _Pose(pos, pos[e] + quat.rotate(g[e], skeleton.end_site_offsets), g, False)
+
+
+def _local(pose: _Pose, owner: int | NDArray[np.int64], world: Array) -> Array:
+    """World vectors of a pose expressed in the frame of joint(s) ``owner``."""
+    return world if pose.rest else quat.rotate(quat.inv(pose.rotations[owner]), world)
 
 
 def _zero_length(skeleton: Skeleton) -> float:
@@ -219,8 +296,207 @@ def _zero_length(skeleton: Skeleton) -> float:
     return 1e-6 * max(float(lengths.max(initial=0.0)), 1e-12)
 
 
-def _point(skeleton: Skeleton, rest: tuple[Array, Array], spec: str) -> Array:
-    joints, ends = rest
+class RestPoseWarning(UserWarning):
+    """The skeleton's rest pose is not a standing pose: the body is measured in another pose (or is off)."""
+
+
+def standing_pose(motion: Motion, *, roles: Mapping[str, Any] | None = None) -> Array:
+    """A standing reference pose of a motion: local rotations, shape (J, 4).
+
+    The pose :meth:`Body.from_skeleton` measures a body in when the
+    skeleton's rest pose is not a standing pose (see the module notes,
+    "Reference pose"):
+
+    1. per joint, the mean of the motion's local rotations (the chordal
+       mean: the principal eigenvector of ``sum q q^T``); the pelvis gets
+       the mean of its global rotation with each frame's heading (the
+       facing of the hips) taken off, the joints above it (a static
+       reference root) the identity, so that a turning clip has a mean;
+    2. every joint inside the chain of a link (the head's, the hand's,
+       helpers within the pelvis and the limbs) turned by the smallest turn
+       that makes its bone continue the bone into it; joints at their
+       parent's place (zero-length helpers) keep the mean.
+
+    Both steps depend only on world positions and on rotations up to a
+    constant change of each joint's frame, so skeletons that differ only in
+    their joints' rest frames get the same pose, each in its own frames.
+
+    Parameters
+    ----------
+    motion : Motion
+    roles : mapping of role names to joint names, optional
+        Role overrides (:func:`mocaplab.roles.resolve_roles`).
+
+    Returns
+    -------
+    ndarray, shape (J, 4)
+        Unit quaternions ``(x, y, z, w)``, to pass as ``pose=``.
+
+    Examples
+    --------
+    >>> from mocaplab.data import cmu                                  # doctest: +SKIP
+    >>> walk = cmu("16_15")                                             # doctest: +SKIP
+    >>> body = Body.from_skeleton(walk, pose=standing_pose(walk))       # doctest: +SKIP
+    """
+    if not isinstance(motion, Motion):
+        raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
+    sk = motion.skeleton
+    r = resolve_roles(motion, roles)
+    r.require(*_NEEDED, purpose="a standing pose of the motion (standing_pose)")
+    pelvis = r.index("pelvis")
+    q = np.array(motion.rotations, dtype=float, copy=True)
+    gpos = motion.global_positions()
+    across = gpos[:, r.index("left_hip")] - gpos[:, r.index("right_hip")]
+    heading = np.arctan2(-across[:, 2], across[:, 0])  # of left x up = (-a_z, 0, a_x)
+    q[:, pelvis] = quat.mul(quat.from_yaw(-heading), motion.global_rotations()[:, pelvis])
+    above = int(sk.parents[pelvis])
+    while above >= 0:
+        q[:, above] = quat.identity()
+        above = int(sk.parents[above])
+    scatter = np.einsum("fji,fjk->jik", q, q)
+    mean = quat.normalize(np.linalg.eigh(scatter)[1][..., -1])
+    return _straightened(sk, r, mean)
+
+
+def _link_chains(skeleton: Skeleton, roles: Roles, pose: _Pose) -> list[list[int | None]]:
+    """The joint chains the default links span, each from the link's first joint to its far point.
+
+    ``None`` at the end of the head's chain stands for the top of the head
+    (the head joint's end site or children, see :func:`_beyond`).
+    """
+    def chain(a: int, b: int) -> list[int | None]:
+        try:
+            return list(skeleton.chain(a, b))
+        except ValueError:
+            return []
+
+    pelvis, neck, head = roles.indices("pelvis", "neck", "head")
+    chains = [chain(neck, head) + [None]]
+    for side in ("left", "right"):
+        hip, knee, ankle, shoulder, elbow, wrist = roles.indices(
+            *(f"{side}_{p}" for p in ("hip", "knee", "ankle", "shoulder", "elbow", "wrist"))
+        )
+        chains += [chain(pelvis, hip), chain(hip, knee), chain(knee, ankle)]
+        chains += [chain(shoulder, elbow), chain(elbow, wrist), chain(wrist, _far_joint(skeleton, pose, wrist)[0])]
+        if f"{side}_toe" in roles:
+            chains.append(chain(ankle, roles.index(f"{side}_toe")))
+    return chains
+
+
+def _straightened(skeleton: Skeleton, roles: Roles, local: Array) -> Array:
+    """``local`` (J, 4) with every joint inside a link's chain turned so that its bone continues the bone into it.
+
+    Joints at their parent's place (zero-length helpers such as CMU
+    ``LHipJoint``) keep their rotation; so does a joint whose bone has no
+    length.  The turn is the smallest one (about the axis across both
+    bones), so the bone's twist is kept.
+    """
+    out = np.array(local, dtype=float, copy=True)
+    eps = _zero_length(skeleton)
+    for chain in _link_chains(skeleton, roles, _pose_points(skeleton, out)):
+        for prev, j, nxt in zip(chain, chain[1:], chain[2:], strict=False):  # each joint with its neighbours
+            if prev is None or j is None:
+                continue
+            pose = _pose_points(skeleton, out)
+            far = _beyond(skeleton, pose, j) if nxt is None else pose.joints[nxt]
+            if far is None:
+                continue
+            into, onward = pose.joints[j] - pose.joints[prev], far - pose.joints[j]
+            if np.linalg.norm(into) <= eps or np.linalg.norm(onward) <= eps:
+                continue
+            turned = quat.mul(quat.between(onward, into), pose.rotations[j])
+            out[j] = quat.normalize(quat.mul(quat.inv(pose.rotations[skeleton.parents[j]]), turned))
+    return out
+
+
+def _skeleton_of(source: Skeleton | Motion) -> Skeleton:
+    sk = getattr(source, "skeleton", source)
+    if not isinstance(sk, Skeleton):
+        raise TypeError(f"Expected `skeleton` to be a Skeleton or Motion, got {type(source).__name__}")
+    return sk
+
+
+def _check_pose(pose: ArrayLike, skeleton: Skeleton) -> Array:
+    q = np.asarray(pose, dtype=float)
+    if q.shape != (skeleton.n_joints, 4) or not np.all(np.isfinite(q)):
+        raise ValueError(
+            f"Expected `pose` to be 'rest' or finite local rotations of shape ({skeleton.n_joints}, 4) "
+            f"(e.g. motion.rotations[0]), got shape {q.shape}"
+        )
+    norm = np.linalg.norm(q, axis=-1, keepdims=True)
+    if np.any(norm < 1e-6):
+        raise ValueError("Expected `pose` to hold unit quaternions (x, y, z, w), got a zero quaternion")
+    return q / norm
+
+
+def _reference(source: Skeleton | Motion, roles: Mapping[str, Any] | None, pose: ArrayLike | str | None) -> _Pose:
+    """The reference pose of :meth:`Body.from_skeleton` (see the module notes)."""
+    sk = _skeleton_of(source)
+    if isinstance(pose, str):
+        if pose != "rest":
+            raise ValueError(f"Expected `pose` to be 'rest', local rotations ({sk.n_joints}, 4) or None, got {pose!r}")
+        return _pose_points(sk)
+    if pose is not None:
+        return _pose_points(sk, _check_pose(pose, sk))
+    rest = _pose_points(sk)
+    try:
+        r = resolve_roles(sk, roles)
+    except RolesError:
+        return rest  # what needs the roles says so
+    why = _not_standing(r, rest)
+    if why is None:
+        return rest
+    if not isinstance(source, Motion):
+        warnings.warn(
+            f"The rest pose of this skeleton is not a standing pose ({why}; bones laid along one axis, "
+            "rest rotations baked into the motion?): link centres and support points measured in it are off. "
+            "Give the motion (Body.from_skeleton(motion)) or a pose (pose=motion.rotations[k])",
+            RestPoseWarning,
+            stacklevel=3,
+        )
+        return rest
+    standing = _pose_points(sk, standing_pose(source, roles=r))
+    still = _not_standing(r, standing)
+    warnings.warn(
+        f"The rest pose of this skeleton is not a standing pose ({why}; bones laid along one axis, rest "
+        "rotations baked into the motion?): link centres and support points are measured in a standing pose "
+        "of the motion instead (mocaplab.physics.standing_pose: its mean pose, the chains inside links "
+        "straight)" + ("" if still is None else f", which does not stand either ({still}): the body may be off")
+        + ". Pass pose= to choose (pose='rest' keeps the rest pose)",
+        RestPoseWarning,
+        stacklevel=3,
+    )
+    return standing
+
+
+def _not_standing(roles: Roles, pose: _Pose) -> str | None:
+    """Why a pose is not a standing pose (None when it is): the head well above the pelvis, the feet well below the hips.
+
+    The head test is that of :mod:`mocaplab.roles` (rise above the pelvis
+    more than 0.8 of their distance); each ankle must lie below its hip by
+    more than half of the leg's length (hip to knee to ankle).
+    """
+    j = pose.joints
+    if "pelvis" not in roles or not ("head" in roles or "neck" in roles):
+        return None  # nothing to judge by (the body model needs these roles and says so)
+    pelvis = roles.index("pelvis")
+    top = roles.index("head") if "head" in roles else roles.index("neck")
+    if not _plausible(j[None], {"pelvis": pelvis, "head": top}):
+        rise, span = j[top, 1] - j[pelvis, 1], float(np.linalg.norm(j[top] - j[pelvis]))
+        return f"the head is {rise:.2f} m above the pelvis, {span:.2f} m from it"
+    for side in ("left", "right"):
+        if not all(f"{side}_{p}" in roles for p in ("hip", "knee", "ankle")):
+            continue
+        hip, knee, ankle = roles.indices(f"{side}_hip", f"{side}_knee", f"{side}_ankle")
+        leg = float(np.linalg.norm(j[knee] - j[hip]) + np.linalg.norm(j[ankle] - j[knee]))
+        drop = float(j[hip, 1] - j[ankle, 1])
+        if not drop > 0.5 * leg:
+            return f"the {side} ankle is {drop:.2f} m below its hip, whose leg is {leg:.2f} m long"
+    return None
+
+
+def _point(skeleton: Skeleton, pose: _Pose, spec: str) -> Array:
+    joints, ends = pose.joints, pose.ends
     if spec.endswith(":end"):
         j = skeleton.index(spec[:-4])
         hits = np.flatnonzero(skeleton.end_site_parents == j)
@@ -230,13 +506,13 @@ def _point(skeleton: Skeleton, rest: tuple[Array, Array], spec: str) -> Array:
     return joints[skeleton.index(spec)]
 
 
-def _beyond(skeleton: Skeleton, rest: tuple[Array, Array], j: int) -> Array | None:
+def _beyond(skeleton: Skeleton, pose: _Pose, j: int) -> Array | None:
     """Where joint ``j``'s own bone ends: the mean of its end sites, else of its child joints.
 
     Only points away from the joint count (zero-length end sites and helper
     joints do not); None when there is none.
     """
-    joints, ends = rest
+    joints, ends = pose.joints, pose.ends
     eps = _zero_length(skeleton)
     for cands in (ends[skeleton.end_site_parents == j], joints[skeleton.children(j)]):
         cands = cands[np.linalg.norm(cands - joints[j], axis=-1) > eps]
@@ -251,7 +527,7 @@ def _unit(v: Array) -> Array | None:
 
 
 class _Frame(NamedTuple):
-    """Scale and directions of a skeleton's rest pose."""
+    """Scale and directions of a skeleton's reference pose."""
 
     leg: float  # mean leg length, hip to knee plus knee to ankle
     forward: Array  # horizontal unit vector the body faces (left x up)
@@ -268,28 +544,35 @@ def _body_frame(roles: Roles, joints: Array) -> _Frame:
         ])
     )
     if not leg > 0:
-        raise ValueError(f"Expected legs of positive length in the rest pose, got {leg!r}")
+        raise ValueError(f"Expected legs of positive length in the reference pose, got {leg!r}")
     forward = np.cross(at("left_hip") - at("right_hip"), _UP)
     forward[1] = 0.0
     unit = _unit(forward)
     return _Frame(leg, np.array([0.0, 0.0, 1.0]) if unit is None else unit)
 
 
-def _knuckles(skeleton: Skeleton, rest: tuple[Array, Array], wrist: int, elbow: int) -> Array:
-    """Far point of the hand: the last joint of the longest chain of joints below the wrist.
-
-    Else the wrist's end site, else :data:`HAND` forearm lengths beyond the wrist.
-    """
-    joints = rest[0]
+def _far_joint(skeleton: Skeleton, pose: _Pose, wrist: int) -> tuple[int, float]:
+    """The last joint of the longest chain of joints below the wrist, and that chain's length."""
+    joints = pose.joints
     reach = {wrist: 0.0}
     for k in range(wrist + 1, skeleton.n_joints):  # parents come first
         p = int(skeleton.parents[k])
         if p in reach:
             reach[k] = reach[p] + float(np.linalg.norm(joints[k] - joints[p]))
     far = max(reach, key=lambda k: reach[k])
-    if reach[far] > _zero_length(skeleton):
+    return far, reach[far]
+
+
+def _knuckles(skeleton: Skeleton, pose: _Pose, wrist: int, elbow: int) -> Array:
+    """Far point of the hand: the last joint of the longest chain of joints below the wrist.
+
+    Else the wrist's end site, else :data:`HAND` forearm lengths beyond the wrist.
+    """
+    joints = pose.joints
+    far, reach = _far_joint(skeleton, pose, wrist)
+    if reach > _zero_length(skeleton):
         return np.asarray(joints[far])
-    tip = _beyond(skeleton, rest, wrist)
+    tip = _beyond(skeleton, pose, wrist)
     return tip if tip is not None else joints[wrist] + HAND * (joints[wrist] - joints[elbow])
 
 
@@ -322,11 +605,11 @@ def _trunk_links(skeleton: Skeleton, roles: Roles, joints: Array) -> list[_Link]
     return links + [_Link("upper_trunk", "upper_trunk", 1.0, a, 0.5 * (joints[a] + joints[b]))]
 
 
-def _head_link(skeleton: Skeleton, roles: Roles, rest: tuple[Array, Array], frame: _Frame) -> _Link:
+def _head_link(skeleton: Skeleton, roles: Roles, pose: _Pose, frame: _Frame) -> _Link:
     """Head and neck from the neck to the top of the head, owned by the chain joint below its centre."""
-    joints = rest[0]
+    joints = pose.joints
     neck, head = roles.index("neck"), roles.index("head")
-    top = _beyond(skeleton, rest, head)
+    top = _beyond(skeleton, pose, head)
     if top is None:
         up = _unit(joints[head] - joints[neck])
         if up is None:
@@ -340,18 +623,18 @@ def _head_link(skeleton: Skeleton, roles: Roles, rest: tuple[Array, Array], fram
     return _Link("head", "head_neck", 1.0, int(owner), 0.5 * (a + top))
 
 
-def _limb_links(skeleton: Skeleton, roles: Roles, rest: tuple[Array, Array], frame: _Frame) -> list[_Link]:
-    joints = rest[0]
+def _limb_links(skeleton: Skeleton, roles: Roles, pose: _Pose, frame: _Frame) -> list[_Link]:
+    joints = pose.joints
     links = []
     for side in ("left", "right"):
         shoulder, elbow, wrist = roles.indices(*(f"{side}_{p}" for p in ("shoulder", "elbow", "wrist")))
         hip, knee, ankle = roles.indices(*(f"{side}_{p}" for p in ("hip", "knee", "ankle")))
         toe = roles.get(f"{side}_toe")
-        _, ball, tip = _foot_points(skeleton, rest, ankle, None if toe is None else skeleton.index(toe), None, frame)
+        _, ball, tip = _foot_points(skeleton, pose, ankle, None if toe is None else skeleton.index(toe), None, frame)
         links += [
             _Link(f"{side}_upper_arm", "upper_arm", 1.0, shoulder, 0.5 * (joints[shoulder] + joints[elbow])),
             _Link(f"{side}_forearm", "forearm", 1.0, elbow, 0.5 * (joints[elbow] + joints[wrist])),
-            _Link(f"{side}_hand", "hand", 1.0, wrist, 0.5 * (joints[wrist] + _knuckles(skeleton, rest, wrist, elbow))),
+            _Link(f"{side}_hand", "hand", 1.0, wrist, 0.5 * (joints[wrist] + _knuckles(skeleton, pose, wrist, elbow))),
             _Link(f"{side}_thigh", "thigh", 1.0, hip, 0.5 * (joints[hip] + joints[knee])),
             _Link(f"{side}_shank", "shank", 1.0, knee, 0.5 * (joints[knee] + joints[ankle])),
             _Link(f"{side}_foot", "foot", 1.0, ankle, 0.5 * (joints[ankle] + (ball if toe is not None else tip))),
@@ -361,28 +644,28 @@ def _limb_links(skeleton: Skeleton, roles: Roles, rest: tuple[Array, Array], fra
 
 def _foot_points(
     skeleton: Skeleton,
-    rest: tuple[Array, Array],
+    pose: _Pose,
     ankle: int,
     toe: int | None,
     tip: Array | None,
     frame: _Frame | Callable[[], _Frame],
 ) -> tuple[Array, Array, Array]:
-    """Ankle, ball and toe tip of one foot in the rest pose (see the module notes).
+    """Ankle, ball and toe tip of one foot in the reference pose (see the module notes).
 
     ``tip`` overrides the toe tip; ``frame`` (or a function giving it) is
     needed only when a point must be estimated.
     """
-    joints = rest[0]
+    joints = pose.joints
     pa = joints[ankle]
     if toe is not None:
         ball = joints[toe]
         if tip is None:
-            tip = _beyond(skeleton, rest, toe)
+            tip = _beyond(skeleton, pose, toe)
         if tip is None:
             tip = ball + TOE_TIP * (ball - pa) * [1.0, 0.0, 1.0]
         return pa, ball, tip
     if tip is None:
-        tip = _beyond(skeleton, rest, ankle)
+        tip = _beyond(skeleton, pose, ankle)
     if tip is None:
         f = frame() if callable(frame) else frame
         tip = pa + f.leg * (FOOT_TIP[0] * f.forward - FOOT_TIP[1] * _UP)
@@ -413,6 +696,7 @@ class Body:
         Support point in its owner's local frame.
 
     Use :meth:`from_skeleton` to build one from any humanoid skeleton (by its joint roles).
+    Its arrays are copies, read-only for good (views of read-only owners).
 
     Examples
     --------
@@ -454,9 +738,7 @@ class Body:
                 f"Expected `point_owners` ({len(pj)},) and `point_offsets` ({len(pj)}, 3), got {po.shape} and {pof.shape}"
             )
         for name, arr in (("owners", owners), ("offsets", offsets), ("masses", masses), ("point_owners", po), ("point_offsets", pof)):
-            arr = np.array(arr, copy=True)
-            arr.flags.writeable = False
-            object.__setattr__(self, name, arr)
+            object.__setattr__(self, name, readonly(np.array(arr, copy=True)))
         object.__setattr__(self, "joint_names", jn)
         object.__setattr__(self, "link_names", ln)
         object.__setattr__(self, "point_joints", pj)
@@ -472,12 +754,15 @@ class Body:
         table: Mapping[str, float] = DE_LEVA_MALE,
         foot_width: float = 0.09,
         heel: float = 0.05,
+        pose: ArrayLike | Literal["rest"] | None = None,
     ) -> Body:
         """The default body of any humanoid skeleton, mapped from its joint roles.
 
         Parameters
         ----------
         skeleton : Skeleton or Motion
+            A Motion also gives the reference pose when the skeleton's rest
+            pose is not a standing pose (see ``pose``).
         roles : mapping of role names to joint names, optional
             Overrides of the inferred joint roles
             (:func:`mocaplab.roles.resolve_roles`).
@@ -490,6 +775,14 @@ class Body:
             heel-to-toe line of the paper's description).
         heel : float
             How far the heel point lies behind the ankle, metres.
+        pose : array_like, shape (J, 4), "rest" or None
+            The pose in which link centres and support points are measured
+            (see the module notes, "Reference pose"): local rotations (for
+            instance ``motion.rotations[k]``), or ``"rest"`` for the rest
+            pose.  Default: the rest pose when it is a standing pose; else,
+            when a Motion is given, :func:`standing_pose` of the motion,
+            with a :class:`RestPoseWarning` (a Skeleton alone keeps its rest
+            pose, with a warning that says how to do better).
 
         Returns
         -------
@@ -506,80 +799,85 @@ class Body:
             head, the legs' hip, knee and ankle, the arms' shoulder, elbow
             and wrist), naming it and the ``roles=`` that supplies it.
         """
-        sk = getattr(skeleton, "skeleton", skeleton)
-        if not isinstance(sk, Skeleton):
-            raise TypeError(f"Expected `skeleton` to be a Skeleton or Motion, got {type(skeleton).__name__}")
+        sk = _skeleton_of(skeleton)
         r = resolve_roles(sk, roles)
         r.require(*_NEEDED, purpose="the body model (Body.from_skeleton)")
-        rest = _rest_points(sk)
-        frame = _body_frame(r, rest[0])
+        if not np.isfinite(foot_width) or foot_width < 0:
+            raise ValueError(f"Expected `foot_width` >= 0 metres, got {foot_width!r}")
+        if not np.isfinite(heel) or heel < 0:
+            raise ValueError(f"Expected `heel` >= 0 metres, got {heel!r}")
+        ref = _reference(skeleton, r, pose)
+        frame = _body_frame(r, ref.joints)
         pelvis = r.index("pelvis")
-        hips = rest[0][r.indices("left_hip", "right_hip")].mean(axis=0)
-        links = [_Link("pelvis", "lower_trunk", 1.0, pelvis, 0.5 * (hips + rest[0][pelvis]))]
-        links += _trunk_links(sk, r, rest[0])
-        links.append(_head_link(sk, r, rest, frame))
-        links += _limb_links(sk, r, rest, frame)
-        body = cls._assemble(sk, rest, links, total_mass=total_mass, table=table)
-        return body.with_feet(sk, r.feet(), roles=r, foot_width=foot_width, heel=heel)
+        hips = ref.joints[r.indices("left_hip", "right_hip")].mean(axis=0)
+        links = [_Link("pelvis", "lower_trunk", 1.0, pelvis, 0.5 * (hips + ref.joints[pelvis]))]
+        links += _trunk_links(sk, r, ref.joints)
+        links.append(_head_link(sk, r, ref, frame))
+        links += _limb_links(sk, r, ref, frame)
+        body = cls._assemble(sk, ref, links, total_mass=total_mass, table=table)
+        return body._with_feet(sk, ref, r.feet(), r, foot_width, heel)
 
     @classmethod
     def from_links(
         cls,
-        skeleton: Skeleton,
+        skeleton: Skeleton | Motion,
         links: Sequence[LinkSpec],
         *,
         total_mass: float = DEFAULT_TOTAL_MASS,
         table: Mapping[str, float] = DE_LEVA_MALE,
+        pose: ArrayLike | Literal["rest"] | None = None,
     ) -> Body:
         """A body from explicit link specifications (no support points).
 
         Masses are ``total_mass * table[segment] / 100 * share``; they are not
         renormalised, so a partial mapping has less than ``total_mass``.
+        Link centres are measured in ``pose`` (see :meth:`from_skeleton`).
         """
-        rest = _rest_points(skeleton)
+        ref = _reference(skeleton, None, pose)
+        sk = _skeleton_of(skeleton)
         out = []
         for spec in links:
-            a = np.mean([_point(skeleton, rest, p) for p in spec.a], axis=0)
-            b = np.mean([_point(skeleton, rest, p) for p in spec.b], axis=0)
-            out.append(_Link(spec.name, spec.segment, spec.share, skeleton.index(spec.owner), 0.5 * (a + b)))
-        return cls._assemble(skeleton, rest, out, total_mass=total_mass, table=table)
+            a = np.mean([_point(sk, ref, p) for p in spec.a], axis=0)
+            b = np.mean([_point(sk, ref, p) for p in spec.b], axis=0)
+            out.append(_Link(spec.name, spec.segment, spec.share, sk.index(spec.owner), 0.5 * (a + b)))
+        return cls._assemble(sk, ref, out, total_mass=total_mass, table=table)
 
     @classmethod
     def _assemble(
         cls,
         skeleton: Skeleton,
-        rest: tuple[Array, Array],
+        pose: _Pose,
         links: Sequence[_Link],
         *,
         total_mass: float,
         table: Mapping[str, float],
     ) -> Body:
-        """The body of links whose centres are rest-pose points (the one builder behind the others)."""
+        """The body of links whose centres are points of the reference pose (the one builder behind the others)."""
         if not np.isfinite(total_mass) or total_mass <= 0:
             raise ValueError(f"Expected `total_mass` > 0 kilograms, got {total_mass!r}")
         for link in links:
             if link.segment not in table:
                 raise KeyError(f"Segment {link.segment!r} of link {link.name!r} is not in the mass table {sorted(table)}")
         owners = np.array([link.owner for link in links], dtype=np.int64)
-        # rest rotations are identities: a rest vector is the local offset
-        offsets = np.array([link.centre - rest[0][link.owner] for link in links]).reshape(-1, 3)
+        offsets = _local(pose, owners, np.array([link.centre - pose.joints[link.owner] for link in links]).reshape(-1, 3))
         masses = np.array([total_mass * table[link.segment] / 100.0 * link.share for link in links])
         return cls(skeleton.names, tuple(link.name for link in links), owners, offsets, masses)
 
     def with_feet(
         self,
-        skeleton: Skeleton,
+        skeleton: Skeleton | Motion,
         feet: Sequence[tuple[str, str | None] | tuple[str, str | None, str | None]] | None = None,
         *,
         roles: Mapping[str, Any] | None = None,
         foot_width: float = 0.09,
         heel: float = 0.05,
+        pose: ArrayLike | Literal["rest"] | None = None,
     ) -> Body:
         """This body with heel and toe support points for each foot.
 
         Parameters
         ----------
-        skeleton : Skeleton
+        skeleton : Skeleton or Motion
         feet : sequence of (ankle, toe joint or None[, toe-tip point or None]), optional
             Joint names; default the feet of the joint roles
             (:meth:`mocaplab.roles.Roles.feet`).  A toe-tip point is a joint
@@ -587,24 +885,36 @@ class Body:
             (see the module notes).
         roles : mapping of role names to joint names, optional
             Role overrides, used for the feet and for estimated points.
-        foot_width, heel : float
+        foot_width, heel, pose
             See :meth:`from_skeleton`.
         """
+        sk = _skeleton_of(skeleton)
         if not np.isfinite(foot_width) or foot_width < 0:
             raise ValueError(f"Expected `foot_width` >= 0 metres, got {foot_width!r}")
         if not np.isfinite(heel) or heel < 0:
             raise ValueError(f"Expected `heel` >= 0 metres, got {heel!r}")
-        rest = _rest_points(skeleton)
+        if feet is None:
+            feet = resolve_roles(sk, roles).feet()
+            if not feet:
+                resolve_roles(sk, roles).require("left_ankle", "right_ankle", purpose="the feet of the body model")
+        return self._with_feet(sk, _reference(skeleton, roles, pose), feet, roles, foot_width, heel)
+
+    def _with_feet(
+        self,
+        skeleton: Skeleton,
+        pose: _Pose,
+        feet: Sequence[tuple[str, str | None] | tuple[str, str | None, str | None]],
+        roles: Mapping[str, Any] | None,
+        foot_width: float,
+        heel: float,
+    ) -> Body:
+        """:meth:`with_feet` with the feet and the reference pose resolved."""
 
         def frame() -> _Frame:
             r = resolve_roles(skeleton, roles)
             r.require(*_NEEDED[:6], purpose="estimating the toe tips of feet without toe joints or end sites")
-            return _body_frame(r, rest[0])
+            return _body_frame(r, pose.joints)
 
-        if feet is None:
-            feet = resolve_roles(skeleton, roles).feet()
-            if not feet:
-                resolve_roles(skeleton, roles).require("left_ankle", "right_ankle", purpose="the feet of the body model")
         pj: list[str] = []
         po: list[int] = []
         pof: list[Array] = []
@@ -613,8 +923,8 @@ class Body:
             tip_spec = foot[2] if len(foot) > 2 else None
             ja = skeleton.index(ankle)
             jt = None if toe is None else skeleton.index(toe)
-            given = None if tip_spec is None else _point(skeleton, rest, tip_spec)
-            pa, ball, ptip = _foot_points(skeleton, rest, ja, jt, given, frame)
+            given = None if tip_spec is None else _point(skeleton, pose, tip_spec)
+            pa, ball, ptip = _foot_points(skeleton, pose, ja, jt, given, frame)
             fwd = (ball - pa) * [1.0, 0.0, 1.0]
             unit = _unit(fwd)
             fwd = unit if unit is not None else frame().forward
@@ -626,7 +936,7 @@ class Body:
                 po.append(ja)
                 pof.append(heel_pt + s * side - pa)
             owner = ja if jt is None else jt
-            base = rest[0][owner]
+            base = pose.joints[owner]
             bw = foot_width / 2.0
             for s in (-bw, bw) if bw > 0 else (0.0,):
                 pj.append(skeleton.names[owner])
@@ -635,11 +945,12 @@ class Body:
             pj.append(skeleton.names[owner])
             po.append(owner)
             pof.append(ptip - base)
+        point_owners = np.array(po, dtype=np.int64)
         return dataclasses.replace(
             self,
             point_joints=tuple(pj),
-            point_owners=np.array(po, dtype=np.int64),
-            point_offsets=np.array(pof).reshape(-1, 3),
+            point_owners=point_owners,
+            point_offsets=_local(pose, point_owners, np.array(pof).reshape(-1, 3)),
         )
 
     def with_masses(self, masses: ArrayLike) -> Body:
@@ -726,7 +1037,11 @@ class Body:
                 owners.append(skeleton.index(name))
                 offsets.append(np.zeros(3))
                 column.append(k)
-        out = (np.array(owners, dtype=np.int64), np.array(offsets).reshape(-1, 3), np.array(column, dtype=np.int64))
+        out = (
+            readonly(np.array(owners, dtype=np.int64)),
+            readonly(np.array(offsets).reshape(-1, 3)),
+            readonly(np.array(column, dtype=np.int64)),
+        )
         cache[key] = out
         return out
 
@@ -850,9 +1165,7 @@ def _extrapolator(q: int, at: tuple[int, ...]) -> Array:
     """The linear map from ``q`` samples to their least-squares parabola at ``at``."""
     deg = min(2, q - 1)
     basis = np.vander(np.arange(q, dtype=float), deg + 1)
-    out = np.vander(np.asarray(at, dtype=float), deg + 1) @ np.linalg.pinv(basis)
-    out.flags.writeable = False
-    return out
+    return readonly(np.vander(np.asarray(at, dtype=float), deg + 1) @ np.linalg.pinv(basis))
 
 
 def center_of_mass(motion: Motion, body: Body) -> Array:

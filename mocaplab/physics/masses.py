@@ -150,7 +150,8 @@ def fit_masses(
         Reference clips believed physically plausible (captured, unedited),
         all with the body's skeleton.
     body : Body, optional
-        Initial guess (default :meth:`Body.from_skeleton` of the first clip).
+        Initial guess (default :meth:`Body.from_skeleton` of the first clip, measured
+        in its standing pose when the rest pose does not stand).
     contacts : Contacts or sequence of Contacts, optional
         One per clip (default :func:`mocaplab.contacts.foot_contacts`).
     symmetric : bool
@@ -188,7 +189,7 @@ def fit_masses(
         if not isinstance(m, Motion):
             raise TypeError(f"Expected Motion objects in `motions`, got {type(m).__name__} at position {k}")
     known = resolve_roles(clips[0], roles) if body is None or contacts is None else None
-    body = Body.from_skeleton(clips[0].skeleton, roles=known) if body is None else body
+    body = Body.from_skeleton(clips[0], roles=known) if body is None else body
     if contacts is None:
         cons = [default_contacts(m, roles=known) for m in clips]
     elif hasattr(contacts, "mask"):

@@ -196,7 +196,7 @@ from scipy.ndimage import gaussian_filter1d
 from .. import quat
 from ..contacts import intervals_from_mask
 from ..displacement import blend_ramp
-from ..motion import Motion, Skeleton, _owned
+from ..motion import Motion, Skeleton, _owned, readonly
 from ..refinement import Goal, _solve_goals, blend_weights, foot_goals, refine
 from ..roles import Roles, RolesError, resolve_roles
 from .body import GRAVITY, Body, link_positions, paper_width, smoothed_derivatives
@@ -546,9 +546,8 @@ def _link_sets(
     carried_top = np.full(n, -1, dtype=np.int64)
     for u, _ in carried:
         carried_top[_subtree(skeleton, u)] = u
-    for arr in (roles, part, carried_top):
-        arr.flags.writeable = False
-    return LinkSets(roles, tuple(tops), tuple(carried), tuple(carried_s1), part, carried_top)
+    # cached and handed out: read-only for good
+    return LinkSets(readonly(roles), tuple(tops), tuple(carried), tuple(carried_s1), readonly(part), readonly(carried_top))
 
 
 # ======================================================================
@@ -613,9 +612,7 @@ def _smooth(x: Array, width: float) -> Array:
 @lru_cache(maxsize=32)
 def _kernel_mass(n: int, std: float) -> Array:
     """Weight of the truncated Gaussian kernel that falls inside ``n`` frames, per frame (n,)."""
-    mass = gaussian_filter1d(np.ones(n), std, mode="constant", truncate=KERNEL_TRUNCATE)
-    mass.flags.writeable = False
-    return mass
+    return readonly(gaussian_filter1d(np.ones(n), std, mode="constant", truncate=KERNEL_TRUNCATE))
 
 
 def _rotate_about(omega: Array, centre: Array, point: Array) -> Array:
@@ -657,9 +654,7 @@ def _apply_layout(sets: LinkSets) -> dict[str, NDArray[np.int64]]:
         "below": below,
         "below_slot": np.array([slot[int(u)] for u in sets.carried_top[below]], dtype=np.int64),
     }
-    for arr in out.values():
-        arr.flags.writeable = False
-    return out
+    return {k: readonly(v) for k, v in out.items()}
 
 
 #: Left-multiplication matrix of a quaternion (x, y, z, w): (q g)_i = sum_j
@@ -757,10 +752,7 @@ def _lever_layout(sets: LinkSets, body: Body) -> tuple[NDArray[np.int64], NDArra
     part = sets.part[body.owners][moving]
     slots = np.flatnonzero(carried[moving])
     tops = link_top[moving][slots]
-    out = (moving, part, slots, tops)
-    for arr in out:
-        arr.flags.writeable = False
-    return out
+    return readonly(moving), readonly(part), readonly(slots), readonly(tops)
 
 
 def _ground_rotation(
@@ -1177,6 +1169,9 @@ def _footplant_fn(
 class TouchUpState:
     """Where a touch-up stands: the current motion and what comes next.
 
+    Every array it holds or computes (kinematics, violation, the balance's)
+    is read-only for good: a view of a read-only owner.
+
     Attributes
     ----------
     motion : Motion
@@ -1227,6 +1222,13 @@ class TouchUpState:
     roles: Roles | None = None
     path_joint: int = 0
 
+    def __post_init__(self) -> None:
+        # states share their kinematics with the next step: read-only for good
+        # (the arrays are the touch-up's own, made read-only in place)
+        if self.kinematics is not None:
+            grot, gpos = self.kinematics
+            object.__setattr__(self, "kinematics", (readonly(grot), readonly(gpos)))
+
     @property
     def next_adjustment(self) -> Adjustment:
         """The adjustment the next :func:`step` applies."""
@@ -1270,7 +1272,7 @@ class TouchUpState:
         com, dt = self.balance.com, self.motion.dt
         for a, b in flight_stages(self.contacts):
             out[a:b] = np.linalg.norm(com[a:b] - _ballistic(com[a], com[b - 1], b - a, dt), axis=1)
-        return out
+        return readonly(out)
 
     @property
     def error(self) -> float:
@@ -1314,7 +1316,7 @@ def start(
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
     known = resolve_roles(motion, roles)
-    body = Body.from_skeleton(motion.skeleton, roles=known) if body is None else body
+    body = Body.from_skeleton(motion, roles=known) if body is None else body
     if not isinstance(body, Body):
         raise TypeError(f"Expected `body` to be a Body, got {type(body).__name__}")
     body.check(motion)
@@ -1448,6 +1450,9 @@ class TouchUpHistory:
         were done), ``"stalled"`` (a pass lowered the best error by less than
         the tolerance), ``"solved"`` (the error reached 0) or ``""`` (a
         history built from a session).
+
+    The per-step arrays (:attr:`errors`, :attr:`zmp_distance`, ...) are
+    computed once and read-only.
     """
 
     states: tuple[TouchUpState, ...]
@@ -1494,25 +1499,28 @@ class TouchUpHistory:
         """What each step did (index 0: ``"input"``)."""
         return [s.label for s in self.states]
 
-    @property
+    # the arrays below are computed once and read-only (motion.readonly): a
+    # history is a record, and widgets read these on every redraw
+
+    @cached_property
     def zmp_distance(self) -> Array:
         """ZMP distance outside the support polygon, per step and frame (NaN in flight), shape (S + 1, F)."""
-        return np.stack([s.zmp_distance for s in self.states])
+        return readonly(np.stack([s.zmp_distance for s in self.states]))
 
-    @property
+    @cached_property
     def mean_zmp_distance(self) -> Array:
         """Mean ZMP distance per step (Figure 9), metres, shape (S + 1,); index 0 the input."""
-        return np.array([s.mean_zmp_distance for s in self.states])
+        return readonly(np.array([s.mean_zmp_distance for s in self.states]))
 
-    @property
+    @cached_property
     def errors(self) -> Array:
         """:attr:`TouchUpState.error` per step, metres, shape (S + 1,); index 0 the input."""
-        return np.array([s.error for s in self.states])
+        return readonly(np.array([s.error for s in self.states]))
 
-    @property
+    @cached_property
     def dropped(self) -> NDArray[np.int64]:
         """Ground frames without a ZMP per step (left out of the means), shape (S + 1,)."""
-        return np.array([s.dropped for s in self.states], dtype=np.int64)
+        return readonly(np.array([s.dropped for s in self.states], dtype=np.int64))
 
     def __len__(self) -> int:
         return len(self.states)
@@ -1539,7 +1547,8 @@ def touch_up(
         (:func:`mocaplab.refinement.refine`): the touch-up keeps them where
         they are and warns when they slide.
     body : Body, optional
-        Masses; default :meth:`Body.from_skeleton` (de Leva table).  Fitted
+        Masses; default :meth:`Body.from_skeleton` of the motion (de Leva table;
+        measured in the motion's standing pose when the rest pose does not stand).  Fitted
         masses (:func:`mocaplab.physics.fit_masses`) make a captured clip
         change less.
     schedule : "default", "ground", "flight", Adjustment or sequence of Adjustment

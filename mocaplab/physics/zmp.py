@@ -43,7 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, QhullError
 
 from .. import quat
-from ..motion import Motion
+from ..motion import Motion, _freeze, _owned, _take, readonly
 from ..roles import resolve_roles
 from .body import GRAVITY, Body, _positions_and_accelerations, paper_width
 
@@ -304,9 +304,7 @@ def _depth(z: Array, v: Array, act: NDArray[np.bool_], pairs: NDArray[np.int64])
 def _pairs(n: int, with_self: bool = False) -> NDArray[np.int64]:
     """Index pairs ``i < j`` (``i <= j`` with ``with_self``) of ``n`` points, shape (K, 2)."""
     pick = combinations_with_replacement if with_self else combinations
-    out = np.array(list(pick(range(n), 2)), dtype=np.int64).reshape(-1, 2)
-    out.flags.writeable = False
-    return out
+    return readonly(np.array(list(pick(range(n), 2)), dtype=np.int64).reshape(-1, 2))
 
 
 def signed_distance(point: ArrayLike, polygon: ArrayLike) -> float:
@@ -362,6 +360,10 @@ class Balance:
         Which support points are planted on each frame.
     positions, accelerations : ndarray, shape (F, L, 3)
         Smoothed link centres and their accelerations (what equation 4 used).
+
+    Every array, :attr:`signed_distance` included, is read-only for good (a
+    view of a read-only owner: ``flags.writeable = True`` raises); arrays
+    given to the constructor are copied.
     """
 
     zmp: Array
@@ -375,17 +377,19 @@ class Balance:
     accelerations: Array
 
     def __post_init__(self) -> None:
-        # states of a touch-up history share Balance objects: keep them read-only
+        # states of a touch-up history share Balance objects: every array is
+        # read-only for good (a view of a read-only owner, motion.readonly);
+        # arrays given from outside are copied first, those built here are
+        # handed over with motion._owned
         for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, np.ndarray):
-                value.flags.writeable = False
+            arr, fresh = _take(getattr(self, f.name), bool if f.name in ("ground", "active") else float)
+            object.__setattr__(self, f.name, _freeze(arr, fresh))
 
     @cached_property
     def signed_distance(self) -> Array:
         """Signed ZMP distance: positive outside, minus the depth inside, NaN in flight, shape (F,)."""
         signed, _ = polygon_distance(self.zmp[:, [0, 2]], self.support[..., [0, 2]], self.active)
-        return signed
+        return readonly(signed)
 
     @property
     def dropped(self) -> int:
@@ -431,7 +435,8 @@ def balance(
     ----------
     motion : Motion
     body : Body, optional
-        Default :meth:`Body.from_skeleton` of the motion's skeleton.
+        Default :meth:`Body.from_skeleton` of the motion (measured in its
+        standing pose when the skeleton's rest pose does not stand).
     contacts : Contacts, optional
         Planted joints; default :func:`mocaplab.contacts.foot_contacts`.
     width : float, optional
@@ -449,7 +454,7 @@ def balance(
     """
     if body is None or contacts is None:
         known = resolve_roles(motion, roles)
-        body = Body.from_skeleton(motion.skeleton, roles=known) if body is None else body
+        body = Body.from_skeleton(motion, roles=known) if body is None else body
         contacts = default_contacts(motion, roles=known) if contacts is None else contacts
     _check_contacts(contacts, motion)
     w = paper_width(5.0, motion.fps) if width is None else float(width)
@@ -525,10 +530,11 @@ def _finish(
     proj[:, 0], proj[:, 2] = px, pz
     proj[np.isnan(px)] = np.nan
     com = (m @ raw) / body.total_mass
-    out = Balance(z, proj, dist, com, ground, support, active, r, acc)
+    # every array is new here or read-only already (shared with the Balance _rebalance started from)
+    out = Balance(*(_owned(a) for a in (z, proj, dist, com, ground, support, active, r, acc)))
     # for _rebalance: the unsmoothed link centres and the support segments
-    object.__setattr__(out, "_raw", raw)
-    object.__setattr__(out, "_segments", segments)
+    object.__setattr__(out, "_raw", readonly(raw))
+    object.__setattr__(out, "_segments", tuple(readonly(s) for s in segments))
     return out
 
 
@@ -537,10 +543,8 @@ def _point_layout(body: Body, owners: NDArray[np.int64], offsets: Array) -> tupl
     key = (id(owners), id(offsets))
     cache = body.__dict__.setdefault("_point_layout_cache", {})
     if key not in cache:
-        idx = np.concatenate([body.owners, owners])
-        off = np.concatenate([body.offsets, offsets])
-        idx.flags.writeable = False
-        off.flags.writeable = False
+        idx = readonly(np.concatenate([body.owners, owners]))
+        off = readonly(np.concatenate([body.offsets, offsets]))
         cache[key] = (idx, off, owners, offsets)  # keep the keyed arrays alive
     return cache[key][:2]
 

@@ -45,3 +45,21 @@ def cmu(mocap_dir: Path):
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def converted(cmu, tmp_path_factory):
+    """``converted(clip, convention, frames)``: a CMU clip slice written in another
+    convention (``tests/conventions.py``) and loaded back, with its name map (cached)."""
+    from conventions import load_converted
+
+    cache: dict = {}
+
+    def get(clip: str, convention: str, frames: slice = slice(0, 360)):
+        key = (clip, convention, frames.start, frames.stop, frames.step)
+        if key not in cache:
+            folder = tmp_path_factory.mktemp(f"{clip}_{convention}")
+            cache[key] = load_converted(cmu(clip)[frames], convention, folder)
+        return cache[key]
+
+    return get

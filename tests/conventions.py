@@ -32,6 +32,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -290,3 +291,23 @@ def convert(motion: Motion, convention: str, folder: str | Path) -> tuple[Path, 
     except KeyError:
         raise ValueError(f"Expected `convention` to be one of {CONVENTIONS}, got {convention!r}") from None
     return converter(motion, folder)
+
+
+def load_converted(motion: Motion, convention: str, folder: str | Path) -> tuple[Motion, dict[str, str]]:
+    """Write ``motion`` in ``convention`` to ``folder`` and read it back with :func:`mocaplab.load`.
+
+    Warnings the loader gives on purpose (the estimated unit, the path joint)
+    are silenced.  Returns ``(loaded motion, name_map)``.
+    """
+    from mocaplab import load
+
+    path, name_map = convert(motion, convention, folder)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        loaded = load(path, **LOAD_OPTIONS.get(convention, {}))
+    return loaded, name_map
+
+
+def as_original(motion: Motion, convention: str) -> Motion:
+    """The CMU motion a converted file should match (``fps30`` files are resampled)."""
+    return motion.resample(30.0) if convention == "fps30" else motion

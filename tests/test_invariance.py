@@ -15,9 +15,8 @@ import warnings
 
 import numpy as np
 import pytest
-from conventions import CONVENTIONS, EXTRA_JOINTS, LOAD_OPTIONS, convert
+from conventions import CONVENTIONS, EXTRA_JOINTS, as_original
 
-from mocaplab import load
 from mocaplab.contacts import foot_contacts, stillness_contacts
 from mocaplab.refinement import refine
 
@@ -27,26 +26,13 @@ TOL = 1e-3  # metres
 
 
 def _original(cmu, clip, convention):
-    m = cmu(clip)[FRAMES]
-    return m.resample(30.0) if convention == "fps30" else m
+    return as_original(cmu(clip)[FRAMES], convention)
 
 
 @pytest.fixture(scope="module")
-def converted(cmu, tmp_path_factory):
-    cache: dict = {}
-
-    def get(clip: str, convention: str):
-        key = (clip, convention)
-        if key not in cache:
-            folder = tmp_path_factory.mktemp(f"{clip}_{convention}")
-            path, name_map = convert(cmu(clip)[FRAMES], convention, folder)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # unit estimates, the path joint
-                motion = load(path, **LOAD_OPTIONS.get(convention, {}))
-            cache[key] = (motion, name_map)
-        return cache[key]
-
-    return get
+def converted(converted):
+    """The shared ``converted`` fixture (tests/conftest.py) on this module's frames."""
+    return lambda clip, convention: converted(clip, convention, FRAMES)
 
 
 def _columns(motion, names):

@@ -56,9 +56,9 @@ import warnings
 
 import numpy as np
 import pytest
-from conventions import CONVENTIONS, LOAD_OPTIONS, convert
+from conventions import CONVENTIONS, as_original
 
-from mocaplab import load, quat
+from mocaplab import quat
 from mocaplab.physics import (
     Body,
     RestPoseWarning,
@@ -90,26 +90,13 @@ TOL["x_bones"] = {
 
 
 def _original(cmu, clip, convention):
-    m = cmu(clip)[FRAMES]
-    return m.resample(30.0) if convention == "fps30" else m
+    return as_original(cmu(clip)[FRAMES], convention)
 
 
 @pytest.fixture(scope="module")
-def converted(cmu, tmp_path_factory):
-    cache: dict = {}
-
-    def get(clip: str, convention: str):
-        key = (clip, convention)
-        if key not in cache:
-            folder = tmp_path_factory.mktemp(f"{clip}_{convention}")
-            path, name_map = convert(cmu(clip)[FRAMES], convention, folder)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # unit estimates, the path joint
-                motion = load(path, **LOAD_OPTIONS.get(convention, {}))
-            cache[key] = (motion, name_map)
-        return cache[key]
-
-    return get
+def converted(converted):
+    """The shared ``converted`` fixture (tests/conftest.py) on this module's frames."""
+    return lambda clip, convention: converted(clip, convention, FRAMES)
 
 
 @pytest.fixture(scope="module")

@@ -493,6 +493,32 @@ class LessonPage:
             [code, timeout * 1000],
         )
 
+    def run_cell(self, source: str, *, timeout: float = 120.0) -> None:
+        """Append a code cell with ``source`` to the notebook, run it and wait until the kernel is idle."""
+        self.page.evaluate(
+            """async (src) => {
+                 const app = window.jupyterapp;
+                 const nb = app.shell.currentWidget.content;
+                 const n = nb.model.cells.length;
+                 nb.model.sharedModel.insertCell(n, {cell_type: 'code', source: src});
+                 nb.activeCellIndex = n;
+                 await app.commands.execute('notebook:run-cell');
+               }""",
+            source,
+        )
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.page.wait_for_timeout(300)
+            state = self.cell_state()
+            if state.get("phase") != "ok":
+                continue
+            last = state["cells"][-1]
+            if last["errors"]:
+                raise AssertionError(f"{self.notebook}: the added cell raised {last['errors'][0]}")
+            if last["count"] is not None and not state["running"] and state["status"] == "idle":
+                return
+        raise AssertionError(f"{self.notebook}: the added cell did not finish within {timeout:.0f} s")
+
     # -- evidence ----------------------------------------------------------
     def screenshot(self, label: str, locator: Any = None) -> Path:
         """Save a screenshot (of the page, or of ``locator``) and return its path."""
@@ -531,3 +557,219 @@ def wait_until(predicate: Callable[[], Any], *, timeout: float, interval: float 
             return value
         time.sleep(interval)
     raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what or predicate}; last value {value!r}")
+
+
+# -- counting the pictures a view shows ------------------------------------------
+class PictureCounter:
+    """Count the distinct pictures a region of the page shows, with Chromium's CDP screencast.
+
+    The screencast sends a frame each time the compositor paints the page
+    (never when nothing changed); each frame is cropped to ``box`` (CSS
+    pixels of the viewport, as ``locator.bounding_box()`` gives them, less a
+    margin of 8 frame pixels: JPEG blocks across the edge see the page around)
+    and counts as a new picture when at least ``min_pixels`` of its pixels
+    differ from the previous frame's crop by more than ``threshold`` grey
+    levels (a skeleton moving by a few pixels changes a few hundred; the same
+    picture encoded again changes none).  Changes elsewhere on the page (a
+    slider, a label) are not counted.
+
+    Parameters
+    ----------
+    page : playwright Page
+    box : dict
+        ``{"x", "y", "width", "height"}`` in CSS pixels of the viewport.
+    threshold : float
+        Grey-level change (8-bit) above which a pixel has changed.
+    min_pixels : int
+        Changed pixels that make a new picture.
+    skip_top : float
+        Share of the box's height left out at its top (an overlaid toolbar).
+
+    Notes
+    -----
+    Frames are acknowledged as they arrive (Chromium sends no more until
+    then) and decoded only in :meth:`stop`, so counting costs the page little.
+    """
+
+    def __init__(
+        self,
+        page: Any,
+        box: dict[str, float],
+        *,
+        threshold: float = 24.0,
+        min_pixels: int = 6,
+        skip_top: float = 0.0,
+        scale: float = 0.5,
+    ) -> None:
+        self.page = page
+        self.min_pixels = int(min_pixels)
+        self.scale = float(scale)
+        self.box = dict(box)
+        self.threshold = float(threshold)
+        self.skip_top = float(skip_top)
+        self.frames: list[tuple[float, str, dict[str, Any]]] = []  # (seconds, base64 jpeg, metadata)
+        self._cdp: Any = None
+
+    def _on_frame(self, params: dict[str, Any]) -> None:
+        self.frames.append((time.monotonic(), params["data"], params.get("metadata", {})))
+        try:
+            self._cdp.send("Page.screencastFrameAck", {"sessionId": params["sessionId"]})
+        except Exception:  # noqa: BLE001 - the session may be closing
+            pass
+
+    def start(self) -> None:
+        self._cdp = self.page.context.new_cdp_session(self.page)
+        self._cdp.on("Page.screencastFrame", self._on_frame)
+        # half-size frames: encoding the full viewport for every paint would take the page's CPU
+        size = self.page.viewport_size or {"width": 1800, "height": 1100}
+        self._cdp.send(
+            "Page.startScreencast",
+            {
+                "format": "jpeg",
+                "quality": 70,
+                "maxWidth": int(size["width"] * self.scale),
+                "maxHeight": int(size["height"] * self.scale),
+                "everyNthFrame": 1,
+            },
+        )
+
+    def stop(self) -> None:
+        if self._cdp is None:
+            return
+        try:
+            self._cdp.send("Page.stopScreencast")
+            self._cdp.detach()
+        finally:
+            self._cdp = None
+
+    def crops(self) -> list[tuple[float, np.ndarray]]:
+        """(arrival time, grey crop of the box) of every frame received."""
+        import base64
+
+        from PIL import Image
+
+        out = []
+        for stamp, data, meta in self.frames:
+            img = Image.open(io.BytesIO(base64.b64decode(data))).convert("L")
+            scale = img.width / float(meta.get("deviceWidth") or img.width)
+            top = float(meta.get("offsetTop", 0.0))
+            margin = 8
+            x0 = int(round(self.box["x"] * scale)) + margin
+            y0 = int(round((self.box["y"] + top + self.skip_top * self.box["height"]) * scale)) + margin
+            x1 = int(round((self.box["x"] + self.box["width"]) * scale)) - margin
+            y1 = int(round((self.box["y"] + top + self.box["height"]) * scale)) - margin
+            out.append((stamp, np.asarray(img.crop((x0, y0, x1, y1)), dtype=float)))
+        return out
+
+    def distinct(self, t0: float | None = None, t1: float | None = None) -> list[float]:
+        """Arrival times of the frames whose crop differs from the frame before (within [t0, t1])."""
+        changes: list[float] = []
+        previous: np.ndarray | None = None
+        for stamp, crop in self.crops():
+            new = (
+                previous is None
+                or crop.shape != previous.shape
+                or int((np.abs(crop - previous) > self.threshold).sum()) >= self.min_pixels
+            )
+            if new and previous is not None and (t0 is None or stamp >= t0) and (t1 is None or stamp <= t1):
+                changes.append(stamp)
+            previous = crop
+        return changes
+
+
+def count_pictures(
+    page: Any,
+    box: dict[str, float],
+    seconds: float,
+    action: Callable[[], Any],
+    *,
+    sample: Callable[[], Any] | None = None,
+    every: float = 0.25,
+    **options: Any,
+) -> tuple[float, PictureCounter, list[tuple[float, Any]]]:
+    """Distinct pictures per second shown in ``box`` during ``seconds`` after ``action()`` (a click on play).
+
+    ``sample()``, if given, is called every ``every`` seconds meanwhile; its
+    results come back with the seconds since the action.
+    """
+    counter = PictureCounter(page, box, **options)
+    samples: list[tuple[float, Any]] = []
+    counter.start()
+    try:
+        page.wait_for_timeout(300)  # a first frame of the still view
+        t0 = time.monotonic()
+        action()
+        while time.monotonic() - t0 < seconds:
+            page.wait_for_timeout(int(1000 * min(every, max(seconds - (time.monotonic() - t0), 0.01))))
+            if sample is not None and time.monotonic() - t0 < seconds:
+                before = time.monotonic()
+                value = sample()
+                samples.append(((before + time.monotonic()) / 2 - t0, value))
+        t1 = time.monotonic()
+    finally:
+        counter.stop()
+    return len(counter.distinct(t0, t1)) / (t1 - t0), counter, samples
+
+
+_VIEWER_STATE = """
+import json as _j, numpy as _n
+_v = {var}
+_l = list(_v.play_log)
+print("@@json@@" + _j.dumps({{"frame": _v.frame, "time": _v.time, "playing": _v.playing, "pictures": len(_l),
+    "cost_ms": float(1e3 * _n.median([c for _, _, c in _l])) if _l else None, "fps": _v.fps,
+    "n_frames": _v.n_frames}}))
+del _j, _n, _v, _l
+"""
+
+def play_viewer(lesson: LessonPage, var: str, *, seconds: float = 3.0, settle: float = 2.0) -> dict[str, Any]:
+    """Play the lesson's ``MotionViewer`` called ``var`` for ``seconds`` and measure it as a person sees it.
+
+    The viewer (found by a class the kernel adds to its box) is scrolled into
+    view and set to frame 0; its play button is clicked with the screencast
+    running over its 3D view (:class:`PictureCounter`).  Every 0.25 s the
+    time label and the slider's readout are read together.  Returns the
+    pictures per second, the kernel's own count and median cost per picture
+    (``play_log``), the label/slider pairs, the largest lag of the label's
+    time behind the wall clock since the click, and the viewer's state after.
+    """
+    page = lesson.page
+    marker = f"mocaplab-measured-{secrets.token_hex(3)}"
+    lesson.kernel_eval(f"{var}.widget.add_class({marker!r}); {var}.stop_playback(); {var}.set_frame(0)")
+    box = page.locator(f".{marker}").first
+    box.wait_for(timeout=30000)
+    box.scroll_into_view_if_needed()
+    page.wait_for_timeout(int(settle * 1000))
+    lesson.kernel_eval(f"{var}.play_log.clear()")
+    iframe = box.locator("iframe.pyvista").first
+    view_box = iframe.bounding_box()
+    play = box.locator(".mocaplab-viewer-play button, button.mocaplab-viewer-play").first
+    slider = box.locator(".mocaplab-viewer-slider").first
+
+    def both() -> tuple[str, str]:  # the slider's time (its description) and frame (its readout), read together
+        return slider.evaluate(
+            "(el) => [el.querySelector('.widget-label').textContent, el.querySelector('.widget-readout').textContent]"
+        )
+
+    rate, counter, samples = count_pictures(page, view_box, seconds, play.click, sample=both, skip_top=0.18)
+    state = json.loads(
+        [x for x in lesson.kernel_eval(_VIEWER_STATE.format(var=var)).splitlines() if x.startswith("@@json@@")][-1][8:]
+    )
+    lesson.kernel_eval(f"{var}.stop_playback()")
+    pairs, lags = [], []
+    for elapsed, (text, value) in samples:
+        found = re.search(r"([\d.]+) s", text or "")
+        if not found or not str(value).strip().isdigit():
+            continue
+        seconds_shown, frame = float(found.group(1)), int(str(value).strip())
+        pairs.append((round(seconds_shown * state["fps"]), frame))  # the time shown, in frames, and the frame
+        lags.append(elapsed - seconds_shown)
+    return {
+        "pictures_per_s": rate,
+        "screencast_frames": len(counter.frames),
+        "kernel_pictures_per_s": state["pictures"] / seconds,
+        "kernel_cost_ms": state["cost_ms"],
+        "label_slider": pairs,
+        "max_lag_s": max(lags) if lags else None,
+        "state": state,
+        "box": box,
+    }

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import asyncio
+import dataclasses
+import html
 import sys
 import threading
 
@@ -12,7 +14,7 @@ import pytest
 pv = pytest.importorskip("pyvista")
 pytest.importorskip("ipywidgets")
 
-from mocaplab.widgets.viewer import MotionViewer, _SphereSet  # noqa: E402
+from mocaplab.widgets.viewer import MotionViewer, PlayClock, _session_url, _SphereSet, fit_view  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -73,14 +75,29 @@ def test_screenshot_is_not_blank_and_follows_the_frame(viewer):
     b = viewer.screenshot().astype(float)
     assert np.abs(a - b).mean() > 0.5
     assert viewer._view.value != png_before  # the static image widget was re-rendered
-    assert "frame 300" in viewer._label.value
+    assert viewer.slider.description == "2.500 s", "the slider shows the time with the frame"
 
 
-def test_play_is_linked_to_the_slider(viewer):
-    assert viewer.play.max == viewer.slider.max == viewer.n_frames - 1
-    assert viewer.play.step == 4  # about 30 updates per second of a 120 fps clip
-    assert viewer.play.interval == 33
-    assert viewer.widget.children[0] is viewer._view
+def test_controls_play_step_and_a_usable_slider(viewer):
+    """Play and step buttons beside a slider whose track keeps at least 300 px."""
+    box = viewer.widget
+    assert box.children[0] is viewer._view
+    legend, controls, label, status = box.children[1:]
+    assert legend is viewer._legend and label is viewer._label and status is viewer._status
+    assert list(controls.children) == [viewer.play, viewer.back, viewer.forward, viewer.slider]
+    assert viewer.slider.max == viewer.n_frames - 1
+    assert int(viewer.slider.layout.min_width.removesuffix("px")) >= 480  # track = width - time (72 px) - readout
+    assert viewer.play.description == "play" and viewer.play.icon == "play"
+    assert legend.layout.display == "none", "no legend for one character"
+    viewer.set_frame(10)
+    viewer.forward.click()
+    assert viewer.frame == viewer.slider.value == 11
+    viewer.back.click()
+    viewer.back.click()
+    assert viewer.frame == viewer.slider.value == 9 and viewer.slider.description == f"{9 / 120:.3f} s"
+    viewer.set_frame(0)
+    viewer.back.click()  # clamped, no error
+    assert viewer.frame == 0 and viewer._status.value == ""
 
 
 def test_several_characters_of_different_lengths_and_rates(walk, cmu):
@@ -92,6 +109,7 @@ def test_several_characters_of_different_lengths_and_rates(walk, cmu):
     v.set_time(2.0)
     assert v.frame == 240
     assert v.character_frames() == [119, 120]  # the walk holds its last pose
+    assert v.label_text() == "clip 3.983 s, frames 0-478 at 120 fps; characters' frames 119, 120"
     assert np.allclose(_sphere_centres(v, 1)[: salsa.n_joints], salsa.global_positions()[120], atol=1e-9)
     assert np.allclose(_sphere_centres(v, 0)[: short.n_joints], short.global_positions()[119], atol=1e-9)
     img = v.screenshot()
@@ -130,10 +148,10 @@ def test_overlays_follow_the_time(walk):
     v.close()
 
 
-def test_callback_errors_are_shown_in_the_widget(walk):
+def test_callback_errors_are_shown_in_the_widget_and_leave_it_consistent(walk):
     v = MotionViewer(walk[:60], backend="none")
     box = v.widget
-    assert v._view is None and len(box.children) == 2
+    assert v._view is None and len(box.children) == 4  # legend, controls, label, status
 
     def broken(t):
         if t > 0.1:
@@ -144,9 +162,36 @@ def test_callback_errors_are_shown_in_the_widget(walk):
     with pytest.raises(RuntimeError):
         v.slider.value = 30
     assert "overlay exploded" in v._status.value
+    # the engine, the slider, the label and the characters all show frame 30
+    assert v.frame == v.slider.value == 30 and v.slider.description == "0.250 s"
+    assert v._label.value == html.escape(v.label_text())
+    assert np.allclose(_sphere_centres(v)[: walk.n_joints], walk.global_positions()[30], atol=1e-9)
     v.remove_overlay("broken")
     v.slider.value = 10
     assert v._status.value == ""
+    v.close()
+
+
+def test_text_from_data_and_errors_is_escaped(walk):
+    """A joint name or a label that is HTML (from a downloaded file) is shown as text, never run."""
+    evil = "<img src=x onerror=alert(1)>"
+    names = (evil,) + walk.skeleton.names[1:]
+    m = walk[:60].replace(skeleton=dataclasses.replace(walk.skeleton, names=names))
+    v = MotionViewer([m, walk[:60]], backend="none", labels=[evil, "<b>walk</b>"])
+    v.widget  # noqa: B018
+
+    def missing_joint(t):
+        if t > 0.1:
+            raise KeyError(f"no target for joint {m.skeleton.names[0]}")
+        return np.zeros((1, 3))
+
+    v.add_points("targets", missing_joint)
+    with pytest.raises(KeyError):
+        v.slider.value = 20
+    for text in (v._status.value, v._legend.value):
+        assert "<img" not in text and "<b>" not in text
+    assert html.escape(evil) in v._status.value
+    assert html.escape(evil) in v._legend.value and "&lt;b&gt;walk&lt;/b&gt;" in v._legend.value
     v.close()
 
 
@@ -211,7 +256,7 @@ def test_set_motions_updates_the_meshes_in_place(walk, monkeypatch):
     centres = _sphere_centres(v)
     assert np.allclose(centres[: walk.n_joints], edited.global_positions()[100], atol=1e-9)
     assert np.allclose(centres[walk.n_joints :], edited.end_site_positions()[100], atol=1e-9)
-    assert v.n_frames == 300 and v.slider.max == 299 and v.play.max == 299
+    assert v.n_frames == 300 and v.slider.max == 299
     assert view.value != png, "the static image was re-rendered"
     x0, x1, z0, z1 = v._ground_extent
     root = edited.root_positions
@@ -219,7 +264,7 @@ def test_set_motions_updates_the_meshes_in_place(walk, monkeypatch):
 
     # shorter motions: the current frame is clamped to the new last frame
     v.set_motions(walk[:50])
-    assert v.n_frames == 50 and v.slider.max == 49 and v.play.max == 49
+    assert v.n_frames == 50 and v.slider.max == 49
     assert v.frame == 49 and v.slider.value == 49
     assert np.allclose(_sphere_centres(v)[: walk.n_joints], walk.global_positions()[49], atol=1e-9)
     v.slider.value = 10  # the slider still drives the new motions
@@ -235,7 +280,7 @@ def test_set_motions_follows_the_clock_and_keeps_the_time(walk):
     v.set_motions(slow)
     assert v.fps == pytest.approx(30.0) and v.n_frames == slow.n_frames
     assert v.frame == 30 and v.time == pytest.approx(1.0)
-    assert v.play.step == 1 and v.play.interval == 33
+    assert v._play_clock.fps == pytest.approx(30.0) and v._play_clock.n_frames == slow.n_frames
     assert np.allclose(_sphere_centres(v)[: walk.n_joints], slow.global_positions()[30], atol=1e-9)
     fixed = MotionViewer(walk[:60], backend="none", fps=60.0)
     fixed.set_motions(slow)
@@ -260,9 +305,10 @@ def test_set_motions_rebuilds_actors_when_the_skeletons_change(walk, cmu):
     assert v.characters[1].actors[1].mapper.dataset is v.characters[1].joints
     assert v.character_frames() == [40, 20]
     assert np.allclose(_sphere_centres(v, 1)[: salsa.n_joints], salsa.global_positions()[20], atol=1e-9)
-    assert plotter.legend is not None
+    assert "walk" in v._legend.value and "salsa" in v._legend.value and v._legend.layout.display == ""
+    assert plotter.legend is None, "the legend is HTML beside the view, not under the trame toolbar"
     v.set_motions(salsa)  # one character of another skeleton
-    assert "bones1" not in v.plotter.actors and plotter.legend is None
+    assert "bones1" not in v.plotter.actors and v._legend.layout.display == "none"
     assert np.allclose(_sphere_centres(v)[: salsa.n_joints], salsa.global_positions()[20], atol=1e-9)
     assert v.screenshot().std() > 10
     v.close()
@@ -412,3 +458,240 @@ def test_follow_tracks_the_pelvis_whatever_the_layout(walk):
     v.close()
     with pytest.raises(ValueError, match="one per character"):
         MotionViewer([m, m], backend="none", roles=[None])
+
+
+# ----------------------------------------------------------------- playback
+class _FakeClock:
+    """A wall clock the test moves: drawing a picture costs ``cost`` s, sleeping advances by the wait."""
+
+    def __init__(self, cost: float) -> None:
+        self.now = 1000.0
+        self.cost = cost
+        self.sleeps: list[float] = []
+
+    def __call__(self) -> float:
+        return self.now
+
+    async def sleep(self, seconds: float) -> None:
+        self.sleeps.append(seconds)
+        self.now += seconds
+        await asyncio.sleep(0)
+
+
+def _play_with(v: MotionViewer, clock: _FakeClock) -> list[tuple[float, int, int, str]]:
+    """Wire ``clock`` into ``v``; record (time, frame, slider value, slider time) of every drawn picture."""
+    seen: list[tuple[float, int, int, str]] = []
+    draw = v._apply_frame
+
+    def costly(frame: int, **options) -> None:
+        began = clock.now
+        draw(frame, **options)
+        seen.append((began, v.frame, v.slider.value, v.slider.description))
+        clock.now += clock.cost
+
+    v._apply_frame = costly
+    v._now, v._sleep = clock, clock.sleep
+    return seen
+
+
+@pytest.mark.parametrize("cost", [0.0, 0.1])
+def test_playback_follows_the_wall_clock_and_skips_what_it_cannot_draw(walk, cost):
+    """Frame = start + floor(elapsed * fps) at every picture: never behind, slider and label on the same frame."""
+
+    async def scenario() -> None:
+        v = MotionViewer(walk[:240], backend="none")  # 2 s at 120 fps
+        v.widget  # noqa: B018
+        v.set_frame(12)
+        clock = _FakeClock(cost)
+        seen = _play_with(v, clock)
+        t0 = clock.now
+        v.play.click()
+        assert v.playing and v.play.description == "pause"
+        await _until(lambda: not v.playing, "the end of the clip")
+        assert v.play.description == "play" and v.frame == v.n_frames - 1
+        frames = [f for _, f, _, _ in seen]
+        updates = []
+        for k, (began, frame, slider, label) in enumerate(seen):
+            assert frame == min(12 + int(np.floor((began - t0) * v.fps + 1e-9)), v.n_frames - 1)
+            assert label == f"{slider / v.fps:.3f} s", "the slider's time and frame always agree"
+            if k == 0 or slider != seen[k - 1][2]:
+                assert slider == frame, "the slider moves to the frame drawn"
+                updates.append(began)
+        assert seen[-1][2] == v.slider.value == v.n_frames - 1, "on the last frame at the end"
+        gaps = np.diff(updates[:-1])
+        assert np.all(gaps >= 1 / v.slider_rate - 1e-9), "at most slider_rate slider updates per second"
+        assert np.all(gaps <= 1 / v.slider_rate + max(1 / 30, 1.5 * cost) + 1e-9), "and not fewer"
+        steps = np.diff(frames)
+        if cost == 0.0:  # at most play_rate pictures per second: 120 fps / 30 = every 4th frame
+            assert set(steps[:-1]) == {4}
+        else:  # 0.1 s per picture, then a rest of half of it: 0.15 s = 18 frames skipped each time
+            assert set(steps[:-1]) == {18}
+            assert all(s == pytest.approx(0.05) for s in clock.sleeps[1:]), "rest: half the cost"
+        # the last frame is drawn when the clip's time is up (within one picture), not later
+        duration = (v.n_frames - 1 - 12) / v.fps
+        assert seen[-2][0] - t0 < duration <= seen[-1][0] - t0 < duration + max(1 / 30, 1.5 * cost) + 1e-9
+        v.close()
+
+    asyncio.run(scenario())
+
+
+def test_slider_moves_and_steps_while_playing(walk):
+    async def scenario() -> None:
+        v = MotionViewer(walk[:240], backend="none")
+        v.widget  # noqa: B018
+        clock = _FakeClock(0.0)
+        seen = _play_with(v, clock)
+        v.play.click()
+        for _ in range(3):
+            await asyncio.sleep(0)
+        _in_thread(setattr, v.slider, "value", 150)  # the student drags the slider (a subshell thread)
+        await _until(lambda: any(f == 150 for _, f, _, _ in seen), "the slider move")
+        await _until(lambda: seen[-1][1] > 170, "playing on")
+        at = next(k for k, (_, f, _, _) in enumerate(seen) if f == 150)
+        t150 = seen[at][0]
+        for began, frame, _, _ in seen[at:]:  # the clock restarted at the slider's frame
+            assert frame == 150 + int(np.floor((began - t150) * v.fps + 1e-9))
+        v.forward.click()  # a step pauses
+        assert not v.playing and v.play.description == "play"
+        frame = v.frame
+        assert v.slider.value == frame and v.slider.description == f"{frame / v.fps:.3f} s"
+        await asyncio.sleep(0.01)
+        assert v.frame == frame, "paused"
+        v.close()
+
+    asyncio.run(scenario())
+
+
+def test_play_button_from_another_thread_plays_in_the_main_thread(walk):
+    main = threading.main_thread()
+
+    async def scenario() -> None:
+        v = MotionViewer(walk[:120], backend="static", window_size=(120, 90))
+        v.widget  # noqa: B018
+        drawn_in: list[threading.Thread] = []
+        real = v.screenshot
+
+        def spy():
+            drawn_in.append(threading.current_thread())
+            return real()
+
+        v.screenshot = spy
+        _in_thread(v.play.click)  # JupyterLab's subshell runs the click in another thread
+        assert not v.playing and drawn_in == [], "nothing done in the worker"
+        await _until(lambda: v.playing, "playback started")
+        await _until(lambda: v.frame > 10, "frames drawn")
+        _in_thread(v.play.click)
+        await _until(lambda: not v.playing, "paused")
+        assert drawn_in and all(t is main for t in drawn_in)
+        v.close()
+
+    asyncio.run(scenario())
+
+
+def test_play_without_a_loop_says_why(walk):
+    v = MotionViewer(walk[:60], backend="none")  # a script: no asyncio loop runs
+    v.widget  # noqa: B018
+    v.play.click()
+    assert not v.playing and v.play.description == "play"
+    assert "RuntimeError" in v._status.value and "asyncio loop" in v._status.value
+    with pytest.raises(RuntimeError, match="set_frame"):
+        v.start_playback()
+    v.close()
+
+
+def test_play_clock():
+    clock = PlayClock(fps=120.0, n_frames=240)
+    clock.start(10, now=5.0)
+    assert clock.frame_at(4.0) == 10, "never before the start"
+    assert clock.frame_at(5.5) == 70 and clock.frame_at(5.0 + 1 / 120) == 11
+    assert clock.frame_at(99.0) == 239 and clock.at_end(99.0) and not clock.at_end(5.5)
+
+
+# ------------------------------------------------------------------- camera
+def _ndc(v: MotionViewer, points: np.ndarray) -> np.ndarray:
+    """Normalised device coordinates (x, y in [-1, 1] inside the picture) of world points."""
+    width, height = v.plotter.window_size
+    m = v.plotter.camera.GetCompositeProjectionTransformMatrix(width / height, -1, 1)
+    proj = np.array([[m.GetElement(i, j) for j in range(4)] for i in range(4)])
+    p = np.c_[points, np.ones(len(points))] @ proj.T
+    return p[:, :2] / p[:, 3:]
+
+
+@pytest.mark.parametrize("size", [(640, 360), (420, 340), (300, 500)])
+def test_camera_frames_every_character_over_the_whole_clip(cmu, size):
+    """Every drawn point of every frame (the jumper's head at the top of the jump too) is in the picture."""
+    jump, walk = cmu("16_05"), cmu("16_15")
+    v = MotionViewer([jump, walk.transformed(translation=(2.0, 0.0, 0.0))], backend="none", window_size=size)
+    pts = np.concatenate([c.positions.reshape(-1, 3) for c in v.characters])
+    ndc = _ndc(v, pts)
+    assert np.abs(ndc).max() <= 0.9 + 1e-6, "inside, with a 10% margin"
+    assert np.abs(ndc).max() > 0.8, "and not lost in the distance"
+    v.close()
+
+
+def test_set_motions_refits_a_camera_the_user_left_alone(walk):
+    v = MotionViewer(walk[:240], backend="none", window_size=(420, 340))
+    moved = walk[:240].transformed(yaw=1.2, translation=(3.0, 0.0, -2.0))
+    v.set_motions(moved)  # an edit moved the character: the untouched camera follows the new clip
+    pts = v.characters[0].positions.reshape(-1, 3)
+    assert np.abs(_ndc(v, pts)).max() <= 0.9 + 1e-6
+    assert not v.camera_moved()
+    v.plotter.camera.Azimuth(40.0)  # the student turns the view
+    assert v.camera_moved()
+    turned = np.asarray(v.plotter.camera.position)
+    v.set_motions(walk[:240])
+    assert np.allclose(v.plotter.camera.position, turned), "a camera the user moved stays"
+    v.set_motions(walk[:240], reset_camera=True)
+    assert not v.camera_moved()
+    v.close()
+
+
+def test_fit_view_keeps_a_band_free_and_is_tight():
+    corners = np.array([[x, y, z] for x in (-1.0, 2.0) for y in (0.0, 1.8) for z in (-3.0, 4.0)])
+    direction, up = np.array([1.0, 0.5, 0.9]), np.array([0.0, 1.0, 0.0])
+    for band in (0.0, 0.16):
+        focal, position = fit_view(corners, direction, up, view_angle=30.0, aspect=1.6, top_band=band)
+        w = (position - focal) / np.linalg.norm(position - focal)
+        assert np.allclose(w, direction / np.linalg.norm(direction))
+        right = np.cross(-w, up)
+        right /= np.linalg.norm(right)
+        upv = np.cross(right, -w)
+        d = corners - position
+        z = d @ -w
+        ty = 0.9 * np.tan(np.radians(15.0))
+        x, y = (d @ right) / (1.6 * ty * z), (d @ upv) / (ty * z)
+        assert np.all(np.abs(x) <= 1 + 1e-6) and np.all(y >= -1 - 1e-6) and np.all(y <= 1 - 2 * band + 1e-6)
+        assert max(np.abs(x).max(), (y.max() + 1) / (2 - 2 * band) * 2 - 1) > 1 - 1e-3, "no closer camera fits"
+
+
+# -------------------------------------------------------------------- trame
+def test_trame_view_sends_pictures_only_and_names_its_websocket(walk, monkeypatch):
+    pytest.importorskip("trame_pyvista")
+    from trame_pyvista.widgets import PyVistaRemoteView
+
+    v = MotionViewer(walk[:60], backend="trame", window_size=(420, 340))
+    view = v.widget.children[0]
+    assert [type(x) for x in view.viewer.views] == [PyVistaRemoteView], "server rendering: no geometry per frame"
+    port = view.viewer.server.port
+    assert f"sessionURL=ws%3A%2F%2Flocalhost%3A{port}%2Fws" in view.src, "no POST to a ParaView launcher (405)"
+    assert view.viewer.server.state[view.viewer.SHOW_UI] is False, "a narrow view starts with its toolbar collapsed"
+    # the newest encoded picture is handed to trame's image delivery (its encoder is one picture behind)
+    from trame_vtk.modules.vtk.protocols import vtkWebPublishImageDelivery
+
+    pushed = []
+    monkeypatch.setattr(
+        vtkWebPublishImageDelivery, "push_render", lambda self, view_id, *a, **k: pushed.append(view_id)
+    )
+    v._push_latest()
+    from trame_vtk.modules.vtk import get_helper
+
+    assert pushed == [get_helper(view.viewer.server).id(v.plotter.render_window)]
+    v.close()
+    wide = MotionViewer(walk[:60], backend="trame", window_size=(640, 400))
+    view = wide.widget.children[0]
+    assert view.viewer.server.state[view.viewer.SHOW_UI] is True
+    assert wide._toolbar_band() == pytest.approx(64 / 400)
+    wide.close()
+    assert _session_url("http://localhost:8123/index.html?ui=x") == "ws://localhost:8123/ws"
+    assert _session_url("https://host:1/a/index.html") == "wss://host:1/a/ws"
+    assert _session_url("proxy/8123/index.html?ui=x") is None

@@ -13,6 +13,10 @@ point coordinates into those meshes **in place** (no actor is re-created),
 then re-renders.  A ground grid lies at y = 0 under the whole scene.
 :meth:`MotionViewer.set_motions` swaps in new motions (an edited scene) the
 same way: same plotter, same widget, same meshes when the skeletons match.
+The camera looks from the front-right and above, at the distance where the
+whole clip of every character (from the ground to the top of the head, over
+all frames) lies inside the picture.  With several characters a legend (an
+HTML row under the view, not drawn into the picture) names them.
 
 Time
 ----
@@ -21,6 +25,24 @@ frames of the viewer's clock, at ``fps`` frames per second (default: the
 highest fps of the characters); slider frame ``i`` is time ``t = i / fps`` and
 character ``k`` shows its frame ``round(t * fps_k)``, held at its last frame
 once it has ended.  With one character the slider frame is its frame.
+
+Playback
+--------
+The play button runs the clock in the kernel, against the wall clock: each
+picture shows the frame ``start + floor(elapsed * fps)``, so a clip of 4 s
+takes 4 s whatever the view costs to draw; frames that cannot be drawn in
+time are skipped, never queued.  The kernel draws at most :attr:`play_rate`
+pictures per second and rests between two pictures for ``play_rest`` times
+the cost of the last one (the browser needs the CPU to show them).  The slider
+shows the frame (its readout) and the time (its description), sent in one
+message so that the two always agree; while playing it moves at most
+:attr:`slider_rate` times per second (each move costs the JupyterLab page a
+layout and paint that the 3D pictures need), always on the last frame and
+when paused.  The line under the slider gives the clip's length and, for
+characters of other frame rates, their own frames.  Moving the slider or pressing a step button while playing
+continues from there (a step pauses).  Playing needs the kernel's asyncio loop
+(it runs between cells, like the trame server); in a script it raises
+``RuntimeError``, use :meth:`MotionViewer.set_frame`.
 
 Overlays
 --------
@@ -36,16 +58,36 @@ filled polygon).  Their data is one of
 * an array of shape ``(k, 3)``: the same points on every frame;
 * a callable ``f(t) -> (k, 3)`` of the time in seconds.
 
-Rows containing NaN are left out on that frame.
+Rows containing NaN are left out on that frame.  An overlay that raises
+leaves the viewer consistent: the characters, slider and label still move
+to the new frame, and the error is shown in the status line (and raised to a
+caller from Python).
 
 Backends
 --------
 ``MOCAPLAB_JUPYTER_BACKEND`` (default ``"trame"``) selects how the 3D view
-reaches the notebook: ``"trame"``, ``"server"`` or ``"client"`` embed pyvista's
-interactive trame view (rotate and zoom with the mouse; it re-renders when
-the slider moves); ``"static"`` renders off-screen and shows a PNG image that
-is re-rendered when the slider moves (used by the tests and by nbval);
-``"none"`` builds the controls without any 3D view.
+reaches the notebook:
+
+* ``"trame"`` and ``"server"`` (the same): pyvista's trame view in its
+  server-rendering mode.  The kernel renders (no multisampling: on Mesa's
+  software rasteriser it costs five times the picture) and sends each picture
+  as a JPEG; the mouse rotates and zooms.  Only the picture crosses the wire,
+  never the geometry: pyvista's own ``"trame"`` mode also serialises the whole
+  scene for its client-side toggle on every update (60-90 ms per frame for
+  eight characters), which is the cost this viewer avoids.
+* ``"client"``: pyvista's vtk.js view, rendered in the browser; the kernel
+  serialises and sends the changed geometry on every frame (slower to play,
+  see ``benchmarks/bench_viewer.py``).
+* ``"static"`` renders off-screen and shows a PNG image that is re-rendered
+  when the slider moves (used by the tests and by nbval);
+* ``"none"`` builds the controls without any 3D view.
+
+The trame toolbar starts collapsed (one button that opens it) in views
+narrower than :data:`TOOLBAR_WIDTH` pixels, where its icons would overlap.
+The iframe is told the address of the trame server's websocket
+(``sessionURL``): without it the trame page first asks a ParaView launcher at
+``.../paraview/`` (a ``POST`` that the trame server answers with 405, logged
+as an error in the browser console), then falls back to that websocket.
 
 Threads
 -------
@@ -58,14 +100,15 @@ black view with white dashes in the browser.  The viewer therefore remembers
 the asyncio loop running in the main thread when it is built and, when one of
 its methods that touch the scene (:meth:`~MotionViewer.set_frame`,
 :meth:`~MotionViewer.set_time`, :meth:`~MotionViewer.set_motions`, the
-overlay methods, :meth:`~MotionViewer.close`, the slider's callback) is called
-from another thread, queues the whole call onto that loop
+overlay methods, playback, :meth:`~MotionViewer.close`, the slider's callback)
+is called from another thread, queues the whole call onto that loop
 (``loop.call_soon_threadsafe``), in call order, and returns at once.  Slider
-moves are coalesced: a burst of them (the play button) draws the newest frame
-once.  Calls made in the main thread, or when no loop was running there (a
-script, the tests), run immediately as before, so the static backend's image
-is re-rendered before the call returns.  An error in a queued call is shown
-in the widget's status line.
+moves are coalesced: a burst of them draws the newest frame once.  Calls made
+in the main thread, or when no loop was running there (a script, the tests),
+run immediately as before, so the static backend's image is re-rendered
+before the call returns.  An error in a queued call is shown in the widget's
+status line.  Every text from data or from an exception (labels, messages)
+is HTML-escaped before it goes into the widget.
 
 The trame server is started without ``trame-vtklocal``: pyvista loads it when
 it is installed, and it then downloads VTK's WebAssembly build from
@@ -77,13 +120,18 @@ vtk.js local rendering) do not need it.
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import functools
+import html
 import io
 import logging
+import math
 import os
 import sys
 import threading
+import time
+import urllib.parse
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -94,11 +142,27 @@ from numpy.typing import ArrayLike, NDArray
 from mocaplab.editing.paths import with_roles
 from mocaplab.motion import Motion
 
-__all__ = ["MotionViewer", "BACKENDS", "default_backend"]
+__all__ = ["MotionViewer", "PlayClock", "BACKENDS", "TOOLBAR_WIDTH", "default_backend", "fit_view"]
 
 BACKENDS = ("trame", "server", "client", "static", "none")
 ENV_VAR = "MOCAPLAB_JUPYTER_BACKEND"
 COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
+# Width (px) the trame toolbar needs for its icons (it spans x = 20..510 px in server mode);
+# narrower views start with it collapsed.
+TOOLBAR_WIDTH = 540
+# JPEG quality of the trame pictures while playing (paused: 100).  Measured in headless
+# Chromium (lesson 01): 100 shows 10-12 pictures per second, 80 shows 17-21.
+PLAY_QUALITY = 80
+# Most slider updates per second while playing.  Each one costs the JupyterLab page a
+# style, layout and paint pass (~30 ms of its main thread in headless Chromium): updating
+# it with every picture halved the pictures shown (lesson 01: 10-13/s instead of 20).
+SLIDER_RATE = 8.0
+# Bottom edge (px) of the open toolbar: the camera keeps the characters below it.
+_TOOLBAR_BOTTOM = 64
+# pyvista's trame modes behind the viewer's backends.
+_TRAME_MODES = {"trame": "server", "server": "server", "client": "client"}
+# Share of the picture's area the characters' box may fill (the rest is margin).
+_FILL = 0.9
 
 OverlayData = ArrayLike | Sequence[ArrayLike] | Callable[[float], ArrayLike]
 
@@ -154,6 +218,31 @@ def _without_vtklocal() -> Iterator[None]:
             del sys.modules[name]
 
 
+def _session_url(src: str) -> str | None:
+    """The websocket address of the trame server behind the iframe address ``src``.
+
+    ``http://localhost:PORT/index.html?ui=...`` serves its websocket at
+    ``ws://localhost:PORT/ws``.  None for a relative address (behind
+    jupyter-server-proxy), where the page finds its websocket by itself.
+    """
+    parts = urllib.parse.urlsplit(src)
+    if parts.scheme not in ("http", "https") or not parts.netloc:
+        return None
+    path = parts.path.rsplit("/", 1)[0]
+    scheme = "wss" if parts.scheme == "https" else "ws"
+    return f"{scheme}://{parts.netloc}{path}/ws"
+
+
+def _iframe_widget(viewer: Any, src: str, **kwargs: Any) -> Any:
+    """pyvista's trame iframe widget, its address naming the websocket (no launcher request, no 405)."""
+    from trame_pyvista.jupyter import Widget
+
+    ws = _session_url(src)
+    if ws is not None:
+        src = f"{src}{'&' if '?' in src else '?'}sessionURL={urllib.parse.quote(ws, safe='')}"
+    return Widget(viewer, src, **kwargs)
+
+
 def _main_thread_loop() -> asyncio.AbstractEventLoop | None:
     """The asyncio loop of the main thread (the kernel's), if one is running.
 
@@ -181,6 +270,125 @@ def _on_main_thread(method: Callable[..., Any]) -> Callable[..., Any]:
         return method(self, *args, **kwargs)
 
     return wrapper
+
+
+def _error_html(err: BaseException) -> str:
+    """An exception as status HTML: its text escaped, wrapped (never cut)."""
+    text = html.escape(f"{type(err).__name__}: {err}")
+    return f"<pre style='color:#b00;white-space:pre-wrap;overflow-wrap:anywhere;margin:0'>{text}</pre>"
+
+
+def fit_view(
+    corners: ArrayLike,
+    direction: ArrayLike,
+    up: ArrayLike,
+    *,
+    view_angle: float,
+    aspect: float,
+    fill: float = _FILL,
+    top_band: float = 0.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Focal point and position of the nearest perspective camera that sees every corner.
+
+    The camera looks along ``-direction`` with ``up`` up.  A point at depth
+    ``z`` in front of it, ``x`` to the right and ``y`` up (camera axes) is
+    inside the picture when ``|x| <= fill * aspect * tan(view_angle / 2) * z``
+    and ``-1 <= y / (fill * tan(view_angle / 2) * z) <= 1 - 2 * top_band``:
+    the top ``top_band`` of the picture's height is kept free (a toolbar lies
+    there).  The camera distance is the smallest for which both ranges hold
+    for every corner (found by bisection: each range only widens with the
+    distance); the focal point then centres the corners between the limits.
+
+    Parameters
+    ----------
+    corners : array_like, shape (n, 3)
+        Points that must be inside the picture (a box's corners).
+    direction : array_like, shape (3,)
+        From the scene towards the camera (any length).
+    up : array_like, shape (3,)
+        The view-up vector.
+    view_angle : float
+        Vertical view angle in degrees (VTK's default is 30).
+    aspect : float
+        Picture width over height.
+    fill : float
+        Largest share of the half-width and half-height a corner may reach.
+    top_band : float
+        Share of the picture's height kept free at its top, in [0, 0.5).
+
+    Returns
+    -------
+    focal_point, position : ndarray, shape (3,)
+    """
+    pts = np.asarray(corners, dtype=float).reshape(-1, 3)
+    w = np.asarray(direction, dtype=float)
+    w = w / np.linalg.norm(w)
+    right = np.cross(-w, np.asarray(up, dtype=float))
+    right /= np.linalg.norm(right)
+    upv = np.cross(right, -w)
+    centre = pts.mean(axis=0)
+    d = pts - centre
+    a, x, y = d @ w, d @ right, d @ upv
+    ty = fill * math.tan(math.radians(view_angle) / 2.0)
+    tx, top = ty * aspect, 1.0 - 2.0 * float(top_band)
+
+    def ranges(dist: float) -> tuple[float, float, float, float]:
+        z = dist - a
+        return (
+            float(np.max(x - tx * z)),
+            float(np.min(x + tx * z)),
+            float(np.max(y - top * ty * z)),
+            float(np.min(y + ty * z)),
+        )
+
+    def fits(dist: float) -> bool:
+        x0, x1, y0, y1 = ranges(dist)
+        return x0 <= x1 and y0 <= y1
+
+    size = float(np.ptp(pts, axis=0).max()) + 1e-3
+    near = float(a.max()) + 1e-6
+    far = near + size
+    while not fits(far):
+        far = near + 2.0 * (far - near)
+    for _ in range(60):
+        mid = 0.5 * (near + far)
+        near, far = (near, mid) if fits(mid) else (mid, far)
+    x0, x1, y0, y1 = ranges(far)
+    focal = centre + 0.5 * (x0 + x1) * right + 0.5 * (y0 + y1) * upv
+    return focal, focal + far * w
+
+
+@dataclass
+class PlayClock:
+    """Playback against the wall clock: the frame to show at a moment.
+
+    ``frame_at(now) = min(start_frame + floor((now - start_time) * fps), n_frames - 1)``:
+    the frame follows the time that has passed, whatever was drawn before
+    (frames that could not be drawn in time are skipped).
+
+    Examples
+    --------
+    >>> clock = PlayClock(fps=30.0, n_frames=90)
+    >>> clock.start(10, now=100.0)
+    >>> clock.frame_at(100.5), clock.frame_at(200.0)
+    (25, 89)
+    """
+
+    fps: float
+    n_frames: int
+    start_frame: int = 0
+    start_time: float = 0.0
+
+    def start(self, frame: int, *, now: float) -> None:
+        """Play from ``frame`` at the moment ``now`` (seconds of the same clock as :meth:`frame_at`)."""
+        self.start_frame, self.start_time = int(frame), float(now)
+
+    def frame_at(self, now: float) -> int:
+        elapsed = max(float(now) - self.start_time, 0.0)
+        return int(min(self.start_frame + math.floor(elapsed * self.fps + 1e-9), self.n_frames - 1))
+
+    def at_end(self, now: float) -> bool:
+        return self.frame_at(now) >= self.n_frames - 1
 
 
 # --------------------------------------------------------------------------
@@ -366,19 +574,41 @@ class MotionViewer:
         skeletons whose roles cannot be inferred; the followed joint is
         their ``pelvis``.  Kept for :meth:`set_motions`.
     window_size : (int, int)
-        Pixels of the 3D view.
+        Pixels of the 3D view (views narrower than :data:`TOOLBAR_WIDTH`
+        start with the trame toolbar collapsed).
     backend : str, optional
         One of :data:`BACKENDS`; default ``MOCAPLAB_JUPYTER_BACKEND`` or ``"trame"``.
     frame : int
         Initial slider frame.
+    play_rate : float
+        Most pictures per second drawn while playing.
 
     Attributes
     ----------
     plotter : pyvista.Plotter
     slider : ipywidgets.IntSlider
         The frame of the viewer's clock (created with :attr:`widget`).
-    play : ipywidgets.Play
-        Linked to ``slider`` in the browser.
+    play : ipywidgets.Button
+        Starts and pauses real-time playback (:meth:`toggle_playback`).
+    back, forward : ipywidgets.Button
+        One frame back or forward (pause playback).
+    play_rate : float
+        Most pictures per second while playing.
+    play_rest : float
+        Pause after each picture while playing, in units of that picture's cost.
+    play_quality : int
+        JPEG quality (0-100) of the trame pictures while playing; paused
+        pictures are sent at 100.
+    slider_rate : float
+        Most slider updates per second while playing (the slider's value and
+        time always change together; the last frame and a pause always
+        update it).
+    pictures : int
+        Pictures drawn by playback so far (for benchmarks).
+    frame_cost : float
+        Seconds the last played picture took to draw and send.
+    play_log : collections.deque of (float, int, float)
+        The last 2000 played pictures: clock reading when it began, frame, cost in seconds.
 
     Examples
     --------
@@ -399,10 +629,11 @@ class MotionViewer:
         end_sites: bool = True,
         ground: bool = True,
         follow: bool = False,
-        window_size: tuple[int, int] = (760, 460),
+        window_size: tuple[int, int] = (640, 400),
         backend: str | None = None,
         frame: int = 0,
         roles: Any = None,
+        play_rate: float = 30.0,
     ) -> None:
         items = _as_motions(motions)
         if roles is not None and not isinstance(roles, Mapping) and len(roles) != len(items):
@@ -415,6 +646,8 @@ class MotionViewer:
             raise ValueError("Expected at least one colour in `colors`, got none")
         if labels is not None and len(labels) != len(items):
             raise ValueError(f"Expected {len(items)} `labels`, got {len(labels)}")
+        if not (np.isfinite(float(play_rate)) and float(play_rate) > 0):
+            raise ValueError(f"Expected `play_rate` > 0 pictures per second, got {play_rate!r}")
         self.backend = backend
         if fps is not None and not (np.isfinite(float(fps)) and float(fps) > 0):
             raise ValueError(f"Expected `fps` > 0, got {fps!r}")
@@ -435,14 +668,31 @@ class MotionViewer:
         self._view: Any = None  # the embedded pyvista view (trame) or ipywidgets.Image (static)
         self.slider: Any = None
         self.play: Any = None
+        self.back: Any = None
+        self.forward: Any = None
         self._label: Any = None
+        self._legend: Any = None
         self._status: Any = None
-        self._quiet = False
+        self._quiet_thread: int | None = None  # the thread moving the controls itself (its echoes are ignored)
         self._loop = _main_thread_loop()  # where calls from other threads are queued
         self._lock = threading.Lock()
         self._pending_frame: int | None = None  # newest slider frame not drawn yet (other threads)
         self._render_queued = False
         self.queued_calls = 0  # calls from other threads handed to the main thread's loop
+        # playback
+        self.play_rate = float(play_rate)
+        self.play_rest = 0.5
+        self.play_quality = PLAY_QUALITY
+        self.slider_rate = SLIDER_RATE
+        self._controls_at = -math.inf  # clock reading of the last slider update
+        self.pictures = 0
+        self.frame_cost = 0.0
+        self.play_log: collections.deque[tuple[float, int, float]] = collections.deque(maxlen=2000)
+        self._now: Callable[[], float] = time.perf_counter  # the wall clock (a fake one in tests)
+        self._sleep: Callable[[float], Any] = asyncio.sleep
+        self._play_clock = PlayClock(self.fps, self.n_frames)
+        self._playing = False
+        self._play_task: asyncio.Task[None] | None = None
         self._build_scene(window_size, ground)
         self._apply_frame(self._frame)
 
@@ -453,6 +703,10 @@ class MotionViewer:
         interactive = self.backend in ("trame", "server", "client")
         with _quiet_vtk():
             self.plotter = pv.Plotter(off_screen=True, notebook=interactive, window_size=list(window_size))
+        # no anti-aliasing: on Mesa's llvmpipe 8x MSAA makes a picture ~5x dearer (FXAA is as dear)
+        self.plotter.disable_anti_aliasing()
+        if self.plotter.render_window is not None:
+            self.plotter.render_window.SetMultiSamples(0)
         self.plotter.theme.allow_empty_mesh = True  # overlays may be empty on some frames
         self.plotter.set_background("white")
         lo, hi = self._scene_bounds()
@@ -464,14 +718,18 @@ class MotionViewer:
             self._update_ground(lo, hi)
         for k, c in enumerate(self.characters):
             self._add_character_actors(k, c)
-        self._update_legend()
-        floor = min(float(lo[1]), 0.0)
+        self._frame_camera(self._frame)
+
+    def _frame_camera(self, frame: int) -> None:
+        """Fit the camera to the whole clip (or, following, to 1 m around the followed joint)."""
+        lo, hi = self._bounds
+        floor, top = min(float(lo[1]), 0.0), float(hi[1])
         if self.follow:
-            root = self.characters[0].anchor(self._frame / self.fps)
-            self._fit_camera(root - [1.0, 0.0, 1.0], root + [1.0, 0.0, 1.0], floor, float(hi[1]))
+            root = self.characters[0].anchor(frame / self.fps)
+            self._fit_camera(root - [1.0, 0.0, 1.0], root + [1.0, 0.0, 1.0], floor, top)
             self._camera_root = root.copy()
         else:
-            self._fit_camera(lo, hi, floor, float(hi[1]))
+            self._fit_camera(lo, hi, floor, top)
 
     def _clock(self, items: Sequence[Motion]) -> tuple[float, int]:
         """The slider clock's rate and frame count for the characters ``items``."""
@@ -511,11 +769,13 @@ class MotionViewer:
             segs = np.concatenate([segs, np.stack([new[esp[ok]], ends], axis=1)])
         color = self._colors[k % len(self._colors)]
         name = label if label is not None else (m.name or f"character {k}")
-        return _Character(m, color, name, pos, segs, int(new[pj]))
+        return _Character(m, color, str(name), pos, segs, int(new[pj]))
 
     def _scene_bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Box of every drawn point of every character over its whole clip, grown by the joint radius."""
         all_pts = np.concatenate([c.positions.reshape(-1, 3) for c in self.characters])
-        return all_pts.min(axis=0), all_pts.max(axis=0)
+        pad = max(self.joint_radius, self.bone_radius)
+        return all_pts.min(axis=0) - pad, all_pts.max(axis=0) + pad
 
     def _update_ground(self, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> None:
         """Lay (or widen) the ground grid under the box ``[lo, hi]``; the actor is kept."""
@@ -554,26 +814,65 @@ class MotionViewer:
         for actor in c.actors:
             actor.prop.interpolation = "gouraud"
 
+    def legend_html(self) -> str:
+        """The legend (one coloured dot and escaped name per character); empty for one character."""
+        if len(self.characters) < 2:
+            return ""
+        items = "".join(
+            f"<span style='white-space:nowrap;margin-right:14px'>"
+            f"<span style='color:{html.escape(c.color, quote=True)};font-size:1.3em'>&#9679;</span> "
+            f"{html.escape(c.label)}</span> "
+            for c in self.characters
+        )
+        return f"<div style='display:flex;flex-wrap:wrap;align-items:center;line-height:1.6'>{items}</div>"
+
     def _update_legend(self) -> None:
-        if len(self.characters) > 1:
-            self.plotter.add_legend(  # replaces any previous legend
-                [(c.label, c.color) for c in self.characters],
-                bcolor="white",
-                face="circle",
-                size=(0.18, 0.05 * len(self.characters)),
-            )
-        elif self.plotter.legend is not None:
-            self.plotter.remove_legend(render=False)
+        if self._legend is not None:
+            self._legend.value = self.legend_html()
+            self._legend.layout.display = "" if len(self.characters) > 1 else "none"
 
     def _fit_camera(self, lo: NDArray[np.float64], hi: NDArray[np.float64], floor: float, top: float) -> None:
-        """Look from the front-right and above at the box [lo, hi] (x, z) x [floor, top] (y)."""
-        centre = np.array([(lo[0] + hi[0]) / 2, (floor + top) / 2, (lo[2] + hi[2]) / 2])
+        """Look from the front-right and above at the box [lo, hi] (x, z) x [floor, top] (y), all of it inside.
+
+        In a trame view with its toolbar open, the picture's top band under
+        the toolbar is kept free.
+        """
         direction = np.array([1.0, 0.5, 0.9])
-        direction /= np.linalg.norm(direction)
-        self.plotter.camera_position = [tuple(centre + 5.0 * direction), tuple(centre), (0.0, 1.0, 0.0)]
-        self.plotter.renderer.ResetCamera(lo[0], hi[0], floor, top, lo[2], hi[2])
-        self.plotter.camera.zoom(1.3)
-        self.plotter.renderer.ResetCameraClippingRange()  # keep the whole ground visible
+        up = np.array([0.0, 1.0, 0.0])
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (floor, top) for z in (lo[2], hi[2])])
+        width, height = self.plotter.window_size
+        focal, position = fit_view(
+            corners,
+            direction,
+            up,
+            view_angle=self.plotter.camera.view_angle,
+            aspect=width / max(height, 1),
+            top_band=self._toolbar_band(),
+        )
+        self.plotter.camera_position = [tuple(position), tuple(focal), tuple(up)]
+        self.plotter.renderer.ResetCameraClippingRange()
+        self._fitted = self._camera_pose()
+
+    def _camera_pose(self) -> NDArray[np.float64]:
+        """The camera as the viewer compares it: position relative to the focal point, view-up, and
+        (without ``follow``, which moves it) the focal point."""
+        cam = self.plotter.camera
+        focal = np.asarray(cam.focal_point, dtype=float)
+        parts = [np.asarray(cam.position, dtype=float) - focal, np.asarray(cam.up, dtype=float)]
+        if not self.follow:
+            parts.append(focal)
+        return np.concatenate(parts)
+
+    def camera_moved(self) -> bool:
+        """Whether the camera is no longer where the viewer put it (the user rotated, panned or zoomed)."""
+        return not np.allclose(self._camera_pose(), self._fitted, rtol=1e-6, atol=1e-6)
+
+    def _toolbar_band(self) -> float:
+        """Share of the view's height under the open trame toolbar (0 when collapsed or without trame)."""
+        width, height = self.plotter.window_size
+        if self.backend not in _TRAME_MODES or width < TOOLBAR_WIDTH:
+            return 0.0
+        return min(_TOOLBAR_BOTTOM / max(height, 1), 0.3)
 
     def _frame_of(self, k: int, frame: int) -> int:
         return self.characters[k].frame_at(frame / self.fps)
@@ -589,19 +888,37 @@ class MotionViewer:
         """The current time in seconds."""
         return self._frame / self.fps
 
+    @property
+    def playing(self) -> bool:
+        """Whether real-time playback is running."""
+        return self._playing
+
     def character_frames(self) -> list[int]:
         """Frame shown by each character at the current time."""
         return [c.frame_at(self.time) for c in self.characters]
 
+    def label_text(self) -> str:
+        """The line under the slider: the clip's length and rate, and the characters' own frames where they differ.
+
+        The slider itself shows the time (its description) and the clock's
+        frame (its readout), sent together; this line changes during play
+        only when a character's frame differs from the clock's (other rates).
+        """
+        end = (self.n_frames - 1) / self.fps
+        text = f"clip {end:.3f} s, frames 0-{self.n_frames - 1} at {self.fps:g} fps"
+        frames = self.character_frames()
+        if any(f != self._frame for f in frames):
+            text += f"; characters' frames {', '.join(str(f) for f in frames)}"
+        return text
+
     @_on_main_thread
     def set_frame(self, frame: int) -> None:
-        """Show clock frame ``frame`` (also moves the slider if it exists)."""
+        """Show clock frame ``frame`` (also moves the slider; while playing, play on from there)."""
         f = int(frame)
         if not 0 <= f < self.n_frames:
             raise IndexError(f"Expected `frame` in [0, {self.n_frames}), got {frame}")
-        if self.slider is not None and self.slider.value != f:
-            self.slider.value = f  # the observer calls back into _apply_frame
-            return
+        if self._playing:
+            self._play_clock.start(f, now=self._now())
         self._apply_frame(f)
 
     @_on_main_thread
@@ -615,9 +932,9 @@ class MotionViewer:
         motions: Motion | Sequence[Motion],
         *,
         labels: Sequence[str] | None = None,
-        reset_camera: bool = False,
+        reset_camera: bool | None = None,
     ) -> None:
-        """Show new motions in this viewer, keeping its plotter, widget and camera.
+        """Show new motions in this viewer, keeping its plotter and widget (and a camera the user moved).
 
         Meant for edits: after a path drag, pass the edited characters and the
         3D view (static image or trame view) just updates.
@@ -629,9 +946,10 @@ class MotionViewer:
         labels : sequence of str, optional
             New legend names (default: keep the current ones when the number
             of characters is unchanged, else each motion's name).
-        reset_camera : bool
-            Fit the camera to the new scene (default: leave it where the user
-            put it).
+        reset_camera : bool, optional
+            Fit the camera to the new scene (the whole clip of every new
+            character in the picture).  Default: when the camera is still
+            where the viewer put it; a camera the user moved stays.
 
         Notes
         -----
@@ -640,10 +958,10 @@ class MotionViewer:
         receive the new points **in place**: no actor or mesh is re-created.
         Otherwise the characters' actors are rebuilt inside the same plotter.
         The clock (``fps`` unless it was given to the constructor,
-        ``n_frames``, the slider's and play button's range) follows the new
-        motions; the current time is kept, clamped to the new last frame.
-        The ground grid is widened if the characters walk off it; overlays
-        are left as they are.
+        ``n_frames``, the slider's range) follows the new motions; the
+        current time is kept, clamped to the new last frame, and playback
+        goes on from there.  The ground grid is widened if the characters
+        walk off it; overlays are left as they are.
         """
         items = _as_motions(motions)
         if labels is not None and len(labels) != len(items):
@@ -665,48 +983,52 @@ class MotionViewer:
                     self.plotter.remove_actor(name, render=False)
             for k, c in enumerate(new):
                 self._add_character_actors(k, c)
-        relabel = [c.label for c in new] != [c.label for c in self.characters]
         self.characters = new
-        if relabel or not in_place:
-            self._update_legend()
+        self._update_legend()
 
-        time = self.time
+        time_now = self.time
         self.fps, self.n_frames = self._clock(items)
-        frame = int(np.clip(round(time * self.fps), 0, self.n_frames - 1))
-        lo, hi = self._scene_bounds()
-        self._bounds = (lo, hi)
+        frame = int(np.clip(round(time_now * self.fps), 0, self.n_frames - 1))
+        self._play_clock.fps, self._play_clock.n_frames = self.fps, self.n_frames
+        if self._playing:
+            self._play_clock.start(frame, now=self._now())
+        self._bounds = self._scene_bounds()
         if self._ground_mesh is not None:
-            self._update_ground(lo, hi)
-        if reset_camera:
-            floor = min(float(lo[1]), 0.0)
-            if self.follow:
-                root = self.characters[0].anchor(frame / self.fps)
-                self._fit_camera(root - [1.0, 0.0, 1.0], root + [1.0, 0.0, 1.0], floor, float(hi[1]))
-                self._camera_root = root.copy()
-            else:
-                self._fit_camera(lo, hi, floor, float(hi[1]))
+            self._update_ground(*self._bounds)
+        if reset_camera or (reset_camera is None and not self.camera_moved()):
+            self._frame = frame
+            self._frame_camera(frame)
         if self.slider is not None:
             self._sync_controls(frame)
         self._apply_frame(frame)
 
     def _sync_controls(self, frame: int) -> None:
-        """Fit the slider and play button to the clock without a render per change."""
-        step = max(1, int(round(self.fps / 30.0)))
-        self._quiet = True
-        try:
-            for control in (self.slider, self.play):
-                if frame > control.max:  # keep value <= max at every step
-                    control.max = self.n_frames - 1
-                    control.value = frame
-                else:
-                    control.value = frame
-                    control.max = self.n_frames - 1
-            self.play.step = step
-            self.play.interval = int(round(1000 * step / self.fps))
-        finally:
-            self._quiet = False
+        """Fit the slider to the clock without a render per change."""
+        with self._moving_controls():
+            if frame > self.slider.max:  # keep value <= max at every step
+                self.slider.max = self.n_frames - 1
+                self.slider.value = frame
+            else:
+                self.slider.value = frame
+                self.slider.max = self.n_frames - 1
 
-    def _apply_frame(self, frame: int) -> None:
+    @contextlib.contextmanager
+    def _moving_controls(self) -> Iterator[None]:
+        """Changes of the controls made in this block are the viewer's own: its observers ignore them."""
+        self._quiet_thread = threading.get_ident()
+        try:
+            yield
+        finally:
+            self._quiet_thread = None
+
+    def _apply_frame(self, frame: int, *, controls: bool = True) -> None:
+        """Move everything to clock frame ``frame``: characters, overlays, camera, slider, label, picture.
+
+        ``controls=False`` (playback between two slider updates) leaves the
+        slider and label as they are.  An overlay that raises does not stop
+        the others, nor the slider and label; its error is raised once all of
+        them show ``frame``.
+        """
         self._frame = frame
         t = frame / self.fps
         for c in self.characters:
@@ -714,8 +1036,12 @@ class MotionViewer:
             pts, normals = _tube_points(p[c.segments[:, 0]], p[c.segments[:, 1]], self.bone_radius, self._sides)
             _write_points(c.bones, pts, normals)
             _write_points(c.joints, self._spheres.points(p))
+        error: Exception | None = None
         for ov in self.overlays.values():
-            self._update_overlay(ov, t)
+            try:
+                self._update_overlay(ov, t)
+            except Exception as err:  # noqa: BLE001 - raised below, once the view is consistent
+                error = error or err
         if self.follow:
             root = self.characters[0].anchor(t)
             shift = root - self._camera_root
@@ -725,10 +1051,127 @@ class MotionViewer:
             cam.focal_point = tuple(np.asarray(cam.focal_point) + shift)
             self._camera_root = self._camera_root + shift
             self.plotter.renderer.ResetCameraClippingRange()
-        if self._label is not None:
-            frames = ", ".join(str(f) for f in self.character_frames())
-            self._label.value = f"<span style='white-space:nowrap'>t = {t:.3f} s &nbsp; frame {frames}</span>"
+        if controls:
+            self._show_on_controls(frame)
         self._refresh()
+        if error is not None:
+            raise error
+
+    def _show_on_controls(self, frame: int) -> None:
+        """Slider (value and time in one message: never one without the other) and label at ``frame``."""
+        if self.slider is not None:
+            with self._moving_controls(), self.slider.hold_sync():
+                self.slider.value = frame
+                self.slider.description = f"{frame / self.fps:.3f} s"
+        if self._label is not None:
+            self._label.value = html.escape(self.label_text())
+        self._controls_at = self._now()
+
+    # ------------------------------------------------------------ playback
+    @_on_main_thread
+    def toggle_playback(self) -> None:
+        """Start playback, or pause it if it runs (the play button)."""
+        if self._playing:
+            self.stop_playback()
+        else:
+            self.start_playback()
+
+    @_on_main_thread
+    def start_playback(self) -> None:
+        """Play in real time from the current frame (from the first one when at the end).
+
+        Raises
+        ------
+        RuntimeError
+            Without a running asyncio loop in the main thread (a script):
+            playback runs on the loop of the Jupyter kernel.
+        """
+        if self._playing:
+            return
+        loop = self._loop
+        if loop is None or loop.is_closed() or not loop.is_running():
+            raise RuntimeError(
+                "Playback runs on the asyncio loop of a Jupyter kernel; no loop was running when this "
+                "viewer was built. Use set_frame() or set_time() to move through the clip."
+            )
+        start = 0 if self._frame >= self.n_frames - 1 else self._frame
+        self._play_clock = PlayClock(self.fps, self.n_frames)
+        self._play_clock.start(start, now=self._now())
+        self._playing = True
+        self._controls_at = -math.inf  # the first picture moves the slider
+        self._update_play_button()
+        self._set_picture_quality(self.play_quality)
+        if start != self._frame:
+            self._apply_frame(start)
+        self._play_task = loop.create_task(self._play_loop())
+
+    @_on_main_thread
+    def stop_playback(self) -> None:
+        """Pause playback on the frame shown."""
+        was_playing, self._playing = self._playing, False
+        task, self._play_task = self._play_task, None
+        if task is not None and not task.done() and task is not _current_task():
+            task.cancel()
+        self._update_play_button()
+        if was_playing:
+            self._show_on_controls(self._frame)
+        if was_playing and self._set_picture_quality(100):
+            self._render_view()  # the paused picture at full quality
+
+    def _set_picture_quality(self, quality: int) -> bool:
+        """JPEG quality of the trame view's pictures; False when there is no such view."""
+        views = getattr(getattr(self._view, "viewer", None), "views", ())
+        done = False
+        for view in views:
+            helper = getattr(view, "_helper", None)
+            if helper is None or not getattr(view.server, "protocol", None):
+                continue
+            try:
+                helper.set_image_quality(self.plotter.render_window, int(quality), 1)
+                done = True
+            except Exception:  # noqa: BLE001 - no client connected yet: it sets its own
+                _log.debug("MotionViewer: could not set the picture quality", exc_info=True)
+        return done
+
+    def _update_play_button(self) -> None:
+        if self.play is not None:
+            with self._moving_controls():
+                self.play.description = "pause" if self._playing else "play"
+                self.play.icon = "pause" if self._playing else "play"
+
+    async def _play_loop(self) -> None:
+        """Draw the wall clock's frame, rest, repeat; stop on the last frame or on an error."""
+        try:
+            while self._playing:
+                began = self._now()
+                frame = self._play_clock.frame_at(began)
+                if frame != self._frame:
+                    last = frame >= self.n_frames - 1
+                    due = last or began - self._controls_at >= 1.0 / self.slider_rate - 1e-9
+                    self._apply_frame(frame, controls=due)
+                    self.pictures += 1
+                    self.frame_cost = self._now() - began
+                    self.play_log.append((began, frame, self.frame_cost))
+                    self._push_latest_soon()
+                if frame >= self.n_frames - 1:
+                    break
+                spent = self._now() - began
+                await self._sleep(max(1.0 / self.play_rate - spent, self.play_rest * spent, 0.001))
+        except asyncio.CancelledError:
+            return
+        except Exception as err:  # noqa: BLE001 - shown in the widget; nobody awaits this task
+            _log.exception("MotionViewer: playback failed")
+            if self._status is not None:
+                self._status.value = _error_html(err)
+        if self._play_task is _current_task():
+            self._play_task = None
+            self.stop_playback()
+
+    def _step(self, delta: int) -> None:
+        """One frame back or forward (the step buttons); pauses playback."""
+        if self._playing:
+            self.stop_playback()
+        self.set_frame(int(np.clip(self._frame + delta, 0, self.n_frames - 1)))
 
     # ------------------------------------------------------------- threads
     def _queue(self, call: Callable[[], Any]) -> bool:
@@ -756,7 +1199,7 @@ class MotionViewer:
         except Exception as err:  # noqa: BLE001 - shown in the widget and logged
             _log.exception("MotionViewer: a queued update failed")
             if self._status is not None:
-                self._status.value = f"<pre style='color:#b00'>{type(err).__name__}: {err}</pre>"
+                self._status.value = _error_html(err)
 
     def _draw_pending_frame(self) -> None:
         """Show the newest slider frame set from another thread (one draw for a burst of moves)."""
@@ -789,8 +1232,37 @@ class MotionViewer:
         if self.backend == "static":
             self._view.value = self._png()
         elif hasattr(self._view, "viewer"):
-            self.plotter.render()
+            # the view renders the window itself while making the picture: no render here
             self._view.viewer.update()
+
+    def _push_latest_soon(self) -> None:
+        """Send the newest picture a moment after a push (trame's encoder works in the background).
+
+        trame's image delivery renders, hands the pixels to an encoder thread
+        and sends the newest *finished* JPEG, so each push sends the picture
+        of the push before; it would send the last one only 0.5 s later.  A
+        second delivery 5 ms on sends the picture just encoded (none when it
+        was already sent).
+        """
+        if self._loop is None or not hasattr(self._view, "viewer"):
+            return
+        self._loop.call_later(0.005, self._push_latest)
+
+    def _push_latest(self) -> None:
+        try:
+            server = self._view.viewer.server
+            protocol = getattr(server, "protocol", None)
+            if protocol is None:
+                return
+            from trame_vtk.modules.vtk import get_helper
+            from trame_vtk.modules.vtk.protocols import vtkWebPublishImageDelivery
+
+            view_id = get_helper(server).id(self.plotter.render_window)
+            for link in protocol.getLinkProtocols():
+                if isinstance(link, vtkWebPublishImageDelivery):
+                    link.push_render(view_id)
+        except Exception:  # noqa: BLE001 - an optimisation only; the 0.5 s re-send still comes
+            _log.debug("MotionViewer: could not re-send the newest picture", exc_info=True)
 
     # ------------------------------------------------------------ overlays
     def add_points(
@@ -950,7 +1422,7 @@ class MotionViewer:
 
     @property
     def widget(self) -> Any:
-        """The ipywidgets box: 3D view, play button, frame slider, time label."""
+        """The ipywidgets box: 3D view, legend, play and step buttons, frame slider, time label, status."""
         if self._widget is None:
             self._widget = self._build_widget()
         return self._widget
@@ -958,37 +1430,109 @@ class MotionViewer:
     def _build_widget(self) -> Any:
         import ipywidgets as w
 
-        step = max(1, int(round(self.fps / 30.0)))
         self.slider = w.IntSlider(
             value=self._frame,
             min=0,
             max=self.n_frames - 1,
             step=1,
-            description="frame",
+            description=f"{self.time:.3f} s",
             continuous_update=True,
-            layout=w.Layout(width="60%"),
+            style={"description_width": "72px"},
+            # a usable track (width less the time and the frame readout): at least 300 px wherever the viewer sits
+            layout=w.Layout(flex="1 1 480px", min_width="480px", max_width="760px"),
         )
-        self.play = w.Play(
-            value=self._frame, min=0, max=self.n_frames - 1, step=step, interval=int(round(1000 * step / self.fps))
+        self.slider.add_class("mocaplab-viewer-slider")
+        self.play = w.Button(
+            description="play",
+            icon="play",
+            tooltip="play in real time (frames the view cannot draw in time are skipped)",
+            layout=w.Layout(width="88px", flex="0 0 auto"),
         )
-        w.jslink((self.play, "value"), (self.slider, "value"))
-        self._label = w.HTML()
-        self._status = w.HTML()
+        self.play.add_class("mocaplab-viewer-play")
+        self.back = w.Button(
+            icon="step-backward", tooltip="one frame back", layout=w.Layout(width="40px", flex="0 0 auto")
+        )
+        self.forward = w.Button(
+            icon="step-forward", tooltip="one frame forward", layout=w.Layout(width="40px", flex="0 0 auto")
+        )
+        self._label = w.HTML(layout=w.Layout(width="auto"))
+        self._label.add_class("mocaplab-viewer-label")
+        self._status = w.HTML(layout=w.Layout(width="auto"))
+        self._status.add_class("mocaplab-viewer-status")
+        self._legend = w.HTML(layout=w.Layout(width="auto"))
+        self._legend.add_class("mocaplab-viewer-legend")
+        self._update_legend()
         self.slider.observe(self._on_slider, names="value")
+        self.play.on_click(self._on_play)
+        self.back.on_click(self._on_back)
+        self.forward.on_click(self._on_forward)
         if self.backend == "static":
             self._view = w.Image(value=self._png(), format="png")
         elif self.backend == "none":
             self._view = None
         else:
-            with _without_vtklocal():
-                self._view = self.plotter.show(jupyter_backend=self.backend, return_viewer=True, auto_close=False)
-        controls = w.HBox([self.play, self.slider, self._label])
-        children = ([self._view] if self._view is not None else []) + [controls, self._status]
-        box = w.VBox(children)
+            self._view = self._trame_view()
+        controls = w.HBox(
+            [self.play, self.back, self.forward, self.slider],
+            layout=w.Layout(flex_flow="row wrap", align_items="center", width="100%"),
+        )
+        children = ([self._view] if self._view is not None else []) + [
+            self._legend,
+            controls,
+            self._label,
+            self._status,
+        ]
+        width = int(self.plotter.window_size[0])
+        # as wide as the view, and at least as wide as the controls' row (buttons and a 300 px track)
+        box = w.VBox(children, layout=w.Layout(width=f"{max(width, 680)}px", max_width="100%"))
+        box.add_class("mocaplab-viewer")
         self._apply_frame(self._frame)
         return box
 
+    def _trame_view(self) -> Any:
+        """pyvista's trame iframe in server-rendering mode (or vtk.js for ``"client"``)."""
+        width = int(self.plotter.window_size[0])
+        options = {
+            "mode": _TRAME_MODES[self.backend],
+            "collapse_menu": width < TOOLBAR_WIDTH,
+            "handler": _iframe_widget,
+        }
+        with _without_vtklocal():
+            return self.plotter.show(
+                jupyter_backend=_TRAME_MODES[self.backend],
+                return_viewer=True,
+                auto_close=False,
+                jupyter_kwargs=options,
+            )
+
+    # plain-value callbacks: each forwards one event to the viewer, its error shown in the status line
+    def _on_play(self, _button: Any) -> None:
+        self._shown(self.toggle_playback)
+
+    def _on_back(self, _button: Any) -> None:
+        self._shown(self._step_on_main_thread, -1)
+
+    def _on_forward(self, _button: Any) -> None:
+        self._shown(self._step_on_main_thread, +1)
+
+    def _shown(self, call: Callable[..., Any], *args: Any) -> None:
+        """Run a button's action; an error goes to the status line (a click has no caller to raise to)."""
+        try:
+            call(*args)
+        except Exception as err:  # noqa: BLE001 - shown in the widget
+            if self._status is not None:
+                self._status.value = _error_html(err)
+            return
+        if self._status is not None and self._status.value and threading.current_thread() is threading.main_thread():
+            self._status.value = ""
+
+    @_on_main_thread
+    def _step_on_main_thread(self, delta: int) -> None:
+        self._step(delta)
+
     def _on_slider(self, change: dict[str, Any]) -> None:
+        if self._quiet_thread == threading.get_ident():  # the viewer moved it itself
+            return
         frame = int(change["new"])
         if threading.current_thread() is not threading.main_thread():
             with self._lock:  # coalesce: one queued draw shows the newest frame
@@ -997,17 +1541,18 @@ class MotionViewer:
                 return
             with self._lock:  # no loop to hand it to: draw here, as without subshells
                 self._pending_frame = None
-        if self._quiet:  # set_motions moves the controls, then draws once
-            return
         self._show_slider_frame(frame)
 
     def _show_slider_frame(self, frame: int) -> None:
+        frame = int(np.clip(frame, 0, self.n_frames - 1))
+        if self._playing:  # a move while playing: play on from there
+            self._play_clock.start(frame, now=self._now())
         try:
             self._apply_frame(frame)
             if self._status.value:
                 self._status.value = ""
         except Exception as err:  # show it in the widget instead of losing it in the log
-            self._status.value = f"<pre style='color:#b00'>{type(err).__name__}: {err}</pre>"
+            self._status.value = _error_html(err)
             raise
 
     def show(self) -> Any:
@@ -1024,9 +1569,17 @@ class MotionViewer:
 
     @_on_main_thread
     def close(self) -> None:
-        """Release the render window."""
+        """Stop playback and release the render window."""
+        self.stop_playback()
         self.plotter.close()
 
     def __repr__(self) -> str:
         names = ", ".join(c.label for c in self.characters)
         return f"<MotionViewer [{names}] {self.n_frames} frames at {self.fps:g} fps, backend {self.backend!r}>"
+
+
+def _current_task() -> asyncio.Task[Any] | None:
+    try:
+        return asyncio.current_task()
+    except RuntimeError:  # no running loop in this thread
+        return None

@@ -1,0 +1,253 @@
+"""Benchmark: real-time 3D playback of the MotionViewer, in the kernel and as a browser shows it.
+
+Two scenes, the ones the lessons play:
+
+* lesson 01's viewer: one character (CMU 16_15, 120 fps) with its contact and
+  root-path overlays, at the default window size;
+* lesson 05's relay: the eight characters of the fast run (``MOCAPLAB_FAST=1``)
+  curled into a spiral, at 640 x 420.
+
+Kernel side (headless, always): the cost of one frame, split into the geometry
+update (new points in the fixed meshes, overlays, label) and the render
+(Mesa's llvmpipe, EGL off-screen), without anti-aliasing (what the viewer
+does) and with pyvista's default 8x MSAA (what it did).  Medians of repeats.
+
+Browser side (when Chromium and Playwright are there; ``--no-browser`` skips
+it): JupyterLab serves a copy of ``lessons/`` with the trame backend, headless
+Chromium (software GL) runs lesson 01 and lesson 05, and the play button of
+each viewer is clicked for ``--seconds`` s while Chromium's screencast counts
+the distinct pictures its 3D view shows (``tests/browser_support.py``,
+:func:`play_viewer`).  Printed: pictures per second and their ratio to the
+targets (15 for one character, 8 for the eight-character relay), the pictures
+the kernel drew and its median cost per picture (render, JPEG, send), the
+largest lag of the time label behind the wall clock, and whether the slider
+and the label ever showed different frames.
+
+``--options`` also measures, on lesson 05's relay, the delivery options the
+viewer chose among (each a new viewer added to the notebook):
+
+* ``server q80`` - the viewer's choice: server rendering, JPEG quality 80
+  while playing;
+* ``server q100`` - the same at trame's default quality 100;
+* ``server q80 ratio 0.5`` - pictures rendered at half size and scaled up;
+* ``client (vtk.js)`` - pyvista's client-side rendering, the changed geometry
+  serialised and sent on every frame;
+* ``pyvista 'trame'`` - pyvista's default hybrid mode: a picture *and* the
+  serialised scene on every frame (the viewer's mode before this benchmark).
+
+Run: ``python benchmarks/bench_viewer.py [--seconds 3] [--repeats 20] [--options] [--no-browser]``.
+Needs the CMU mirror (``MOCAPLAB_DATA_DIR``, default ``../shared/mocap``
+beside the checkout).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+TARGETS = {"01": 15.0, "05": 8.0}  # distinct pictures per second of play in headless Chromium
+
+
+def _mirror() -> str:
+    value = os.environ.get("MOCAPLAB_DATA_DIR") or str(ROOT.parent / "shared" / "mocap")
+    if not (Path(value) / "manifest.json").is_file():
+        sys.exit(f"CMU mirror not found at {value}: set MOCAPLAB_DATA_DIR")
+    return value
+
+
+def _lesson_namespace(stem: str, until: str) -> dict[str, Any]:
+    """Run the code cells of ``lessons/<stem>.ipynb`` (fast mode, no 3D views) until ``until`` is defined."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    os.environ["MOCAPLAB_FAST"] = "1"
+    os.environ["MOCAPLAB_JUPYTER_BACKEND"] = "none"
+    cells = json.loads((ROOT / "lessons" / f"{stem}.ipynb").read_text())["cells"]
+    ns: dict[str, Any] = {"__name__": "__lesson__"}
+    for cell in cells:
+        if cell["cell_type"] != "code":
+            continue
+        with contextlib.redirect_stdout(io.StringIO()):  # the lesson's own prints
+            exec(compile("".join(cell["source"]), f"{stem}.ipynb", "exec"), ns)  # noqa: S102 - our own lessons
+        if until in ns:
+            return ns
+    raise RuntimeError(f"lessons/{stem}.ipynb never defines {until!r}")
+
+
+def _median_ms(fn: Any, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return 1e3 * statistics.median(times)
+
+
+def kernel_costs(repeats: int) -> dict[str, dict[str, float]]:
+    """Per-frame kernel cost of the two scenes, headless: geometry, render without and with MSAA."""
+    from mocaplab.widgets import MotionViewer
+
+    ns01 = _lesson_namespace("01_motion_data", "planted")
+    ns05 = _lesson_namespace("05_synchronized_characters", "curled")
+
+    def viewer01(backend: str) -> Any:
+        v = MotionViewer(ns01["walk"], backend=backend)
+        v.add_points("contacts", ns01["planted"], color="red", radius=0.04)
+        v.add_lines("root path", ns01["walk"].root_positions * [1, 0, 1], color="gray")
+        return v
+
+    def viewer05(backend: str) -> Any:
+        return MotionViewer(list(ns05["curled"].motions), window_size=(640, 420), backend=backend)
+
+    out = {}
+    for name, make in (("lesson 01 (1 character)", viewer01), ("lesson 05 (8 characters)", viewer05)):
+        v = make("none")
+        frames = iter(np.resize(np.arange(0, v.n_frames, max(1, v.n_frames // 97)), 100_000))
+        geometry = _median_ms(lambda: v._apply_frame(int(next(frames))), repeats)  # noqa: B023
+        rw = v.plotter.render_window
+        rw.Render()
+
+        def frame_and_render() -> None:
+            v._apply_frame(int(next(frames)))  # noqa: B023
+            rw.Render()  # noqa: B023
+
+        plain = _median_ms(frame_and_render, repeats)
+        rw.SetMultiSamples(8)
+        rw.Render()
+        msaa = _median_ms(frame_and_render, repeats)
+        v.close()
+        out[name] = {"geometry_ms": geometry, "render_ms": plain - geometry, "render_msaa8_ms": msaa - geometry}
+    return out
+
+
+# ------------------------------------------------------------------ browser
+_OPTIONS = {
+    "server q80": "{new} = MotionViewer(list(curled.motions), window_size=(640, 420))",
+    "server q100": "{new} = MotionViewer(list(curled.motions), window_size=(640, 420)); {new}.play_quality = 100",
+    "server q80 ratio 0.5": (
+        "{new} = MotionViewer(list(curled.motions), window_size=(640, 420))\n"
+        "def _half(q, _v={new}):\n"
+        "    for _w in _v._view.viewer.views:\n"
+        "        _w._helper.set_image_quality(_v.plotter.render_window, int(q), 0.5)\n"
+        "    return True\n"
+        "{new}._set_picture_quality = _half"
+    ),
+    "client (vtk.js)": "{new} = MotionViewer(list(curled.motions), window_size=(640, 420), backend='client')",
+    "pyvista 'trame'": (
+        "import mocaplab.widgets.viewer as _mv\n"
+        "_mv._TRAME_MODES['trame'] = 'trame'  # pyvista's hybrid mode: picture + scene on every update\n"
+        "{new} = MotionViewer(list(curled.motions), window_size=(640, 420))\n"
+        "_mv._TRAME_MODES['trame'] = 'server'"
+    ),
+}
+
+
+def browser_figures(seconds: float, options: bool) -> dict[str, dict[str, Any]]:
+    from browser_support import (
+        CHROMIUM,
+        JupyterLabServer,
+        LessonPage,
+        copy_lessons,
+        launch_chromium,
+        play_viewer,
+        server_env,
+    )
+
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        print("browser figures skipped: the playwright package is not installed")
+        return {}
+    if not Path(CHROMIUM).exists():
+        print(f"browser figures skipped: no Chromium at {CHROMIUM}")
+        return {}
+    results: dict[str, dict[str, Any]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(tmp)
+        root = copy_lessons(ROOT / "lessons", base / "lessons")
+        server = JupyterLabServer(root, env=server_env(_mirror()), state_dir=base / "state")
+        server.start()
+        try:
+            with sync_playwright() as p:
+                browser = launch_chromium(p)
+                try:
+                    context = browser.new_context(viewport={"width": 1800, "height": 1100})
+                    for number, stem, var in (
+                        ("01", "01_motion_data", "viewer"),
+                        ("05", "05_synchronized_characters", "relay_viewer"),
+                    ):
+                        lesson = LessonPage(context, server, f"{stem}.ipynb", base / "shots")
+                        lesson.open()
+                        lesson.run_all()
+                        results[number] = play_viewer(lesson, var, seconds=seconds)
+                        results[number]["console"] = list(lesson.console)
+                        if number == "05" and options:
+                            for k, (label, code) in enumerate(_OPTIONS.items()):
+                                new = f"_option{k}"
+                                lesson.run_cell(code.format(new=new) + f"\n{new}")
+                                results[f"05 {label}"] = play_viewer(lesson, new, seconds=seconds)
+                                lesson.kernel_eval(f"{new}.close()")
+                        lesson.close()
+                finally:
+                    browser.close()
+        finally:
+            server.stop()
+    return results
+
+
+def _agree(pairs: list[tuple[int, int]]) -> str:
+    bad = [p for p in pairs if p[0] != p[1]]
+    return f"slider = label in {len(pairs) - len(bad)}/{len(pairs)} reads" + (f" (differ: {bad[:3]})" if bad else "")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=3.0, help="seconds of play measured in the browser")
+    parser.add_argument("--repeats", type=int, default=20, help="frames timed per kernel figure")
+    parser.add_argument("--options", action="store_true", help="also measure the delivery options on lesson 05")
+    parser.add_argument("--no-browser", action="store_true", help="kernel figures only")
+    args = parser.parse_args()
+    os.environ["MOCAPLAB_DATA_DIR"] = _mirror()
+
+    print("kernel, per frame (headless, median):")
+    for name, r in kernel_costs(args.repeats).items():
+        print(
+            f"  {name:26s} geometry {r['geometry_ms']:6.2f} ms   render {r['render_ms']:6.2f} ms"
+            f"   (with 8x MSAA {r['render_msaa8_ms']:6.2f} ms)"
+        )
+    if args.no_browser:
+        return
+    results = browser_figures(args.seconds, args.options)
+    if not results:
+        return
+    print(f"\nbrowser, headless Chromium with software GL, {args.seconds:g} s of play:")
+    for key, r in results.items():
+        target = TARGETS.get(key)
+        ratio = f"  ratio to target {target:g}/s: {r['pictures_per_s'] / target:5.2f}" if target else ""
+        cost = r["kernel_cost_ms"]
+        print(
+            f"  lesson {key:24s} {r['pictures_per_s']:5.1f} pictures/s{ratio}\n"
+            f"      kernel drew {r['kernel_pictures_per_s']:5.1f} pictures/s at "
+            f"{'-' if cost is None else f'{cost:.1f}'} ms each (render + JPEG + send); "
+            f"label lag at most {r['max_lag_s'] if r['max_lag_s'] is None else round(r['max_lag_s'], 3)} s; "
+            f"{_agree(r['label_slider'])}"
+        )
+        if r.get("console"):
+            print(f"      console errors: {r['console']}")
+
+
+if __name__ == "__main__":
+    main()

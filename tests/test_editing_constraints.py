@@ -26,8 +26,12 @@ def test_constructors_take_character_first():
     d = PinDirection(0, 5, np.pi / 2)
     assert d.direction == pytest.approx((1.0, 0.0))  # yaw angle -> unit (x, z)
     assert PinDirection(0, 5, (0.0, 3.0)).direction == (0.0, 1.0)
+    # a Relative's direction is local (forward, left): angle a -> (cos a, sin a), 0 = the same way as `other`
     r = Relative(0, 3, 1, 4, (0.5, -1.0), direction=0.0)
-    assert r.characters == (0, 1) and r.direction == pytest.approx((0.0, 1.0))
+    assert r.characters == (0, 1) and r.direction == pytest.approx((1.0, 0.0))
+    assert Relative(0, 3, 1, 4, (0.5, -1.0), direction=np.pi).direction == pytest.approx((-1.0, 0.0))
+    assert Relative(0, 3, 1, 4, (0.5, -1.0), direction=np.pi / 2).direction == pytest.approx((0.0, 1.0))
+    assert Relative(0, 3, 1, 4, (0.5, -1.0), direction=(0.0, -2.0)).direction == pytest.approx((0.0, -1.0))
     assert AbsoluteTime(0, 2, 1.5).time == 1.5
     assert Duration(0, 2, 20, 1.0).duration == 1.0
     s = Sync(0, 2, 1, 7, offset=0.25)
@@ -49,13 +53,63 @@ def test_frozen_and_with_target():
 
 
 def test_variational_samples_every_tenth_frame():
-    p = PinPosition(0, None, (0.0, 0.0), frames=(5, 32))
+    p = PinPosition(0, position=(0.0, 0.0), frames=(5, 32))
     assert p.variational
     assert p.samples() == [(5,), (15,), (25,), (32,)]
-    r = Relative(0, None, 1, None, (1.0, 0.0), frames=(0, 20), other_frames=(100, 140))
+    r = Relative(0, other=1, offset=(1.0, 0.0), frames=(0, 20), other_frames=(100, 140))
     assert r.samples() == [(0, 100), (10, 120), (20, 140)]
-    s = Sync(0, None, 1, None, frames=(0, 20))
+    s = Sync(0, other=1, frames=(0, 20))
     assert s.samples() == [(0, 0), (10, 10), (20, 20)]
+
+
+def test_variational_constraints_by_keyword_equal_the_positional_none_form():
+    # no positional None needed; the old spelling still works and means the same
+    assert PinPosition(0, position=(1.0, 2.0), frames=(5, 32)) == PinPosition(0, None, (1.0, 2.0), frames=(5, 32))
+    assert PinDirection(0, direction=0.3, frames=(5, 32)) == PinDirection(0, None, 0.3, frames=(5, 32))
+    assert AbsoluteTime(0, time=1.0, frames=(5, 32)) == AbsoluteTime(0, None, 1.0, frames=(5, 32))
+    r = Relative(1, other=0, offset=(0.0, 0.6), direction=np.pi, frames=(40, 90), hard=True)
+    assert r == Relative(1, None, 0, None, (0.0, 0.6), direction=np.pi, frames=(40, 90), hard=True)
+    assert Sync(1, other=0, frames=(40, 90)) == Sync(1, None, 0, None, frames=(40, 90))
+    # intervals include both ends, everywhere: (40, 90) samples 40 and 90
+    assert r.samples()[0] == (40, 40) and r.samples()[-1] == (90, 90)
+
+
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda: PinPosition(0, 10), "missing `position`"),
+        (lambda: PinDirection(0, frames=(1, 5)), "missing `direction`"),
+        (lambda: Relative(0, 10, offset=(0, 0)), "missing `other`"),
+        (lambda: Relative(0, 10, 1, 12), "missing `offset`"),
+        (lambda: AbsoluteTime(0, 10), "missing `time`"),
+        (lambda: Sync(0, 10), "missing `other`"),
+    ],
+)
+def test_missing_arguments_are_named(make, message):
+    with pytest.raises(TypeError, match=message):
+        make()
+
+
+def test_end_effector_constraint_frames_include_both_ends():
+    refine = pytest.importorskip("mocaplab.refinement")
+    from mocaplab.editing import EndEffectorConstraint
+    from mocaplab.editing.constraints import effector_frames
+
+    c = EndEffectorConstraint(1, joint="RightHand", frames=(10, 20), target=(0.0, 1.0, 0.0))
+    assert c.frames == (10, 20) and c.constraint.character == 1
+    assert effector_frames(c, 100) == [(10, 20)]  # 11 frames, 10 and 20 included
+    assert c.constraint.intervals(100) == [(10, 21)]  # refinement's own half-open tuple
+    one = EndEffectorConstraint(0, joint="RightHand", frame=7, target=(0.0, 1.0, 0.0))
+    assert effector_frames(one, 100) == [(7, 7)]
+    ee = refine.EndEffector("RightHand", (10, 20), (0.0, 1.0, 0.0))  # half-open there: 10..19
+    assert effector_frames(EndEffectorConstraint(2, ee), 100) == [(10, 19)]
+    assert EndEffectorConstraint(2, ee).constraint.character == 2
+    with pytest.raises(TypeError, match="not both"):
+        EndEffectorConstraint(0, ee, frame=3)
+    with pytest.raises(TypeError, match="joint="):
+        EndEffectorConstraint(0, frame=3)
+    with pytest.raises(ValueError, match="start <= end"):
+        EndEffectorConstraint(0, joint="RightHand", frames=(20, 10), target=(0.0, 1.0, 0.0))
 
 
 @pytest.mark.parametrize(
@@ -63,6 +117,7 @@ def test_variational_samples_every_tenth_frame():
     [
         (lambda: PinPosition(0, None, (0, 0), frames=(10, 10)), "Degenerate interval"),
         (lambda: PinPosition(0, None, (0, 0)), "give `frame`"),
+        (lambda: PinPosition(0, position=(0, 0)), "got neither"),
         (lambda: PinPosition(0, 1, (0, 0), frames=(1, 5)), "not both"),
         (lambda: PinPosition(0, -1, (0, 0)), "`frame` >= 0"),
         (lambda: PinPosition(0, 1, (0, np.nan)), "position"),
@@ -121,14 +176,82 @@ def test_conflicting_hard_constraints_raise_naming_them(walks):
     with pytest.raises(ConstraintError) as info:
         edit(walks, times)
     assert info.value.indices == (0, 1, 2)
-    # a hard relative placement against the same hard pin twice is redundant too
+    # a hard relative placement on a hard pin, and a hard pin of the placed character elsewhere
     rel = [
         PinPosition(0, 30, p0, hard=True),
         Relative(1, 5, 0, 30, (0.0, 0.0), hard=True),
-        Relative(1, 5, 0, 30, (0.0, 0.0), hard=True),
+        PinPosition(1, 5, (p0[0] + 0.3, p0[1]), hard=True),
     ]
-    with pytest.raises(ConstraintError) as info:
+    with pytest.raises(ConstraintError, match="0.3 m away") as info:
         edit(walks, rel)
+    assert info.value.indices == (0, 1, 2)
+    # the same placement twice is consistent
+    assert edit(walks, rel[:2] + rel[1:2]).hard_residual_space < 1e-9
+
+
+@pytest.fixture(scope="module")
+def stop(mocap_dir):
+    from mocaplab import data
+
+    return data.cmu("16_34").resample(30)  # a walk that stops: a stationary segment at the end
+
+
+def test_redundant_but_consistent_hard_constraints_are_accepted(walks, stop):
+    from mocaplab.editing import MotionPath
+
+    S = stop.root_positions[:, [0, 2]]
+    ((a, b),) = SceneEditor(stop, []).segments[0]
+    tangent = MotionPath.from_motion(stop).tangents
+    cases = {
+        "two hard pins at their places on one standing segment": [
+            PinPosition(0, 0, S[0], hard=True),
+            PinPosition(0, a + 5, S[a + 5], hard=True),
+            PinPosition(0, b - 5, S[b - 5], hard=True),
+        ],
+        "a hard direction pin on a standing frame": [
+            PinPosition(0, 0, S[0], hard=True),
+            PinPosition(0, b - 1, S[b - 1], hard=True),
+            PinDirection(0, a + 10, tangent[a + 10], hard=True),
+        ],
+        "the same hard pin twice": [
+            PinPosition(0, 0, S[0], hard=True),
+            PinPosition(0, 20, S[20], hard=True),
+            PinPosition(0, 20, S[20], hard=True),
+        ],
+    }
+    for name, cons in cases.items():
+        res = edit(stop, cons)
+        assert res.hard_residual_space < 1e-9, name
+        assert res.notes and all("#2" in n and "redundant" in n for n in res.notes), (name, res.notes)
+        np.testing.assert_allclose(res.paths[0], S, atol=1e-9, err_msg=name)  # every pin at its place: no change
+    # time: t10, t20 and their duration, all consistent
+    res = edit(stop, [AbsoluteTime(0, 10, 1.0, hard=True), AbsoluteTime(0, 20, 2.0, hard=True), Duration(0, 10, 20, 1.0, hard=True)])
+    assert res.hard_residual_time < 1e-9 and any("#2" in n for n in res.notes)
+    # nothing redundant, nothing noted
+    assert edit(stop, cases["the same hard pin twice"][:2]).notes == ()
+
+
+def test_redundant_hard_constraints_that_disagree_raise_naming_them(stop):
+    S = stop.root_positions[:, [0, 2]]
+    ((a, b),) = SceneEditor(stop, []).segments[0]
+    cons = [
+        PinPosition(0, 0, S[0], hard=True),
+        PinPosition(0, a + 5, S[a + 5], hard=True),
+        PinPosition(0, b - 5, S[b - 5], hard=True),
+    ]
+    ed = SceneEditor(stop, cons)
+    before = ed.result
+    # a standing segment moves rigidly: dragging one of its two hard pins away from the other cannot be met
+    with pytest.raises(ConstraintError, match=r"rigid stationary segment of character 0.*#1") as info:
+        ed.drag(2, S[b - 5] + [0.3, 0.0])
+    assert info.value.indices == (1, 2)
+    assert ed.result is before and ed.constraints == tuple(cons)  # the editor is unchanged
+    # moving both pins together (a rigid motion) is fine
+    res = ed.set_constraints([cons[0], cons[1].with_target(S[a + 5] + [0.3, 0.0]), cons[2].with_target(S[b - 5] + [0.3, 0.0])])
+    assert res.hard_residual_space < 1e-7
+    # the same pin twice with different targets
+    with pytest.raises(ConstraintError, match="#2") as info:
+        edit(stop, [cons[0], PinPosition(0, 20, S[20], hard=True), PinPosition(0, 20, S[20] + 0.1, hard=True)])
     assert info.value.indices == (1, 2)
 
 
@@ -179,8 +302,11 @@ def test_hard_pins_over_constraining_a_rigid_segment_are_named(walks):
     w = walks[0]
     P = w.root_positions[:, [0, 2]]
     cons = [PinPosition(0, 12, P[12], hard=True)] + [PinPosition(0, f, P[f], hard=True) for f in (15, 25, 35)]
+    opts = {"stationary": [[(10, 40)]], "scale_compensation": False}
+    ok = edit([w], cons, **opts)  # at their places: consistent, the redundant pin is noted
+    assert ok.hard_residual_space < 1e-9 and len(ok.notes) == 2  # #2 and #3 are implied by the segment, #0 and #1
+    bent = cons[:3] + [cons[3].with_target(P[35] + [0.0, 0.2])]
     with pytest.raises(ConstraintError, match="rigid stationary segment") as info:
-        edit([w], cons, stationary=[[(10, 40)]], scale_compensation=False)
-    assert info.value.indices == (0, 1, 2)  # a minimal dependent set, with the segment
-    ok = edit([w], cons[:2], stationary=[[(10, 40)]], scale_compensation=False)
-    assert ok.hard_residual_space < 1e-6
+        edit([w], bent, **opts)
+    assert info.value.indices == (0, 1, 3)  # a minimal dependent set, with the segment
+    assert edit([w], cons[:2], **opts).hard_residual_space < 1e-6

@@ -192,31 +192,6 @@ def test_report_and_transformations(pair):
     assert set(res.residuals()) == set(range(len(scene(pair))))
 
 
-def test_discrete_plug_point(pair, monkeypatch):
-    # section 5 plugs in as mocaplab.editing.graph.discrete_update(editor, result) -> EditResult
-    import sys
-    import types
-
-    import mocaplab.editing as editing
-
-    calls = []
-
-    def discrete_update(editor, result):
-        calls.append((editor, result))
-        return result
-
-    fake = types.ModuleType("mocaplab.editing.graph")
-    fake.discrete_update = discrete_update  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "mocaplab.editing.graph", fake)
-    monkeypatch.setattr(editing, "graph", fake, raising=False)
-    ed = SceneEditor(pair, scene(pair), discrete=True)
-    assert len(calls) == 1 and calls[0][0] is ed and calls[0][1] is ed.result
-    ed.drag(1, (0.5, 0.5))
-    assert len(calls) == 2
-    assert ed.evaluate(pair, scene(pair)).transformations == ()  # candidates are scored without recursion
-    assert len(calls) == 2
-
-
 def test_end_effectors_recorded_and_refined(pair):
     refine = pytest.importorskip("mocaplab.refinement")
     a, b = pair

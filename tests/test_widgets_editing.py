@@ -520,3 +520,28 @@ def test_roles_reach_the_scene_editor(walks):
         PathEditor(pe.editor, viewer=False, roles={"pelvis": "Hips"})
     with pytest.raises(ValueError, match="once"):
         TimeTrackEditor([m], roles={"pelvis": "Hips"}, editor_options={"roles": {"pelvis": "Hips"}})
+
+
+def test_discrete_editing_from_editor_options_drives_a_discrete_editor(walks):
+    # editor_options={"discrete": True} builds a DiscreteEditor behind the same view; dragging the
+    # end pin of a walk far enough adds steps, and the drawn path is the transformed one
+    from mocaplab.editing import DiscreteEditor
+
+    walk = walks[0]
+    P = walk.root_positions[:, [0, 2]]
+    end = walk.n_frames - 1
+    cons = [PinPosition(0, 0, P[0], hard=True), PinPosition(0, end, P[-1], hard=True)]
+    pe = PathEditor([walk], cons, editor_options={"discrete": True}, viewer=False)
+    assert isinstance(pe.editor, DiscreteEditor)
+    pe.figure.canvas.draw()
+    _drag(pe, P[-1], P[0] + 1.5 * (P[-1] - P[0]), steps=10)
+    res = pe.result
+    assert res.transformations and len(res.paths[0]) > walk.n_frames
+    assert np.allclose(pe._lines[0].get_xydata(), res.paths[0]), "the drawn path is the transformed one"
+    pin = pe.editor.constraints[1]
+    assert pin.frame == end, "the editor keeps the input clip's frames"
+    assert res.constraints[1].frame == len(res.paths[0]) - 1, "the result maps them onto the transformed clip"
+    assert np.linalg.norm(np.asarray(pin.position) - (P[0] + 1.5 * (P[-1] - P[0]))) < 0.05, "the pin followed the mouse"
+    handles = json.loads(pe.handles_info.value.replace("&quot;", '"'))
+    assert np.allclose(handles[1]["data"], pin.position), "and is drawn at its target"
+    assert np.allclose(res.paths[0][-1], pin.position, atol=1e-6), "which the transformed path reaches"

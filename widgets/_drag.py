@@ -489,11 +489,9 @@ def as_scene_editor(
         if options and options.get("roles") is not None:
             raise ValueError("Pass `roles` once: as `roles=` or in `editor_options`, not both")
         options = {**(options or {}), "roles": roles}
-    scene_editor = getattr(editing, "SceneEditor", None)
-    if scene_editor is None:
-        raise ImportError("mocaplab.editing.SceneEditor is not available")
     characters = list(editor_or_characters) if isinstance(editor_or_characters, Sequence) else [editor_or_characters]
-    return scene_editor(characters, list(constraints or ()), **(options or {}))
+    # a SceneEditor, or a DiscreteEditor with editor_options={"discrete": True or DiscreteOptions(...)}
+    return editing.make_editor(characters, list(constraints or ()), **(options or {}))
 
 
 def current_result(editor: Any, returned: Any = None) -> Any:

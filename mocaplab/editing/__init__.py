@@ -48,25 +48,32 @@ Constraints (:mod:`mocaplab.editing.constraints`), frozen dataclasses
     ``PinDirection(character, frame, direction, *, hard=False, weight=1.0, frames=None)``
     ``Relative(character, frame, other, other_frame, offset, *, direction=None,
     hard=False, weight=1.0, frames=None, other_frames=None)`` (offset = (forward, left)
-    metres in the tangent frame of ``other`` at ``other_frame``; eqs. 1-2)
+    metres in the tangent frame of ``other`` at ``other_frame``, on the edited
+    path; ``direction`` a (forward, left) vector or an angle ``a``, ``(cos a,
+    sin a)``; eqs. 1-2)
     ``AbsoluteTime(character, frame, time, *, hard=False, weight=1.0, frames=None)``
     ``Duration(character, frame, end_frame, duration, *, hard=False, weight=1.0)``
     ``Sync(character, frame, other, other_frame, *, offset=0.0, hard=False,
     weight=1.0, frames=None, other_frames=None)`` (``t[frame] = t_other[other_frame] + offset``)
-    End effectors: a :class:`mocaplab.refinement.EndEffector` (its ``character``
-    is the scene index) goes straight into the constraint list, or wrapped as
-    ``EndEffectorConstraint(character, end_effector)``; path editing ignores
-    them, ``EditResult.end_effectors[k]`` records them and
-    ``EditResult.refined()`` hands them to :func:`mocaplab.refinement.refine_scene`.
-    Variational form: pass ``frame=None, frames=(start, end)`` (inclusive);
-    sampled every 10th frame.  Every constraint has ``.target``,
+    End effectors: ``EndEffectorConstraint(character, joint=..., frame=i or
+    frames=(a, b), target=...)`` (or wrapping a :class:`mocaplab.refinement.EndEffector`,
+    which may also go straight into the list); path editing ignores them,
+    ``EditResult.end_effectors[k]`` records them and ``EditResult.refined()``
+    hands them to :func:`mocaplab.refinement.refine_scene`.
+    Variational form by keyword: ``PinPosition(0, position=p, frames=(30, 90))``,
+    ``Relative(1, other=0, offset=(0.0, 0.6), frames=(30, 90))``; sampled every
+    10th frame.  Intervals ``frames=(start, end)`` include both ends, for every
+    constraint here.  Every constraint has ``.target``,
     ``.with_target(new_target)``, ``.hard``, ``.weight``, ``.characters``.
     ``ConstraintError(ValueError)`` with ``.constraints`` (the offending ones)
-    and ``.indices``.
+    and ``.indices``: inconsistent hard constraints (redundant but consistent
+    ones are accepted, their rows left out and checked: ``EditResult.notes``).
 
 Editing (:mod:`mocaplab.editing.scene`)
-    ``edit(characters, constraints, **options) -> EditResult``
-    ``SceneEditor(characters, constraints=(), **options)`` with
+    ``edit(characters, constraints, *, discrete=False, **options) -> EditResult``
+    (``discrete``: see below), ``make_editor(characters, constraints, *,
+    discrete=False, **options)`` (a SceneEditor, or a DiscreteEditor),
+    ``SceneEditor(characters, constraints=(), **options)`` (continuous only) with
     ``.drag(constraint_index, new_target) -> EditResult``, ``.add(constraint) -> int``,
     ``.remove(index) -> EditResult``, ``.replace(index, constraint) -> EditResult``,
     ``.set_constraints(constraints) -> EditResult``, ``.evaluate(characters,
@@ -74,7 +81,8 @@ Editing (:mod:`mocaplab.editing.scene`)
     ``.constraints``, ``.characters``, ``.paths`` (input MotionPaths),
     ``.segments`` (rigid stationary segments), ``.options``,
     ``.factorizations`` (how many factorisations so far; a target drag adds
-    none), ``.contact_joints(k)`` (the joints whose foot contacts are kept).
+    none), ``.contact_joints(k)`` (the joints whose foot contacts are kept),
+    ``.snapshot()``/``.restore(state)``.
     A failed update (ConstraintError) leaves the editor unchanged.
     ``EditResult``: ``.paths[k] (F_k, 2)``, ``.times[k] (F_k,)``, ``.motions[k]``
     (lazy; all on one shared clock ``.clock (N,)``, pose held outside each
@@ -87,11 +95,13 @@ Editing (:mod:`mocaplab.editing.scene`)
     clock), ``.original_paths``, ``.report() -> dict`` and attributes
     ``hard_residual_space, hard_residual_time, soft_residual_space,
     soft_residual_time, shape_distortion, length_change (K,), min_time_step``,
-    ``min_time_step_ratio``, ``.energies -> Energies(shape, scale, time)``.
+    ``min_time_step_ratio``, ``.energies -> Energies(shape, scale, time)``,
+    ``.notes``, ``.with_transformations(ts)``; immutable.
     Options: ``scale_compensation=True, stationary="auto", min_step=0.25,
-    max_step=4.0`` (ratios of the frame time), ``flip_threshold=pi/2,
-    variational_step=10, clock_fps=None, start_times=None, discrete=False``
-    (``True`` or a ``DiscreteOptions``: section 5, below), ``refine=False``,
+    max_step=4.0`` (ratios of the frame time), ``flip_threshold=pi/6`` (radians
+    per frame), ``flip_window=1.0`` (s), ``relative_tolerance=1e-3`` (m),
+    ``relative_iterations=20``, ``variational_step=10, clock_fps=None,
+    start_times=None``, ``refine=False``,
     ``roles=None`` (role overrides), ``joints=None`` (contact joints for
     ``stationary="auto"`` and refinement; default the roles' feet).
     Modes no constraint determines (a character's placement, its time
@@ -100,17 +110,20 @@ Editing (:mod:`mocaplab.editing.scene`)
 Energy (:mod:`mocaplab.editing.energy`)
     ``deformation_energy(result, *, cs=1.0, ct=1.0, reference=None) -> float`` (eq. 10).
 
-Discrete editing (section 5; :mod:`mocaplab.editing.graph`, :mod:`mocaplab.editing.discrete`)
+Discrete editing (section 5; :mod:`mocaplab.editing.graph`, the package :mod:`mocaplab.editing.discrete`)
     ``build_graph(clips, *, weights=None, threshold=0.1, window=0.5, min_gap=0.3,
     chunk=1024, roles=None) -> MotionGraph`` (frame similarity of joint angles, root height and
     orientation, joint and root velocities; local minima below ``threshold`` kept,
     stored sparsely, built in row chunks), ``MotionGraph`` with ``.clips``,
     ``.offsets``, ``.pairs (M, 2)``, ``.costs (M,)``, ``.n_frames``,
     ``.transitions() -> (src, dst, cost)``, ``.clip_index(motion)``.
-    ``SceneEditor(..., discrete=True)`` or ``edit(..., discrete=True)`` (or
-    ``discrete=DiscreteOptions(...)``) runs the greedy Algorithm 1 after every
-    constraint update: at most one transformation per update, the best of all
-    pruned candidates by the equation-10 energy on subsampled paths.
+    ``DiscreteEditor(characters, constraints, discrete=True or DiscreteOptions(...),
+    **options)`` (the SceneEditor interface) or ``edit(..., discrete=True)``
+    runs the greedy Algorithm 1 after every constraint update: at most one
+    transformation per update, the best of all pruned candidates by the
+    equation-10 energy on subsampled paths; ``.tracks``, ``.applied``,
+    ``.history`` (``Step`` records), ``.timings`` (``Timing`` records), ``.scene``
+    (the continuous editor of the transformed scene).
     ``DiscreteOptions(*, graphs=None, locality=Locality(), min_duration=0.3,
     max_duration=2.0, cs=1.0, ct=1.0, subsample=25, blend=0.2, min_gain=0.1,
     max_initial=8, verify=3, verify_subsample=5, threshold=0.1, window=0.5,
@@ -125,16 +138,18 @@ Discrete editing (section 5; :mod:`mocaplab.editing.graph`, :mod:`mocaplab.editi
     transformation applied so far (character, type, frame ranges), and
     ``EditResult.characters`` are the transformed clips (constraints follow
     their frames).  Lower-level pieces (``enumerate_transformations``,
-    ``prune``, ``apply_transformation``, ``Track``, ``session(editor)``) stay
-    in :mod:`mocaplab.editing.discrete`.
+    ``prune``, ``pruning_violations``, ``apply_transformation``, ``Track``,
+    ``SubsampledScene``) are in :mod:`mocaplab.editing.discrete`.
 
-The discrete names are imported on first use (``mocaplab.editing.DiscreteOptions``
+The discrete names are imported on first use (``mocaplab.editing.DiscreteEditor``
 loads :mod:`~mocaplab.editing.discrete`), so ``import mocaplab.editing`` does not
 pay for them.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 from .constraints import (
@@ -150,27 +165,30 @@ from .constraints import (
 )
 from .energy import Energies, deformation_energy
 from .paths import MotionPath, stationary_segments
-from .scene import EditResult, SceneEditor, edit
+from .scene import EditResult, SceneEditor
+from .scene import edit as _continuous_edit
 
 if TYPE_CHECKING:
-    from .discrete import Box, DiscreteOptions, Disk, Locality, Transformation
+    from .discrete import Box, DiscreteEditor, DiscreteOptions, Disk, Locality, Transformation
     from .graph import MotionGraph, build_graph
 
-_LAZY = {
+_LAZY = MappingProxyType({
     "Box": "discrete",
+    "DiscreteEditor": "discrete",
     "DiscreteOptions": "discrete",
     "Disk": "discrete",
     "Locality": "discrete",
     "Transformation": "discrete",
     "MotionGraph": "graph",
     "build_graph": "graph",
-}
+})
 
 __all__ = [
     "AbsoluteTime",
     "Box",
     "Constraint",
     "ConstraintError",
+    "DiscreteEditor",
     "DiscreteOptions",
     "Disk",
     "Duration",
@@ -189,8 +207,46 @@ __all__ = [
     "build_graph",
     "deformation_energy",
     "edit",
+    "make_editor",
     "stationary_segments",
 ]
+
+
+def make_editor(characters: Any, constraints: Sequence[Any] = (), *, discrete: Any = False, **options: Any) -> Any:
+    """An interactive editor: a :class:`SceneEditor`, or a :class:`~mocaplab.editing.discrete.DiscreteEditor`.
+
+    Parameters
+    ----------
+    characters : Motion or sequence of Motion
+    constraints : sequence of constraints
+    discrete : bool or DiscreteOptions
+        False: continuous editing only; True or a
+        :class:`~mocaplab.editing.discrete.DiscreteOptions`: section 5 too.
+    **options
+        Options of :class:`SceneEditor` (:mod:`mocaplab.editing.scene`).
+    """
+    if discrete is False or discrete is None:
+        return SceneEditor(characters, constraints, **options)
+    from .discrete import DiscreteEditor
+
+    return DiscreteEditor(characters, constraints, discrete=discrete, **options)
+
+
+def edit(characters: Any, constraints: Sequence[Any] = (), *, discrete: Any = False, **options: Any) -> EditResult:
+    """Edit the paths and timing of ``characters`` under ``constraints`` (one shot).
+
+    ``make_editor(characters, constraints, discrete=discrete, **options).result``:
+    continuous Laplacian editing (:func:`mocaplab.editing.scene.edit`), and
+    with ``discrete`` on, Algorithm 1 run to convergence (up to
+    ``DiscreteOptions.max_initial`` transformations).
+
+    Examples
+    --------
+    >>> res = edit([walk], [PinPosition(0, 0, (0, 0), hard=True), PinPosition(0, 200, (1.0, 3.0))])  # doctest: +SKIP
+    """
+    if discrete is False or discrete is None:
+        return _continuous_edit(characters, constraints, **options)
+    return make_editor(characters, constraints, discrete=discrete, **options).result
 
 
 def __getattr__(name: str) -> Any:
@@ -200,9 +256,7 @@ def __getattr__(name: str) -> Any:
         raise AttributeError(f"module 'mocaplab.editing' has no attribute {name!r}")
     from importlib import import_module
 
-    value = getattr(import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value
-    return value
+    return getattr(import_module(f"{__name__}.{module}"), name)  # sys.modules caches the module
 
 
 def __dir__() -> list[str]:

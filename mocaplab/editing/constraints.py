@@ -6,24 +6,38 @@ the character it acts on.  Each one is
 * **soft** (``hard=False``, the default): met in the least-squares sense with
   weight ``weight`` (the squared residual is multiplied by ``weight``), or
   **hard** (``hard=True``): met exactly through Lagrange multipliers;
-* **instant** (``frame=i``) or **variational** (``frame=None,
-  frames=(start, end)``, both ends included): a variational constraint is
-  approximated, as in the paper, by one instant constraint every
-  ``variational_step`` (10) frames of the interval, the last frame included.
+* **instant** (``frame=i``) or **variational** (``frames=(start, end)`` by
+  keyword, no ``frame``: ``PinPosition(0, position=p, frames=(30, 90))``):
+  a variational constraint is approximated, as in the paper, by one instant
+  constraint every ``variational_step`` (10) frames of the interval.
+
+Intervals: every ``frames=(start, end)`` of mocaplab.editing includes both
+ends (frames ``start .. end``; ``(30, 90)`` is 61 frames), for the path,
+time and end-effector constraints alike (:class:`EndEffectorConstraint`
+converts to the half-open tuples of :mod:`mocaplab.refinement`).
 
 Units: ground positions ``(x, z)`` in metres, times in seconds on the shared
 reference clock.  Local frames are ``(forward, left)``: forward along the
 path tangent ``t_j = p[j+1] - p[j-1]``, left along the normal ``R t_j`` (the
-tangent turned +90 degrees about +Y).  Directions are ground vectors
-``(x, z)`` (normalised here) or yaw angles in radians, ``atan2(x, z)``.
+tangent turned +90 degrees about +Y).  Global directions
+(:class:`PinDirection`) are ground vectors ``(x, z)`` (normalised here) or
+yaw angles in radians, ``atan2(x, z)``; local directions (the ``direction``
+of :class:`Relative`) are ``(forward, left)`` vectors or angles ``a`` turned
+from forward towards left, ``(cos a, sin a)``: 0 faces the same way as the
+other character, ``pi`` faces it, ``pi / 2`` looks to its left.
 
 Choices where the paper leaves room
 -----------------------------------
 * Equations 1 and 2 write relative offsets as multiples of the unnormalised
-  tangent ``p[j+1] - p[j-1]``.  Users give offsets in metres instead; the
-  solver divides them by the length of that tangent on the *undeformed* path,
-  so the constraint stays linear and the metric offset follows the tangent's
-  length (which scale compensation keeps close to the original).
+  tangent ``p[j+1] - p[j-1]``, so a metric offset would stretch and shrink
+  with the edited path (a squeeze to 0.6x put two walkers tied 0.8 m apart
+  0.45-0.54 m apart).  :class:`Relative` offsets are metres on the *edited*
+  path: the solver keeps the linear rows of equations 1 and 2 (scaled by the
+  undeformed tangent length) and corrects their right-hand sides to the
+  metric target measured on the solution, re-solving until the correction
+  settles (see :mod:`mocaplab.editing.laplacian`, "Relative constraints in
+  metres"); :meth:`~mocaplab.editing.scene.EditResult.residuals` reports the
+  metric error.
 * :class:`PinDirection` and the ``direction`` of :class:`Relative` fix the
   direction of the path tangent; its length is kept at the undeformed length,
   so the character's speed there is kept.
@@ -42,9 +56,11 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, cast
 
 import numpy as np
+
+from ..refinement import EndEffector
 
 __all__ = [
     "Constraint",
@@ -55,10 +71,13 @@ __all__ = [
     "Duration",
     "Sync",
     "EndEffectorConstraint",
+    "effector_frames",
+    "is_effector",
     "ConstraintError",
     "SPATIAL",
     "TEMPORAL",
     "direction_vector",
+    "local_direction_vector",
 ]
 
 
@@ -95,6 +114,36 @@ def direction_vector(direction: Any, *, name: str = "direction") -> tuple[float,
     if n < 1e-12:
         raise ValueError(f"Expected a non-zero `{name}` vector, got {direction!r}")
     return (float(arr[0] / n), float(arr[1] / n))
+
+
+def local_direction_vector(direction: Any, *, name: str = "direction") -> tuple[float, float]:
+    """A unit local direction ``(forward, left)`` from an angle or a 2-vector.
+
+    An angle ``a`` (radians) turns from forward towards left: ``(cos a, sin a)``
+    (the yaw convention: turning left is a positive yaw).
+
+    Examples
+    --------
+    >>> [round(v, 12) for v in local_direction_vector(0.0)], [round(v, 12) for v in local_direction_vector(3.141592653589793)]
+    ([1.0, 0.0], [-1.0, 0.0])
+    """
+    arr = np.asarray(direction, dtype=float)
+    if arr.ndim == 0:
+        a = float(arr)
+        if not math.isfinite(a):
+            raise ValueError(f"Expected a finite angle for `{name}`, got {direction!r}")
+        return (math.cos(a), math.sin(a))
+    if arr.shape != (2,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"Expected `{name}` as an angle or a finite (forward, left) pair, got {direction!r}")
+    n = float(np.hypot(arr[0], arr[1]))
+    if n < 1e-12:
+        raise ValueError(f"Expected a non-zero `{name}` vector, got {direction!r}")
+    return (float(arr[0] / n), float(arr[1] / n))
+
+
+def _required(obj: Any, name: str, example: str) -> None:
+    if getattr(obj, name) is None:
+        raise TypeError(f"{type(obj).__name__}: missing `{name}` (e.g. {example})")
 
 
 def _pair(value: Any, name: str) -> tuple[float, float]:
@@ -159,7 +208,10 @@ class Constraint:
         frame = self.frame
         frames = getattr(self, "frames", None)
         if frame is None and frames is None:
-            raise ValueError(f"{type(self).__name__}: give `frame` (instant) or `frames=(start, end)` (variational)")
+            raise ValueError(
+                f"{type(self).__name__}: give `frame` (instant) or `frames=(start, end)` (variational, both ends "
+                "included), got neither"
+            )
         if frame is not None and frames is not None:
             raise ValueError(f"{type(self).__name__}: give either `frame` or `frames`, not both")
         if frame is not None:
@@ -231,13 +283,13 @@ class PinPosition(Constraint):
     --------
     >>> PinPosition(0, 10, (1.0, 2.0), hard=True).position
     (1.0, 2.0)
-    >>> PinPosition(0, None, (0.0, 0.0), frames=(0, 30)).samples()
+    >>> PinPosition(0, position=(0.0, 0.0), frames=(0, 30)).samples()
     [(0,), (10,), (20,), (30,)]
     """
 
     character: int
-    frame: int | None
-    position: tuple[float, float]
+    frame: int | None = None
+    position: tuple[float, float] = None  # type: ignore[assignment]  # required (checked)
     _: dataclasses.KW_ONLY
     hard: bool = False
     weight: float = 1.0
@@ -248,6 +300,7 @@ class PinPosition(Constraint):
 
     def __post_init__(self) -> None:
         self._check_common()
+        _required(self, "position", "PinPosition(0, 10, (1.0, 2.0))")
         object.__setattr__(self, "position", _pair(self.position, "position"))
 
 
@@ -255,13 +308,15 @@ class PinPosition(Constraint):
 class PinDirection(Constraint):
     """Pin the path direction (tangent) of ``character`` at ``frame``.
 
-    ``direction`` is a ground vector ``(x, z)`` or a yaw angle (radians);
-    stored as a unit vector.  The tangent keeps its undeformed length.
+    ``direction`` is a ground vector ``(x, z)`` or a yaw angle (radians,
+    ``atan2(x, z)``); stored as a unit vector.  The tangent keeps its
+    undeformed length.  Variational form: ``PinDirection(k, direction=d,
+    frames=(a, b))``.
     """
 
     character: int
-    frame: int | None
-    direction: Any
+    frame: int | None = None
+    direction: Any = None
     _: dataclasses.KW_ONLY
     hard: bool = False
     weight: float = 1.0
@@ -272,6 +327,7 @@ class PinDirection(Constraint):
 
     def __post_init__(self) -> None:
         self._check_common()
+        _required(self, "direction", "PinDirection(0, 10, (0.0, 1.0))")
         object.__setattr__(self, "direction", direction_vector(self.direction))
 
 
@@ -299,22 +355,32 @@ class Relative(Constraint):
     Parameters
     ----------
     offset : (forward, left), metres
-        Position of ``character`` in the moving tangent frame of ``other``.
-    direction : (forward, left) or yaw angle, optional
-        Path direction of ``character`` in that frame (``None``: free).
+        Position of ``character`` in the moving tangent frame of ``other``,
+        in metres on the edited path (see the module docstring).
+    direction : (forward, left) or angle, optional
+        Path direction of ``character`` in that frame (``None``: free): a
+        vector, or an angle ``a`` turned from forward towards left, ``(cos a,
+        sin a)``: ``0`` walks the same way as ``other``, ``pi`` towards it.
     frames, other_frames : (start, end), optional
-        Variational form: ``frames`` of ``character`` matched linearly to
-        ``other_frames`` of ``other`` (default: the same frame numbers).
+        Variational form (both ends included): ``frames`` of ``character``
+        matched linearly to ``other_frames`` of ``other`` (default: the same
+        frame numbers), e.g. ``Relative(1, other=0, offset=(0.0, 0.6),
+        frames=(40, 90))``.
 
     Drag target: ``offset``.  The offset enters the matrix, so moving it
     refactorises (still fast; positions pins are the cheap drag).
+
+    Examples
+    --------
+    >>> Relative(1, 50, 0, 70, (0.0, 0.6), direction=np.pi).direction[0]
+    -1.0
     """
 
     character: int
-    frame: int | None
-    other: int
-    other_frame: int | None
-    offset: tuple[float, float]
+    frame: int | None = None
+    other: int = None  # type: ignore[assignment]  # required (checked)
+    other_frame: int | None = None
+    offset: tuple[float, float] = None  # type: ignore[assignment]  # required (checked)
     _: dataclasses.KW_ONLY
     direction: Any = None
     hard: bool = False
@@ -328,10 +394,12 @@ class Relative(Constraint):
 
     def __post_init__(self) -> None:
         self._check_common()
+        _required(self, "other", "Relative(1, 50, 0, 70, (0.0, 0.6)) or Relative(1, other=0, ...)")
+        _required(self, "offset", "Relative(1, 50, 0, 70, (0.0, 0.6))")
         object.__setattr__(self, "other", _index(self.other, "other"))
         object.__setattr__(self, "offset", _pair(self.offset, "offset"))
         if self.direction is not None:
-            object.__setattr__(self, "direction", direction_vector(self.direction))
+            object.__setattr__(self, "direction", local_direction_vector(self.direction))
         if self.frames is None:
             if self.other_frame is None:
                 raise ValueError("Relative: instant form needs `other_frame`")
@@ -360,13 +428,14 @@ class Relative(Constraint):
 class AbsoluteTime(Constraint):
     """Frame ``frame`` of ``character`` happens at reference time ``time`` (s): ``t_i = time``.
 
-    Variational form ``frames=(start, end)``: frame ``start`` at ``time`` and
-    the interval played at its original speed (``t_i = time + (i - start) h``).
+    Variational form ``AbsoluteTime(k, time=t, frames=(start, end))``: frame
+    ``start`` at ``time`` and the interval played at its original speed
+    (``t_i = time + (i - start) h``).
     """
 
     character: int
-    frame: int | None
-    time: float
+    frame: int | None = None
+    time: float = None  # type: ignore[assignment]  # required (checked)
     _: dataclasses.KW_ONLY
     hard: bool = False
     weight: float = 1.0
@@ -377,6 +446,7 @@ class AbsoluteTime(Constraint):
 
     def __post_init__(self) -> None:
         self._check_common()
+        _required(self, "time", "AbsoluteTime(0, 10, 1.5)")
         object.__setattr__(self, "time", _scalar(self.time, "time"))
 
 
@@ -424,14 +494,15 @@ class Duration(Constraint):
 class Sync(Constraint):
     """Synchronise two characters: ``t[frame] = t_other[other_frame] + offset`` (s).
 
-    Variational form: ``frames`` of ``character`` matched linearly to
+    Variational form (both ends included): ``Sync(k, other=j, frames=(a, b),
+    other_frames=(c, d))``, ``frames`` of ``character`` matched linearly to
     ``other_frames`` of ``other`` (default: the same frame numbers).
     """
 
     character: int
-    frame: int | None
-    other: int
-    other_frame: int | None
+    frame: int | None = None
+    other: int = None  # type: ignore[assignment]  # required (checked)
+    other_frame: int | None = None
     _: dataclasses.KW_ONLY
     offset: float = 0.0
     hard: bool = False
@@ -444,6 +515,7 @@ class Sync(Constraint):
 
     def __post_init__(self) -> None:
         self._check_common()
+        _required(self, "other", "Sync(1, 50, 0, 70) or Sync(1, other=0, frames=(40, 60))")
         object.__setattr__(self, "other", _index(self.other, "other"))
         object.__setattr__(self, "offset", _scalar(self.offset, "offset"))
         if self.frames is None:
@@ -472,21 +544,89 @@ class Sync(Constraint):
 
 @dataclasses.dataclass(frozen=True)
 class EndEffectorConstraint:
-    """An end-effector constraint of :mod:`mocaplab.refinement` attached to ``character``.
+    """An end-effector constraint (section 4.3) on ``character``, for full-body refinement.
 
     Path editing ignores it; the scene records it (``EditResult.end_effectors``)
-    and hands it to :func:`mocaplab.refinement.refine` for full-body refinement
-    (Kim et al. 2009, section 4.3).  Frames inside ``constraint`` refer to the
-    character's own frames.
+    and hands it to :func:`mocaplab.refinement.refine_scene` (Kim et al. 2009,
+    section 4.3).  Frames are the character's own frames.
+
+    Two forms:
+
+    * ``EndEffectorConstraint(character, joint=..., frame=i, target=...)`` or
+      ``frames=(a, b)`` (both ends included, like every constraint here),
+      with ``target`` a world point (3,), one point per frame ``(b - a + 1,
+      3)``, or a :class:`~mocaplab.refinement.RelativeTo` /
+      :class:`~mocaplab.refinement.ObjectFrame`; ``chain`` and ``blend`` as in
+      :class:`~mocaplab.refinement.EndEffector`.
+    * ``EndEffectorConstraint(character, end_effector)``: a
+      :class:`~mocaplab.refinement.EndEffector` as it is (its own frame
+      convention: a ``(start, stop)`` tuple there is half-open).
+
+    ``constraint`` is the :class:`~mocaplab.refinement.EndEffector` either way.
+
+    Examples
+    --------
+    >>> c = EndEffectorConstraint(0, joint="RightHand", frames=(10, 20), target=(0.0, 1.0, 0.0))
+    >>> c.constraint.frames, c.frames
+    ((10, 21), (10, 20))
     """
 
     character: int
-    constraint: Any
+    constraint: Any = None
+    _: dataclasses.KW_ONLY
+    joint: str | None = None
+    frame: int | None = None
+    frames: tuple[int, int] | None = None
+    target: Any = None
+    chain: Sequence[str] | None = None
+    blend: float | None = None
 
     kind: ClassVar[str] = "body"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "character", _index(self.character, "character"))
+        keywords = {k: getattr(self, k) for k in ("joint", "frame", "frames", "target", "chain", "blend")}
+        if self.constraint is not None:
+            given = sorted(k for k, v in keywords.items() if v is not None)
+            if given:
+                raise TypeError(
+                    f"EndEffectorConstraint: give either an EndEffector or joint=/frame(s)=/target=, not both (got {given})"
+                )
+            if not isinstance(self.constraint, EndEffector):
+                raise TypeError(
+                    f"Expected `constraint` to be a mocaplab.refinement.EndEffector, got {type(self.constraint).__name__}"
+                )
+            ee = self.constraint
+            if ee.character != self.character:
+                ee = dataclasses.replace(ee, character=self.character)
+            object.__setattr__(self, "constraint", ee)
+            return
+        if self.joint is None or self.target is None:
+            raise TypeError(
+                "EndEffectorConstraint: give `joint=` and `target=` with `frame=` or `frames=(start, end)` "
+                "(e.g. EndEffectorConstraint(0, joint='RightHand', frame=40, target=(0.3, 1.1, 2.0)))"
+            )
+        if (self.frame is None) == (self.frames is None):
+            raise ValueError("EndEffectorConstraint: give `frame` (one frame) or `frames=(start, end)` (inclusive), one of them")
+        if self.frame is not None:
+            object.__setattr__(self, "frame", _index(self.frame, "frame"))
+            half_open: Any = int(self.frame)
+        else:
+            a0, b0 = cast(tuple[int, int], self.frames)
+            a, b = _index(a0, "frames[0]"), _index(b0, "frames[1]")
+            if b < a:
+                raise ValueError(f"Expected `frames` (start, end) with start <= end, got {self.frames!r}")
+            object.__setattr__(self, "frames", (a, b))
+            half_open = (a, b + 1)  # refinement's tuples are half-open
+        ee = EndEffector(
+            str(self.joint),
+            half_open,
+            self.target,
+            character=self.character,
+            chain=None if self.chain is None else tuple(self.chain),
+            blend=self.blend,
+        )
+        object.__setattr__(self, "constraint", ee)
 
     @property
     def characters(self) -> tuple[int, ...]:
@@ -494,6 +634,22 @@ class EndEffectorConstraint:
 
     def frame_refs(self) -> list[tuple[int, int]]:
         return []
+
+
+def effector_frames(effector: Any, n_frames: int) -> list[tuple[int, int]]:
+    """Inclusive ``(first, last)`` runs of frames an end effector constrains.
+
+    ``effector`` is an :class:`EndEffectorConstraint` or a
+    :class:`~mocaplab.refinement.EndEffector` (whose own
+    :meth:`~mocaplab.refinement.EndEffector.intervals` decide).
+    """
+    ee = effector.constraint if isinstance(effector, EndEffectorConstraint) else effector
+    return [(a, b - 1) for a, b in ee.intervals(n_frames)]
+
+
+def is_effector(c: Any) -> bool:
+    """Whether ``c`` is an end-effector constraint (either form)."""
+    return isinstance(c, (EndEffector, EndEffectorConstraint))
 
 
 SPATIAL = (PinPosition, PinDirection, Relative)

@@ -7,7 +7,7 @@ distance ``D(i, j)`` between their feature vectors is small; a similar pair
 ``(i, j)`` gives the two transitions ``i -> j + 1`` and ``j -> i + 1`` (after
 playing ``i`` the motion may continue where ``j`` continues, and vice
 versa).  Section 5.1 builds its deletions, insertions and replacements from
-those transitions (:mod:`mocaplab.editing.discrete`).
+those transitions (:mod:`mocaplab.editing.discrete.transformations`).
 
 Frame distance (in the spirit of Lee and Lee 2006)
 --------------------------------------------------
@@ -84,7 +84,6 @@ __all__ = [
     "frame_features",
     "joint_weights",
     "frame_distances",
-    "discrete_update",
 ]
 
 Array = NDArray[np.float64]
@@ -481,13 +480,3 @@ def build_graph(
     costs.flags.writeable = False
     offsets.flags.writeable = False
     return MotionGraph(clips, offsets, pairs, costs, threshold, float(window), float(min_gap), w)
-
-
-def discrete_update(editor: Any, result: Any) -> Any:
-    """Hook called by :class:`~mocaplab.editing.scene.SceneEditor` when ``discrete`` is on.
-
-    Delegates to :func:`mocaplab.editing.discrete.discrete_update`.
-    """
-    from .discrete import discrete_update as _update
-
-    return _update(editor, result)

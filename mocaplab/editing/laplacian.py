@@ -24,9 +24,41 @@ Stationary sub-paths (section 4.2)
     phase 1, so the matrices stay fixed.
 Tangent flips (section 4.2)
     detected after the solve from jumps of ``phi_i = angle(t_i, that_i)``
-    between successive frames, and repaired (for the heading) by linear
-    interpolation of the neighbouring tangent directions.  The positions are
-    not changed, so the matrix never depends on the flips.
+    between successive frames (``flip_threshold``, 30 degrees per frame by
+    default); a jump and a later one that brings ``phi`` back within
+    ``flip_window`` seconds bound a whole reversed stretch; the heading is
+    repaired by linear interpolation over the flagged frames, which grow
+    until it turns at most the threshold per frame
+    (:func:`detect_tangent_flips`).  The positions are not changed, so the
+    matrix never depends on the flips.
+
+Relative constraints in metres (our choice; see
+:mod:`~mocaplab.editing.constraints`)
+    Equations 1 and 2 are linear because they measure the offset in units of
+    the other character's tangent ``T = p[j+1] - p[j-1]``; written with the
+    undeformed length ``L``, ``p_a - p_b - (c_x + c_y R) T / L = 0``, the
+    metric offset grows and shrinks with ``|T| / L``.  We keep those linear
+    rows (the matrix, so its factorisation, does not change) and correct
+    their right-hand sides: with ``u = T / |T|`` measured on the solution,
+    ``r = (c_x + c_y R)(u - T / L)`` makes the rows read ``p_a - p_b = c_x u
+    + c_y R u``, metres along the edited tangent.  ``r`` depends on the
+    solution, so the solve is repeated (a fixed point, Anderson-accelerated)
+    until ``r`` changes by less than ``relative_tolerance`` (1 mm); the
+    iterate with the smallest change is kept if they stop improving (a soft
+    constraint far from anything reachable).  An interactive drag starts from
+    the previous update's corrections and usually needs one solve.  This
+    stands in for the issue's "rescale the offset and refactorise": the same
+    fixed point, without refactorising.  The discrete evaluation instead
+    writes the metric rows linearised about the current solution
+    (``spatial_rows(..., linearize_at=...)``).
+
+Redundant hard constraints
+    A set of hard rows is accepted when it is consistent, not only when it
+    has full rank: rows that others imply (the same pin twice, two pins on a
+    rigid stationary segment) are left out of the factorisation and checked
+    after every solve (:func:`independent_hard_rows`, :class:`HardRows`);
+    ``EditResult.notes`` says which.  Inconsistent ones raise
+    :class:`~mocaplab.editing.constraints.ConstraintError` naming them.
 
 Free modes (our choice): the Laplacian energies only see a path up to a
 similarity (phase 1: translation, rotation, scale) or an index-affine map
@@ -39,21 +71,23 @@ the modes, per group of linked characters) and fix only them with hard
 1, the phase-1 result in phase 2).  Nothing that a constraint determines is
 biased; a character with no constraint keeps its path.
 
-A drag that moves a target changes only ``b`` and ``h``: an update is two
-back-substitutions plus O(F) vector work.
+A drag that moves a target changes only ``b`` and ``h``: phase 1 is then
+updated through cached columns of its inverse for the moved entries
+(O(frames), :meth:`SpatialSolver._phase1`), phase 2 is one back-substitution
+(its right-hand side depends on phase 1 everywhere), plus O(F) vector work.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
-from scipy.ndimage import uniform_filter1d
 from scipy.sparse.csgraph import connected_components
 
 from .constraints import ConstraintError, PinDirection, PinPosition, Relative
@@ -89,9 +123,11 @@ class Layout:
 
     n_frames: tuple[int, ...]
 
-    @property
+    @cached_property
     def offsets(self) -> NDArray[np.int64]:
-        return np.concatenate([[0], np.cumsum(self.n_frames)]).astype(np.int64)
+        off = np.concatenate([[0], np.cumsum(self.n_frames)]).astype(np.int64)
+        off.flags.writeable = False
+        return off
 
     @property
     def total(self) -> int:
@@ -117,13 +153,57 @@ class Layout:
         return np.concatenate([np.arange(off[k], off[k + 1] - 1) for k in range(len(self.n_frames))]).astype(np.int64)
 
 
+@dataclasses.dataclass(frozen=True)
+class MetricPair:
+    """Two rows (x, z) of a :class:`~mocaplab.editing.constraints.Relative` whose target is metric.
+
+    The linear rows (equations 1 and 2) read ``lhs(p) - (c / L) (T, R T) = 0``
+    with ``T`` the other character's tangent (a fixed linear function of
+    ``p``) and ``L`` its undeformed length; the metric target is ``c_x u +
+    c_y R u`` with ``u = T / |T|`` measured on the solution.  The difference,
+    ``(c_x + c_y R) (u - T / L)``, is the right-hand side correction.
+
+    Attributes
+    ----------
+    row : int
+        Index of the x row within its :class:`Rows` (the z row follows).
+    coef : (float, float)
+        ``(c_x, c_y)``: the offset in metres (position rows, eq. 1) or the
+        direction times the character's own undeformed tangent length
+        (direction rows, eq. 2).
+    cols : ndarray of int
+        Unknowns (x coordinates; z is ``+ 1``) of the tangent ``T``.
+    weights : ndarray
+        Their weights in ``T``.
+    length : float
+        ``L``, the undeformed ``|T|``.
+    linear : ndarray, shape (2, 2)
+        ``M``: the rows read ``lhs - M T``.
+    direction : bool
+        True for the direction rows of equation 2.
+    """
+
+    row: int
+    coef: tuple[float, float]
+    cols: NDArray[np.int64]
+    weights: Array
+    length: float
+    linear: Array
+    direction: bool = False
+
+
 @dataclasses.dataclass
 class Rows:
-    """Linear rows ``sum(vals * x[cols]) = rhs`` produced by one constraint."""
+    """Linear rows ``sum(vals * x[cols]) = rhs`` produced by one constraint.
+
+    ``metric`` lists the row pairs whose right-hand side is corrected to a
+    metric target after each solve (relative constraints; :class:`MetricPair`).
+    """
 
     cols: list[NDArray[np.int64]]
     vals: list[Array]
     rhs: Array
+    metric: tuple[MetricPair, ...] = ()
 
     @property
     def n(self) -> int:
@@ -246,12 +326,46 @@ class _TangentRows:
         return op.indices[s:e].astype(np.int64), op.data[s:e].astype(float)
 
 
-def spatial_rows(c: Any, paths: Sequence[MotionPath], layout: Layout, tangents: _TangentRows, step: int) -> Rows:
-    """The linear rows (unweighted) of one spatial constraint."""
+def _metric_linearization(coef: tuple[float, float], T: Array) -> tuple[Array, Array]:
+    """``(M, r)`` with ``lhs - M T' = r`` the metric target ``C u(T')`` linearised about ``T`` (Newton)."""
+    L = float(np.linalg.norm(T))
+    u = T / L
+    C = np.array([[coef[0], coef[1]], [-coef[1], coef[0]]])
+    return C @ (np.eye(2) - np.outer(u, u)) / L, C @ u
+
+
+def _relative_coupling(coef: tuple[float, float], t: Array) -> Array:
+    """2 x 2 matrix ``M = (c_x + c_y R) / |t|`` of the relative rows ``lhs - M T`` (equations 1 and 2).
+
+    ``T`` is the other character's tangent (unknown), ``t`` its undeformed value.
+    """
+    return np.array([[coef[0], coef[1]], [-coef[1], coef[0]]]) / float(np.linalg.norm(t))
+
+
+def spatial_rows(
+    c: Any,
+    paths: Sequence[MotionPath],
+    layout: Layout,
+    tangents: _TangentRows,
+    step: int,
+    *,
+    linearize_at: Array | None = None,
+) -> Rows:
+    """The linear rows (unweighted) of one spatial constraint.
+
+    ``linearize_at`` (stacked positions, shape (2 total,)): relative
+    constraints are written as their metric form linearised about these
+    positions instead of equations 1 and 2 (``lhs = C u`` with ``u = T / |T|``
+    becomes ``lhs - C (I - u u^T) T / |T| = C u`` at the given ``T``: the
+    offset keeps its metres when the tangent's length changes, and turns with
+    its direction).  The discrete evaluation scores candidates this way
+    about the current solution (:mod:`mocaplab.editing.discrete.evaluation`).
+    """
     off = layout.offsets
     cols: list[NDArray[np.int64]] = []
     vals: list[Array] = []
     rhs: list[float] = []
+    metric: list[MetricPair] = []
 
     def var(k: int, i: Any, coord: int) -> Any:
         return 2 * (off[k] + np.asarray(i)) + coord
@@ -275,26 +389,153 @@ def spatial_rows(c: Any, paths: Sequence[MotionPath], layout: Layout, tangents: 
             i, j = sample
             a, b = c.character, c.other
             fb, wb = tangents.row(b, j)
-            Lb = float(np.linalg.norm(paths[b].tangents[j]))
-            cx, cy = c.offset[0] / Lb, c.offset[1] / Lb
-            # x: pa.x - pb.x - cx T.x - cy T.z = 0 ; z: pa.z - pb.z - cx T.z + cy T.x = 0
-            cols.append(np.concatenate([[var(a, i, 0), var(b, j, 0)], var(b, fb, 0), var(b, fb, 1)]))
-            vals.append(np.concatenate([[1.0, -1.0], -cx * wb, -cy * wb]))
-            cols.append(np.concatenate([[var(a, i, 1), var(b, j, 1)], var(b, fb, 1), var(b, fb, 0)]))
-            vals.append(np.concatenate([[1.0, -1.0], -cx * wb, cy * wb]))
-            rhs += [0.0, 0.0]
+            tb = paths[b].tangents[j]
+            Lb = float(np.linalg.norm(tb))
+            tx, tz = var(b, fb, 0), var(b, fb, 1)
+            T_at = None
+            if linearize_at is not None:
+                T_at = np.array([wb @ linearize_at[tx], wb @ linearize_at[tz]])
+            coefs = [(c.offset, False)]
             if c.direction is not None:
-                fa, wa = tangents.row(a, i)
                 La = float(np.linalg.norm(paths[a].tangents[i]))
-                dx, dy = c.direction[0] * La / Lb, c.direction[1] * La / Lb
-                cols.append(np.concatenate([var(a, fa, 0), var(b, fb, 0), var(b, fb, 1)]))
-                vals.append(np.concatenate([wa, -dx * wb, -dy * wb]))
-                cols.append(np.concatenate([var(a, fa, 1), var(b, fb, 1), var(b, fb, 0)]))
-                vals.append(np.concatenate([wa, -dx * wb, dy * wb]))
-                rhs += [0.0, 0.0]
+                coefs.append(((c.direction[0] * La, c.direction[1] * La), True))
+            for coef, is_dir in coefs:
+                r: Any
+                if T_at is None or np.linalg.norm(T_at) < 1e-12:
+                    M = _relative_coupling(coef, tb)  # eq. 1 (2): M = (cx + cy R) / L, right-hand side 0
+                    r = (0.0, 0.0)
+                else:
+                    M, r = _metric_linearization(coef, T_at)
+                metric.append(MetricPair(len(cols), coef, np.asarray(tx, dtype=np.int64), wb, Lb, M, is_dir))
+                if is_dir:  # T_a - M T_b = r
+                    fa, wa = tangents.row(a, i)
+                    left = [(var(a, fa, 0), wa), (var(a, fa, 1), wa)]
+                else:  # p_a - p_b - M T_b = r
+                    left = [
+                        (np.array([var(a, i, 0), var(b, j, 0)]), np.array([1.0, -1.0])),
+                        (np.array([var(a, i, 1), var(b, j, 1)]), np.array([1.0, -1.0])),
+                    ]
+                for q in (0, 1):
+                    cols.append(np.concatenate([np.atleast_1d(left[q][0]), tx, tz]))
+                    vals.append(np.concatenate([np.atleast_1d(left[q][1]), -M[q, 0] * wb, -M[q, 1] * wb]))
+                rhs += [float(r[0]), float(r[1])]
         else:  # pragma: no cover - filtered by the scene
             raise TypeError(f"not a spatial constraint: {c!r}")
-    return Rows([np.asarray(x, dtype=np.int64).reshape(-1) for x in cols], vals, np.asarray(rhs, dtype=float))
+    return Rows(
+        [np.asarray(x, dtype=np.int64).reshape(-1) for x in cols], vals, np.asarray(rhs, dtype=float), tuple(metric)
+    )
+
+
+# ------------------------------------------------- relative constraints in metres
+@dataclasses.dataclass(frozen=True)
+class MetricTargets:
+    """Every metric row pair of a constraint structure, gathered for vectorised corrections.
+
+    Built by :meth:`SpatialSolver.factorize`; see the module docstring
+    ("Relative constraints in metres").
+
+    Attributes
+    ----------
+    tangent : sparse (2 R, 2 n)
+        Rows ``2 r`` and ``2 r + 1`` give the tangent ``T`` of pair ``r``.
+    coef : ndarray, shape (R, 2)
+    length : ndarray, shape (R,)
+    soft : ndarray of bool, shape (R,)
+        Whether the pair's rows are soft (in ``bw``) or hard (in ``h``).
+    index : ndarray of int, shape (R,)
+        Position of the pair's x row in ``bw`` (soft) or ``h`` (hard).
+    scale : ndarray, shape (R,)
+        ``sqrt(weight)`` for soft rows (``bw`` is weighted), 1 for hard.
+    direction : ndarray of bool, shape (R,)
+        Direction pairs (equation 2); the others are offsets (equation 1).
+    """
+
+    tangent: sp.csr_matrix
+    coef: Array
+    length: Array
+    linear: Array
+    soft: NDArray[np.bool_]
+    index: NDArray[np.int64]
+    scale: Array
+    direction: NDArray[np.bool_]
+
+    @property
+    def n(self) -> int:
+        return len(self.length)
+
+    def correction(self, p: Array) -> Array:
+        """Right-hand sides ``(c_x + c_y R)(u - T / L)`` at positions ``p`` (2 n,), shape (R, 2)."""
+        T = (self.tangent @ p).reshape(-1, 2)
+        ln = np.linalg.norm(T, axis=1, keepdims=True)
+        ok = ln > 1e-12
+        u = np.where(ok, T / np.where(ok, ln, 1.0), 0.0)
+        want = self.coef[:, :1] * u + self.coef[:, 1:] * rot90(u)
+        lin = np.einsum("rij,rj->ri", self.linear, T)
+        return np.where(ok, want - lin, 0.0)  # a vanished tangent has no direction: the linear target stands
+
+    def apply(self, bw: Array, h: Array, corr: Array) -> tuple[Array, Array]:
+        """Copies of ``bw`` and ``h`` with the metric rows' right-hand sides set to ``corr`` (R, 2)."""
+        bw, h = bw.copy(), h.copy()
+        vals = corr * self.scale[:, None]
+        s, hd = self.soft, ~self.soft
+        for target, sel in ((bw, s), (h, hd)):
+            if sel.any():
+                i = self.index[sel]
+                target[i] = vals[sel, 0]
+                target[i + 1] = vals[sel, 1]
+        return bw, h
+
+    def errors(self, p: Array, rows: Array) -> Array:
+        """Metric error of each pair at positions ``p``, shape (R,).
+
+        ``rows`` (R, 2) are the pairs' linear row values at ``p`` (unweighted,
+        right-hand side not subtracted): ``lhs - (c / L)(T, R T)`` with
+        ``lhs = p_a - p_b`` or ``T_a``.  The metric error ``|lhs - (c_x u +
+        c_y R u)|`` is ``|rows - correction(p)|``: metres for offsets; for
+        directions it is divided by ``|c|`` (the chord between the unit
+        directions, about the angle in radians).
+        """
+        err = np.linalg.norm(rows - self.correction(p), axis=1)
+        size = np.maximum(np.linalg.norm(self.coef, axis=1), 1e-300)
+        return np.where(self.direction, err / size, err)
+
+
+def metric_targets(
+    soft: Sequence[Rows], weights: Sequence[float], hard: Sequence[Rows], n: int
+) -> MetricTargets | None:
+    """Gather the :class:`MetricPair` rows of the soft and hard blocks (None if there are none)."""
+    rows, cols, vals, coef, length, is_soft, index, scale, direction, linear = [], [], [], [], [], [], [], [], [], []
+    r = 0
+    for blocks, ws, flag in ((soft, weights, True), (hard, [1.0] * len(hard), False)):
+        start = 0
+        for block, w in zip(blocks, ws, strict=True):
+            for m in block.metric:
+                for c in (0, 1):
+                    rows.append(np.full(len(m.cols), 2 * r + c))
+                    cols.append(m.cols + c)
+                    vals.append(m.weights)
+                coef.append(m.coef)
+                length.append(m.length)
+                linear.append(m.linear)
+                is_soft.append(flag)
+                index.append(start + m.row)
+                scale.append(float(np.sqrt(w)) if flag else 1.0)
+                direction.append(m.direction)
+                r += 1
+            start += block.n
+    if r == 0:
+        return None
+    T = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(2 * r, n))
+    return MetricTargets(
+        T,
+        np.asarray(coef, dtype=float),
+        np.asarray(length, dtype=float),
+        np.asarray(linear, dtype=float).reshape(-1, 2, 2),
+        np.asarray(is_soft, dtype=bool),
+        np.asarray(index, dtype=np.int64),
+        np.asarray(scale, dtype=float),
+        np.asarray(direction, dtype=bool),
+    )
 
 
 # ------------------------------------------------------------ free modes
@@ -401,27 +642,52 @@ def gauge_rows(
     translates it rigidly instead of also turning it to reduce the overall
     displacement (which the minimum-norm choice would do).
     """
-    CQ = (sp.csr_matrix(C) @ Q).toarray() if C.shape[0] else np.zeros((0, Q.shape[1]))
-    scale = max(1.0, float(np.abs(CQ).max(initial=0.0)))
-    touched = np.abs(CQ) > 1e-13 * scale
+    CQ = sp.csr_matrix(sp.csr_matrix(C) @ Q) if C.shape[0] else sp.csr_matrix((0, Q.shape[1]))
+    CQ.eliminate_zeros()
+    scale = max(1.0, float(abs(CQ).max())) if CQ.nnz else 1.0
+    CQ.data[np.abs(CQ.data) <= 1e-13 * scale] = 0.0
+    CQ.eliminate_zeros()
+    coo = CQ.tocoo()
     # characters linked by a row
-    inc = sp.csr_matrix(
-        (np.ones(int(touched.sum())), (np.nonzero(touched)[0], owner[np.nonzero(touched)[1]])),
-        shape=(CQ.shape[0], n_chars),
-    )
+    inc = sp.csr_matrix((np.ones(coo.nnz), (coo.row, owner[coo.col])), shape=(CQ.shape[0], n_chars))
+    inc.data[:] = 1.0
     adj = (inc.T @ inc).tocsr()
     ncomp, label = connected_components(adj, directed=False)
+    # rows on one character only, and each character's Gram block of them (q_k x q_k, tiny)
+    per_row = np.asarray((inc > 0).sum(axis=1)).ravel()
+    local = CQ[np.flatnonzero(per_row == 1)]
+    Gl = (local.T @ local).tocoo()
+    same = owner[Gl.row] == owner[Gl.col]
     out: list[sp.csr_matrix] = []
     for comp in range(ncomp):
         chars = np.flatnonzero(label == comp)
         cols = np.flatnonzero(np.isin(owner, chars))
-        rows = np.flatnonzero(touched[:, cols].any(axis=1))
+        sub = CQ[:, cols]
+        rows = np.flatnonzero(np.diff(sub.indptr) > 0)
         if len(rows) == 0:
             V = np.eye(len(cols))
         else:
-            sub = CQ[np.ix_(rows, cols)]
+            # fast exact test: the Gram matrix of all rows dominates the block diagonal of the local rows'
+            # (lambda_min(G) >= min_k lambda_min(G_k)) and lambda_max(G) <= |CQ|_F^2, so if every character's
+            # own rows hold its modes well enough no mode is free
+            bound = 1e-12 * float(sub.multiply(sub).sum())
+            pos = np.full(len(owner), -1, dtype=np.int64)
+            pos[cols] = np.arange(len(cols))
+            q = np.bincount(owner[cols], minlength=n_chars)[chars]
+            ok = False
+            if np.all(q == q[0]):
+                qk = int(q[0])
+                blocks = np.zeros((len(chars), qk, qk))
+                sel = same & (pos[Gl.row] >= 0)
+                ci = np.searchsorted(chars, owner[Gl.row[sel]])
+                first = np.searchsorted(owner, chars)  # owner is sorted: each character's columns together
+                blocks[ci, Gl.row[sel] - first[ci], Gl.col[sel] - first[ci]] = Gl.data[sel]
+                ok = bool(np.linalg.eigvalsh(blocks)[:, 0].min() > bound)
+            if ok:
+                continue
+            dense = sub[rows].toarray()
             # null space from the (small, q x q) Gram matrix: eigenvalues are squared singular values
-            w, vecs = np.linalg.eigh(sub.T @ sub)
+            w, vecs = np.linalg.eigh(dense.T @ dense)
             tol = 1e-12 * max(float(w.max(initial=0.0)), 1e-300)
             V = vecs[:, w <= tol]
         if V.shape[1] == 0:
@@ -513,7 +779,7 @@ def full_row_rank_screen(H: sp.spmatrix) -> bool:
     All pivots above ``1e-9`` certify full row rank.  A dependent set of rows
     makes one pivot vanish (exactly, up to rounding), so the test returns
     False; it also returns False for rows that are merely close to dependent,
-    which the caller then checks exactly (:func:`check_hard_rows`).  Cost:
+    which the caller then checks exactly (:func:`independent_hard_rows`).  Cost:
     one sparse factorisation of ``G`` (banded for the rigid-segment rows),
     instead of dense SVDs.
     """
@@ -536,42 +802,142 @@ def full_row_rank_screen(H: sp.spmatrix) -> bool:
     return bool(np.all(piv > _SCREEN_TOL))
 
 
-def check_hard_rows(H: sp.csr_matrix, groups: Sequence[tuple[Any, NDArray[np.int64]]], what: str) -> None:
-    """Raise :class:`ConstraintError` if the hard rows are linearly dependent.
+def _label_text(label: Any) -> str:
+    return f"#{label[0]} {label[1]!r}" if isinstance(label, tuple) else str(label)
 
-    ``groups`` are ``(label, rows)`` pairs where label is ``(index, constraint)``
-    for user constraints or a string for automatic ones.
 
-    A sparse Cholesky screen (:func:`full_row_rank_screen`) clears the usual
-    case cheaply; only when it fails are the groups searched, with dense
-    rank tests (SVD) on the groups that share unknowns, for a minimal
-    dependent set to name in the error.
+@dataclasses.dataclass(frozen=True)
+class Redundancy:
+    """Hard rows left out of a factorisation because other hard rows imply them.
+
+    Attributes
+    ----------
+    label : (index, constraint) or str
+        The constraint (or automatic rows) whose rows were left out.
+    rows : ndarray of int
+        Their indices in the full hard-row matrix.
+    implied_by : tuple
+        Labels of the hard rows that determine them.
     """
-    if H.shape[0] == 0:
-        return
-    if full_row_rank_screen(H):
-        return
-    bad = _dependent_groups(H, groups)
-    if bad is None:
-        return
-    labels = [groups[b][0] for b in bad]
-    named = []
-    cons, idx = [], []
-    for lab in labels:
-        if isinstance(lab, tuple):
-            idx.append(lab[0])
-            cons.append(lab[1])
-            named.append(f"#{lab[0]} {lab[1]!r}")
-        else:
-            cons.append(lab)
-            named.append(str(lab))
-    raise ConstraintError(
-        f"Conflicting or redundant hard {what} constraints (linearly dependent, cannot all hold exactly): "
-        + "; ".join(named)
-        + ". Make one of them soft (hard=False) or remove it.",
-        cons,
-        idx,
-    )
+
+    label: Any
+    rows: NDArray[np.int64]
+    implied_by: tuple[Any, ...]
+
+    def note(self, what: str) -> str:
+        by = " and ".join(_label_text(b) for b in self.implied_by)
+        return (
+            f"hard {what} constraint {_label_text(self.label)} is redundant (implied by {by}): its rows are left out "
+            "of the solve and checked instead"
+        )
+
+
+_ANDERSON = 5  # iterates mixed by the metric-target iteration
+_STALE = 3  # iterations without a smaller change before the metric-target iteration stops
+_INFLUENCE = 8  # at most this many moved right-hand-side entries update phase 1 through cached columns
+_INFLUENCE_CACHE = 16  # supports kept per factorisation
+_CONSISTENCY_TOL = 1e-7  # metres or seconds: how far a left-out redundant hard row may miss
+
+
+@dataclasses.dataclass(frozen=True)
+class HardRows:
+    """The hard rows of one linear system: all of them, and a linearly independent subset to factorise.
+
+    Built by :func:`independent_hard_rows`.  A set of hard constraints is
+    accepted when it is *consistent*, not only when it has full rank: rows
+    that other hard rows imply (the same pin twice, two pins on a rigid
+    stationary segment, a direction pin on one) are left out of the KKT
+    system (which needs independent rows) and checked after every solve
+    (:meth:`check`): if their targets disagree with what the kept rows
+    determine, the edit raises :class:`ConstraintError` naming them.
+
+    Attributes
+    ----------
+    H : sparse (m, n)
+        Every hard row.
+    keep : ndarray of bool, shape (m,)
+        The rows in the factorisation.
+    redundant : tuple of Redundancy
+    what : str
+        "spatial" or "temporal" (for messages).
+    """
+
+    H: sp.csr_matrix
+    keep: NDArray[np.bool_]
+    redundant: tuple[Redundancy, ...]
+    what: str
+
+    @property
+    def kept(self) -> sp.csr_matrix:
+        return self.H if self.keep.all() else self.H[np.flatnonzero(self.keep)]
+
+    def notes(self) -> tuple[str, ...]:
+        return tuple(r.note(self.what) for r in self.redundant)
+
+    def check(self, x: Array, h: Array) -> None:
+        """Raise :class:`ConstraintError` if a left-out row is not met by ``x`` (``h``: all right-hand sides)."""
+        for r in self.redundant:
+            miss = float(np.max(np.abs(self.H[r.rows] @ x - h[r.rows])))
+            if miss > _CONSISTENCY_TOL * max(1.0, float(np.max(np.abs(h), initial=0.0))):
+                labels = [*r.implied_by, r.label]
+                unit = "m" if self.what == "spatial" else "s"
+                raise ConstraintError(
+                    f"Conflicting hard {self.what} constraints: {_label_text(r.label)} is determined by "
+                    + " and ".join(_label_text(b) for b in r.implied_by)
+                    + f", and its target is {miss:.3g} {unit} away from what they give (they cannot all hold "
+                    "exactly). Make one of them soft (hard=False), move it back, or remove it.",
+                    [lab[1] if isinstance(lab, tuple) else lab for lab in labels],
+                    [lab[0] for lab in labels if isinstance(lab, tuple)],
+                )
+
+
+def independent_hard_rows(
+    H: sp.spmatrix, groups: Sequence[tuple[Any, NDArray[np.int64]]], what: str
+) -> HardRows:
+    """Split hard rows into an independent set to factorise and redundant rows to check (:class:`HardRows`).
+
+    ``groups`` are ``(label, rows)`` pairs in order of preference: when rows
+    depend on each other, the rows of the *later* group are the ones left
+    out (put automatic rows such as rigid segments first, then the user's
+    constraints in index order).  A sparse Cholesky screen
+    (:func:`full_row_rank_screen`) clears the usual case with one sparse
+    factorisation; otherwise a minimal dependent set of groups is found
+    (dense rank tests on the groups that share unknowns), the redundant
+    rows of its last group are left out, and the screen runs again.
+    """
+    H = sp.csr_matrix(H)
+    m = H.shape[0]
+    keep = np.ones(m, bool)
+    redundant: list[Redundancy] = []
+    if m == 0 or full_row_rank_screen(H):
+        return HardRows(H, keep, (), what)
+    for _ in range(m):
+        live = [(lab, rows[keep[rows]]) for lab, rows in groups]
+        index = [i for i, (_, rows) in enumerate(live) if len(rows)]
+        sub = [live[i] for i in index]
+        bad = _dependent_groups(H, sub)
+        if bad is None:  # only close to dependent: the KKT factorisation copes
+            break
+        culprit = sub[bad[-1]]
+        basis_rows = np.concatenate([sub[b][1] for b in bad[:-1]]) if len(bad) > 1 else np.zeros(0, np.int64)
+        cols = np.unique(H[np.concatenate([basis_rows, culprit[1]])].indices)
+        basis = H[basis_rows][:, cols].toarray()
+        rank = int(np.linalg.matrix_rank(basis)) if len(basis_rows) else 0
+        dropped = []
+        for r in culprit[1]:
+            trial = np.vstack([basis, H[[r]][:, cols].toarray()])
+            new_rank = int(np.linalg.matrix_rank(trial))
+            if new_rank == rank:
+                dropped.append(int(r))
+            else:
+                basis, rank = trial, new_rank
+        if not dropped:  # pragma: no cover - numerical corner: accept as the screen's near-dependence
+            break
+        keep[dropped] = False
+        redundant.append(Redundancy(culprit[0], np.asarray(dropped, np.int64), tuple(sub[b][0] for b in bad[:-1])))
+        if full_row_rank_screen(H[np.flatnonzero(keep)]):
+            break
+    return HardRows(H, keep, tuple(redundant), what)
 
 
 class KKT:
@@ -582,7 +948,7 @@ class KKT:
     N : sparse (n, n)
         Symmetric positive definite normal matrix.
     H : sparse (m, n)
-        Hard constraint rows (full row rank: check with :func:`check_hard_rows`).
+        Hard constraint rows (full row rank: the kept rows of :func:`independent_hard_rows`).
     """
 
     def __init__(self, N: sp.spmatrix, H: sp.spmatrix) -> None:
@@ -604,18 +970,79 @@ class KKT:
 
 
 # ----------------------------------------------------------------- solver
-@dataclasses.dataclass
+@dataclasses.dataclass(frozen=True)
 class SpatialFactors:
-    """Both phases' factorisations for one constraint structure."""
+    """Both phases' factorisations for one constraint structure.
+
+    Attributes
+    ----------
+    shape, scale : KKT
+        Phase 1 (equation 6) and phase 2 (equation 7; None without scale
+        compensation).
+    Bw, BwT : sparse
+        Soft rows scaled by the square roots of their weights, and transposed.
+    H : sparse
+        User hard rows followed by the rigid-segment rows of phase 1.
+    hard1, hard2 : HardRows
+        The hard rows of each phase with the independent subset factorised.
+    G1, g1 : sparse, ndarray
+        Phase-1 gauge rows and their values (the undeformed path).
+    G2 : sparse
+        Phase-2 gauge rows (held at the phase-1 result).
+    metric : MetricTargets or None
+        The relative constraints' rows whose targets are corrected to metres.
+    influence : dict
+        Cache of phase-1 inverse columns for small right-hand-side changes
+        (see :meth:`SpatialSolver._phase1`), bounded.
+    """
 
     shape: KKT
     scale: KKT | None
     Bw: sp.csr_matrix
     BwT: sp.csr_matrix
-    H: sp.csr_matrix  # user hard rows followed by rigid rows
-    G1: sp.csr_matrix  # phase-1 gauge rows (fixed to the undeformed path)
+    H: sp.csr_matrix
+    hard1: HardRows
+    hard2: HardRows | None
+    G1: sp.csr_matrix
     g1: Array
-    G2: sp.csr_matrix  # phase-2 gauge rows (fixed to the phase-1 result)
+    G2: sp.csr_matrix
+    metric: MetricTargets | None
+    influence: dict[tuple[tuple[int, ...], tuple[int, ...]], Array] = dataclasses.field(default_factory=dict)
+
+    def notes(self) -> tuple[str, ...]:
+        out = list(self.hard1.notes())
+        if self.hard2 is not None:
+            out += [n + " (phase 2)" for n in self.hard2.notes() if n not in out]
+        return tuple(out)
+
+
+@dataclasses.dataclass(frozen=True)
+class SpatialSolution:
+    """Both phases' solutions for one set of targets.
+
+    Attributes
+    ----------
+    pbar, phat : ndarray, shape (2 total,)
+        Phase-1 and phase-2 positions (``phat is pbar`` without scale compensation).
+    bw, h : ndarray
+        The right-hand sides solved for: the given ones with the relative
+        rows' metric corrections.
+    iterations : int
+        Solves made (1 when there is no relative constraint).
+    change : float
+        Largest change of a metric correction at the kept iterate, metres
+        (its metric error, about).
+    corrections : ndarray, shape (R, 2)
+        The relative rows' right-hand-side corrections solved for.
+    """
+
+    pbar: Array
+    phat: Array
+    bw: Array
+    h: Array
+    iterations: int
+    change: float
+    corrections: Array
 
 
 class SpatialSolver:
@@ -635,7 +1062,11 @@ class SpatialSolver:
         segments: Sequence[Sequence[tuple[int, int]]],
         *,
         scale_compensation: bool = True,
+        metric_tolerance: float = 1e-3,
+        metric_iterations: int = 20,
     ) -> None:
+        self.metric_tolerance = float(metric_tolerance)
+        self.metric_iterations = int(metric_iterations)
         self.paths = list(paths)
         self.layout = Layout(tuple(p.n_frames for p in paths))
         self.p0 = np.concatenate([p.positions for p in paths]).reshape(-1)
@@ -654,6 +1085,14 @@ class SpatialSolver:
             if b - a >= 2
         ]
         rs = np.concatenate(rigid_steps).astype(np.int64) if rigid_steps else np.zeros(0, np.int64)
+        self.rigid_groups2: list[tuple[str, NDArray[np.int64]]] = []
+        r0 = 0
+        for k, segs in enumerate(segments):
+            for a, b in segs:
+                if b - a >= 2:
+                    lab = f"rigid stationary segment of character {k}, frames {a}-{b - 1}"
+                    self.rigid_groups2.append((lab, np.arange(2 * r0, 2 * (r0 + b - 1 - a))))
+                    r0 += b - 1 - a
         n2 = len(rs)
         rr = np.arange(2 * n2)
         cc = np.stack([2 * rs, 2 * rs + 1], axis=1).reshape(-1)
@@ -688,50 +1127,151 @@ class SpatialSolver:
         """Factorise both phases for a constraint structure.
 
         Returns the factors and the (weighted) soft and hard right-hand sides.
+        Redundant hard rows are left out of the factorisations and checked at
+        every solve (:class:`HardRows`); inconsistent ones raise there.
         """
         n = 2 * self.layout.total
         K = len(self.paths)
         Bw, bw = assemble(soft, n, [float(np.sqrt(w)) for w in weights])
         Hu, h = assemble(hard, n)
         H = sp.vstack([Hu, self.R], format="csr")
-        groups: list[tuple[Any, NDArray[np.int64]]] = []
+        user: list[tuple[Any, NDArray[np.int64]]] = []
         r = 0
         for lab, block in zip(labels, hard, strict=True):
-            groups.append((lab, np.arange(r, r + block.n)))
+            user.append((lab, np.arange(r, r + block.n)))
             r += block.n
-        for lab, rows in self.rigid_groups:
-            groups.append((lab, rows + r))
-        check_hard_rows(H, groups, "spatial")
+        rigid = [(lab, rows + r) for lab, rows in self.rigid_groups]
+        hard1 = independent_hard_rows(H, rigid + user, "spatial")  # rigid rows kept first
         BwT = Bw.T.tocsr()
         BtB = (BwT @ Bw).tocsr()
         C = sp.vstack([Bw, H], format="csr")
         G1 = gauge_rows(self.Q1, self.owner1, C, K, self._primary)
-        shape = KKT(self.AtA + BtB, sp.vstack([H, G1], format="csr"))
+        shape = KKT(self.AtA + BtB, sp.vstack([hard1.kept, G1], format="csr"))
         G2 = sp.csr_matrix((0, n))
         scale = None
+        hard2 = None
         if self.scale_compensation:
             H2 = sp.vstack([Hu, self.R2], format="csr")
-            if self.R2.shape[0]:
-                check_hard_rows(
-                    H2,
-                    groups[: len(hard)] + [("rigid stationary segments", np.arange(Hu.shape[0], H2.shape[0]))],
-                    "spatial",
-                )
+            rigid2 = [(lab, rows + Hu.shape[0]) for lab, rows in self.rigid_groups2]
+            hard2 = independent_hard_rows(H2, rigid2 + user, "spatial")
             G2 = gauge_rows(self.Q2, self.owner2, sp.vstack([Bw, H2], format="csr"), K, self._primary2)
-            scale = KKT(self.AhtAh + BtB, sp.vstack([H2, G2], format="csr"))
-        return SpatialFactors(shape, scale, Bw, BwT, H, G1, G1 @ self.p0, G2), bw, h
+            scale = KKT(self.AhtAh + BtB, sp.vstack([hard2.kept, G2], format="csr"))
+        metric = metric_targets(soft, weights, hard, n)
+        return SpatialFactors(shape, scale, Bw, BwT, H, hard1, hard2, G1, G1 @ self.p0, G2, metric), bw, h
 
-    def solve(self, f: SpatialFactors, bw: Array, h: Array) -> tuple[Array, Array]:
+    def solve(
+        self, f: SpatialFactors, bw: Array, h: Array, *, previous: SpatialSolution | None = None
+    ) -> SpatialSolution:
+        """Both phases for the right-hand sides ``bw`` (weighted soft) and ``h`` (hard).
+
+        With relative constraints, the solve is repeated with their rows'
+        right-hand sides corrected to the metric targets measured on the
+        last solution (Anderson-accelerated fixed point) until no correction
+        changes by more than ``metric_tolerance`` metres, at most
+        ``metric_iterations`` solves; the iterate with the smallest change is
+        kept if they stop improving (see the module docstring).
+
+        ``previous``: the solution of the previous update with the same
+        factors.  Its corrections start the iteration (a drag moves them
+        little), and if only a few right-hand-side entries changed, phase 1
+        is updated through cached columns of its inverse (:meth:`_phase1`)
+        instead of solved again.  Without it the iteration starts from the
+        linear rows of equations 1 and 2, so the result depends only on the
+        constraints; with it, on them to within ``metric_tolerance``.
+        """
+        M = f.metric
+        if M is None:
+            pbar, phat = self._solve_once(f, bw, h, previous)
+            return SpatialSolution(pbar, phat, bw, h, 1, 0.0, np.zeros((0, 2)))
+        start = None if previous is None else previous.corrections
+        if start is None or start.shape != (M.n, 2):
+            x, bw1, h1 = np.zeros(2 * M.n), bw, h
+        else:
+            x = start.reshape(-1).copy()
+            bw1, h1 = M.apply(bw, h, start)
+        pbar, phat = self._solve_once(f, bw1, h1, previous)
+        xs: list[Array] = []
+        gs: list[Array] = []
+        best = (np.inf, pbar, phat, bw1, h1, x)
+        stale = 0
+        it = 1
+        while True:
+            g = M.correction(phat).reshape(-1)
+            change = float(np.max(np.abs(g - x)))
+            if change < best[0]:
+                best, stale = (change, pbar, phat, bw1, h1, x), 0
+            else:
+                stale += 1
+            if change <= self.metric_tolerance or it >= self.metric_iterations or stale >= _STALE:
+                break
+            xs, gs = (xs + [x])[-_ANDERSON:], (gs + [g])[-_ANDERSON:]
+            if len(xs) == 1:
+                x = g
+            else:
+                G_ = np.array(gs)
+                R_ = G_ - np.array(xs)
+                dR, dG = (R_[1:] - R_[:-1]).T, (G_[1:] - G_[:-1]).T
+                gamma = np.linalg.lstsq(dR, R_[-1], rcond=None)[0]
+                x = g - dG @ gamma
+            bw1, h1 = M.apply(bw, h, x.reshape(-1, 2))
+            pbar, phat = self._solve_once(f, bw1, h1)
+            it += 1
+        change, pbar, phat, bw1, h1, x = best
+        return SpatialSolution(pbar, phat, bw1, h1, it, change, x.reshape(-1, 2))
+
+    def _phase1(
+        self, f: SpatialFactors, Btb: Array, hk: Array, previous: SpatialSolution | None, bw: Array, h: Array
+    ) -> Array:
+        """Phase 1: a solve, or, when few right-hand-side entries moved since ``previous``, an update.
+
+        Phase 1 is linear in its right-hand side: ``pbar = K^-1 r``.  A drag
+        moves a handful of entries ``r_S``, so ``pbar = pbar_prev + K^-1 E_S
+        dr_S``; the columns ``K^-1 E_S`` are solved once per structure and
+        support ``S`` and kept in ``f.influence`` (an O(frames) update instead
+        of a back-substitution through the whole factorisation).
+        """
+        if previous is not None and len(previous.bw) == len(bw) and len(previous.h) == len(h):
+            dsoft = np.flatnonzero(bw != previous.bw)
+            dhard = np.flatnonzero(h != previous.h)
+            keep_rows = np.flatnonzero(f.hard1.keep[: len(h)])
+            if 0 < len(dsoft) + len(dhard) <= _INFLUENCE and np.all(np.isin(dhard, keep_rows)):
+                key = (tuple(dsoft.tolist()), tuple(dhard.tolist()))
+                cols = f.influence.get(key)
+                n = 2 * self.layout.total
+                if cols is None:
+                    pos = np.searchsorted(keep_rows, dhard)  # kept hard rows come first in the constraint block
+                    E = np.zeros((n + len(hk), len(dsoft) + len(dhard)))
+                    if len(dsoft):
+                        E[:n, : len(dsoft)] = f.BwT[:, dsoft].toarray()
+                    E[n + pos, len(dsoft) + np.arange(len(dhard))] = 1.0
+                    cols = np.ascontiguousarray(f.shape.lu.solve(E)[:n].T)  # one row per moved entry
+                    if len(f.influence) >= _INFLUENCE_CACHE:
+                        f.influence.pop(next(iter(f.influence)))
+                    f.influence[key] = cols
+                delta = np.concatenate([bw[dsoft] - previous.bw[dsoft], h[dhard] - previous.h[dhard]])
+                pbar = previous.pbar.copy()
+                for c, d in zip(cols, delta, strict=True):  # axpys: no threaded BLAS call for a (n x k) product
+                    pbar += d * c
+                return pbar
+        return f.shape.solve(Btb, hk)
+
+    def _solve_once(
+        self, f: SpatialFactors, bw: Array, h: Array, previous: SpatialSolution | None = None
+    ) -> tuple[Array, Array]:
         """Phase 1 and phase 2 solutions, each shape (2 * total,)."""
         zr = np.zeros(self.R.shape[0])
         Btb = f.BwT @ bw if len(bw) else np.zeros(2 * self.layout.total)
-        pbar = f.shape.solve(Btb, np.concatenate([h, zr, f.g1]))
-        if f.scale is None:
+        full1 = np.concatenate([h, zr])
+        pbar = self._phase1(f, Btb, np.concatenate([full1[f.hard1.keep], f.g1]), previous, bw, h)
+        f.hard1.check(pbar, full1)
+        if f.scale is None or f.hard2 is None:
             return pbar, pbar
         a, v = self._scale_terms(pbar)
         rhs = self.AhatT @ a
         r2 = v[self._rigid_step_rows].reshape(-1)
-        phat = f.scale.solve(rhs + Btb, np.concatenate([h, r2, f.G2 @ pbar]))
+        full2 = np.concatenate([h, r2])
+        phat = f.scale.solve(rhs + Btb, np.concatenate([full2[f.hard2.keep], f.G2 @ pbar]))
+        f.hard2.check(phat, full2)
         return pbar, phat
 
     def scale_rhs(self, pbar: Array) -> Array:
@@ -740,12 +1280,13 @@ class SpatialSolver:
 
     def _scale_terms(self, pbar: Array) -> tuple[Array, Array]:
         P = pbar.reshape(-1, 2)
-        seg = P[1:] - P[:-1]
-        ln = np.sqrt(np.einsum("ij,ij->i", seg, seg))
+        v = P[1:] - P[:-1]
+        ln = np.hypot(v[:, 0], v[:, 1])
         scale = np.divide(self._L0full, ln, out=np.ones_like(ln), where=ln > 1e-15)
-        v = seg * scale[:, None]
-        dv = v[1:] - v[:-1]  # row g - 1 belongs to frame g
-        return dv[self._interior - 1].reshape(-1), v
+        v *= scale[:, None]
+        i = self._interior
+        dv = v[i] - v[i - 1]  # the rows of frame g: vbar_g - vbar_{g-1}
+        return dv.reshape(-1), v
 
     # ---------------------------------------------------------- energies
     def shape_energy(self, f: SpatialFactors, bw: Array, pbar: Array) -> float:
@@ -762,27 +1303,75 @@ class SpatialSolver:
 
 
 # ------------------------------------------------------ tangent flipping
+def _interpolated_angles(phi: Array, good: NDArray[np.bool_], F: int, where: NDArray[np.int64]) -> Array:
+    """``phi`` (given at frames ``where``) unwrapped over the ``good`` ones and interpolated at every frame 0..F-1."""
+    idx = where[good]
+    return np.interp(np.arange(F), idx, np.unwrap(phi[good]))
+
+
 def detect_tangent_flips(
     tangents: Array,
     new_tangents: Array,
     *,
-    threshold: float = np.pi / 2,
+    fps: float,
+    threshold: float = np.pi / 6,
+    window: float = 1.0,
     valid: NDArray[np.bool_] | None = None,
-    window: int = 31,
 ) -> NDArray[np.bool_]:
-    """Frames whose deformed tangent flipped (section 4.2), shape (F,) bool.
+    """Frames whose deformed tangent flipped (section 4.2, Figure 4), shape (F,) bool.
 
-    ``phi_i`` is the signed angle from the undeformed tangent ``t_i`` to the
-    deformed one.  As in the paper, a flip is reported where
-    ``|phi_{i+1} - phi_i| > threshold`` between successive valid frames.  To
-    know which frames around such a jump are the flipped ones (a short
-    reversed stretch, Figure 4), each frame's ``phi`` is compared with the
-    circular mean of ``phi`` over ``window`` frames: the two frames of each
-    jump, and the runs of frames more than ``threshold`` away from a coherent
-    mean (resultant length above 0.5) that touch a jump, are flipped.  Deformed tangents of (almost) zero
-    length count as flipped.  ``valid`` marks the frames to examine (default
-    all); others are never flipped.
+    Parameters
+    ----------
+    tangents, new_tangents : ndarray, shape (F, 2)
+        Undeformed and deformed tangents.
+    fps : float
+        Frame rate (``window`` is in seconds).
+    threshold : float
+        Radians per frame: as in the paper, a flip is reported where
+        ``|phi_{i+1} - phi_i|`` exceeds it, ``phi_i`` the signed angle from
+        the undeformed tangent to the deformed one.
+    window : float
+        Seconds: the longest reversed stretch repaired as one.
+    valid : ndarray of bool, shape (F,), optional
+        Frames to examine (default all; degenerate tangents are left out by
+        the caller); the others are never flipped.
+
+    Notes
+    -----
+    Which frames around the jumps are the flipped ones:
+
+    1. *Reversed runs.*  A jump and a later one, at most ``window`` seconds
+       apart, that bring ``phi`` back to within ``threshold`` of its value
+       before the first (a stretch of tangents turned round and back,
+       Figure 4) flag every frame between them, however many.
+    2. *Lone jumps* flag the two frames of the jump.
+    3. *Repair until smooth.*  The repair replaces the flagged frames' ``phi``
+       by linear interpolation over the unflagged ones (unwrapped); while the
+       repaired ``phi`` still turns by more than ``threshold`` between two
+       frames, the nearest unflagged frame on each side of that step is
+       flagged too.  So the repaired heading never turns faster than
+       ``threshold`` per frame more than the input did.
+
+    Deformed tangents of (almost) zero length count as flipped.
+
+    Examples
+    --------
+    >>> t0 = np.tile([0.0, 1.0], (60, 1)); t1 = t0.copy(); t1[20:35] *= -1   # a 15-frame fold
+    >>> np.flatnonzero(detect_tangent_flips(t0, t1, fps=30.0)).tolist() == list(range(20, 35))
+    True
     """
+    tangents = np.asarray(tangents, dtype=float)
+    new_tangents = np.asarray(new_tangents, dtype=float)
+    if tangents.shape != new_tangents.shape or tangents.ndim != 2 or tangents.shape[1] != 2:
+        raise ValueError(
+            f"Expected `tangents` and `new_tangents` of one shape (F, 2), got {tangents.shape} and {new_tangents.shape}"
+        )
+    if not fps > 0:
+        raise ValueError(f"Expected `fps` > 0, got {fps!r}")
+    if not (0 < threshold < np.pi):
+        raise ValueError(f"Expected `threshold` in (0, pi) radians per frame, got {threshold!r}")
+    if not window >= 0:
+        raise ValueError(f"Expected `window` >= 0 seconds, got {window!r}")
     F = len(tangents)
     valid = np.ones(F, bool) if valid is None else np.asarray(valid, bool)
     out = np.zeros(F, bool)
@@ -793,22 +1382,43 @@ def detect_tangent_flips(
     if len(idx) < 3:
         return out
     phi = wrap_angle(ground_angle(new_tangents[idx]) - ground_angle(tangents[idx]))
-    jump = np.abs(wrap_angle(np.diff(phi))) > threshold
-    if not jump.any():
-        return out
-    w = max(3, min(int(window) | 1, len(idx) | 1))
-    c = uniform_filter1d(np.cos(phi), w, mode="nearest")
-    s = uniform_filter1d(np.sin(phi), w, mode="nearest")
-    coherent = np.hypot(c, s) > 0.5
-    far = coherent & (np.abs(wrap_angle(phi - np.arctan2(s, c))) > threshold)
-    near_jump = np.zeros(len(idx), bool)
-    near_jump[:-1] |= jump
-    near_jump[1:] |= jump
-    # keep runs of "far" frames that touch a jump
-    run_id = np.cumsum(np.concatenate([[1], np.diff(far.astype(np.int8)) != 0]))
-    keep = np.unique(run_id[far & near_jump])
-    flipped = (far & np.isin(run_id, keep)) | near_jump
-    out[idx[flipped]] = True
+    step = wrap_angle(np.diff(phi))
+    jumps = np.flatnonzero(np.abs(step) > threshold)  # jump m: between idx[m] and idx[m + 1]
+    flag = np.zeros(len(idx), bool)
+    span = max(1, int(round(window * fps)))
+    used = np.zeros(len(jumps), bool)
+    for q, m in enumerate(jumps):
+        if used[q]:
+            continue
+        # 1. the first later jump within the window that brings phi back to where it was before m
+        for r in range(q + 1, len(jumps)):
+            m2 = jumps[r]
+            if idx[m2] - idx[m] > span:
+                break
+            if abs(wrap_angle(phi[m2 + 1] - phi[m])) <= threshold:
+                flag[m + 1 : m2 + 1] = True
+                used[q : r + 1] = True
+                break
+        else:
+            pass
+        if not used[q]:  # 2. a lone jump
+            flag[m] = flag[m + 1] = True
+            used[q] = True
+    # 3. grow the flagged stretches until the interpolated phi is smooth
+    for _ in range(len(idx)):
+        good = ~flag
+        if good.sum() < 2:
+            break
+        rep = _interpolated_angles(phi, good, F, idx)
+        bad = np.flatnonzero(np.abs(np.diff(rep)) > threshold + 1e-12)
+        if not len(bad):
+            break
+        gidx = idx[good]
+        before = np.searchsorted(gidx, bad, side="right") - 1  # last good frame at or before the step
+        after = np.searchsorted(gidx, bad + 1, side="left")  # first good frame at or after it
+        grow = np.concatenate([before[before >= 0], after[after < len(gidx)]])
+        flag[np.flatnonzero(good)[grow]] = True
+    out[idx[flag]] = True
     return out
 
 
@@ -824,9 +1434,23 @@ def heading_changes(
     new_positions: Array,
     *,
     segments: Sequence[tuple[int, int]] = (),
-    flip_threshold: float = np.pi / 2,
+    flip_threshold: float = np.pi / 6,
+    flip_window: float = 1.0,
 ) -> tuple[Array, NDArray[np.bool_], Array]:
     """Turn of the tangent direction per frame after a deformation.
+
+    Parameters
+    ----------
+    path : MotionPath
+        The undeformed path.
+    new_positions : ndarray, shape (F, 2)
+        The deformed positions.
+    segments : sequence of (start, stop)
+        Rigid stationary segments (half-open): they take their best-fit rotation.
+    flip_threshold : float
+        Radians per frame (:func:`detect_tangent_flips`).
+    flip_window : float
+        Seconds: the longest reversed stretch repaired as one.
 
     Returns
     -------
@@ -844,7 +1468,7 @@ def heading_changes(
     t0 = path.tangents
     t1 = central_tangents(new_positions)
     valid = ~path.degenerate
-    flipped = detect_tangent_flips(t0, t1, threshold=flip_threshold, valid=valid)
+    flipped = detect_tangent_flips(t0, t1, fps=path.fps, threshold=flip_threshold, window=flip_window, valid=valid)
     good = valid & ~flipped
     F = path.n_frames
     if good.any():

@@ -36,17 +36,26 @@ min_speed : float, default 0.1 (m/s)
     Tangent degeneracy threshold (:class:`~mocaplab.editing.paths.MotionPath`).
 min_step, max_step : float, default 0.25 and 4.0
     Time-step bounds as ratios of each clip's frame time (section 4.4).
-flip_threshold : float, default pi / 2
-    Tangent-flip detection threshold (radians per frame, section 4.2).
+flip_threshold : float, default pi / 6
+    Tangent-flip detection threshold, radians per frame (section 4.2): a
+    jump of the deformed tangent's angle to the undeformed one larger than
+    this is a flip, and the repaired heading turns at most this much per
+    frame more than the input did (:func:`~mocaplab.editing.laplacian.detect_tangent_flips`).
+flip_window : float, default 1.0
+    Seconds: the longest reversed stretch between two paired jumps that is
+    repaired as one fold.
+relative_tolerance : float, default 1e-3
+    Metres: relative constraints are re-solved until their metric
+    corrections change by less than this (see
+    :mod:`~mocaplab.editing.laplacian`, "Relative constraints in metres").
+relative_iterations : int, default 20
+    Most solves per update for that.
 variational_step : int, default 10
     Sampling step of variational constraints (frames).
 start_times : sequence of float, optional
     Reference time of each character's frame 0 before editing (default 0).
 clock_fps : float, optional
     Rate of the shared clock of ``motions`` (default: character 0's fps).
-discrete : bool, default False
-    Section 5 discrete editing; delegated to :mod:`mocaplab.editing.graph`
-    (``graph.discrete_update(editor, result) -> EditResult``).
 refine : bool, default False
     ``motions`` are the full-body refined ones (:meth:`EditResult.refined`).
 roles : mapping of role name to joint name, or one per character, optional
@@ -65,20 +74,23 @@ joints : sequence of str, or one per character, optional
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from collections import OrderedDict
 from collections.abc import Iterator, Mapping, Sequence
 from functools import cached_property
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..motion import Motion
-from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint
+from ..refinement import EndEffector
+from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint, Relative, effector_frames
 from .energy import Energies
-from .laplacian import Rows, SpatialFactors, SpatialSolver, heading_changes, spatial_rows
+from .laplacian import Rows, SpatialFactors, SpatialSolution, SpatialSolver, heading_changes, spatial_rows
 from .paths import MotionPath, apply_path, contact_joints, laplacian_coordinates, stationary_segments, with_roles
 from .timewarp import TimeFactors, TimeSolver, temporal_rows
 
@@ -86,7 +98,7 @@ __all__ = ["edit", "SceneEditor", "EditResult"]
 
 Array = NDArray[np.float64]
 
-_OPTIONS: dict[str, Any] = {
+_OPTIONS: Mapping[str, Any] = MappingProxyType({
     "scale_compensation": True,
     "stationary": "auto",
     "stationary_speed": 0.15,
@@ -94,38 +106,26 @@ _OPTIONS: dict[str, Any] = {
     "min_speed": 0.1,
     "min_step": 0.25,
     "max_step": 4.0,
-    "flip_threshold": math.pi / 2,
+    "flip_threshold": math.pi / 6,
+    "flip_window": 1.0,
+    "relative_tolerance": 1e-3,
+    "relative_iterations": 20,
     "variational_step": 10,
     "start_times": None,
     "clock_fps": None,
-    "discrete": False,
     "refine": False,
     "roles": None,
     "joints": None,
-}
+})
 
 
-def _is_effector(c: Any) -> bool:
-    """True for a :class:`mocaplab.refinement.EndEffector` (imported lazily)."""
-    if type(c).__name__ != "EndEffector":
-        return False
-    try:
-        from ..refinement import EndEffector
-    except ImportError:  # pragma: no cover - refine not available
-        return False
-    return isinstance(c, EndEffector)
-
-
-def _effectors(constraints: Sequence[Any], K: int) -> tuple[tuple[Any, ...], ...]:
-    """End-effector constraints per character."""
-    ee: list[list[Any]] = [[] for _ in range(K)]
+def _effectors(constraints: Sequence[Any], K: int) -> tuple[tuple[EndEffector, ...], ...]:
+    """End-effector constraints per character (as :class:`mocaplab.refinement.EndEffector`)."""
+    ee: list[list[EndEffector]] = [[] for _ in range(K)]
     for c in constraints:
         if isinstance(c, EndEffectorConstraint):
-            inner = c.constraint
-            if _is_effector(inner) and inner.character != c.character:
-                inner = dataclasses.replace(inner, character=c.character)
-            ee[c.character].append(inner)
-        elif _is_effector(c):
+            ee[c.character].append(c.constraint)
+        elif isinstance(c, EndEffector):
             ee[c.character].append(c)
     return tuple(tuple(x) for x in ee)
 
@@ -269,6 +269,13 @@ class SceneEditor:
     """
 
     def __init__(self, characters: Any, constraints: Sequence[Any] = (), **options: Any) -> None:
+        if options.get("discrete"):
+            raise TypeError(
+                "SceneEditor is continuous-only: for discrete editing (section 5) use "
+                "mocaplab.editing.DiscreteEditor(characters, constraints, discrete=..., **options), "
+                "or mocaplab.editing.make_editor(..., discrete=...)"
+            )
+        options = {k: v for k, v in options.items() if k != "discrete"}
         unknown = sorted(set(options) - set(_OPTIONS))
         if unknown:
             raise TypeError(f"Unknown option(s) {unknown}; valid options are {sorted(_OPTIONS)}")
@@ -302,6 +309,8 @@ class SceneEditor:
             self.paths,
             self.segments,
             scale_compensation=opts["scale_compensation"],
+            metric_tolerance=float(opts["relative_tolerance"]),
+            metric_iterations=int(opts["relative_iterations"]),
         )
         self._time = TimeSolver(
             [m.n_frames for m in self.characters],
@@ -316,7 +325,7 @@ class SceneEditor:
         self._td = _Domain(self._time, "time", lambda c: temporal_rows(c, layout, self._time.dts, step))
         self._constraints: tuple[Any, ...] = ()
         self._effectors: tuple[tuple[Any, ...], ...] = ()
-        self._space_sol: tuple[Array, Array] | None = None
+        self._space_sol: SpatialSolution | None = None
         self._time_sol: tuple[Array, tuple[int, ...]] | None = None
         self._result: EditResult | None = None
         self._set(tuple(constraints), changed=None)
@@ -356,9 +365,9 @@ class SceneEditor:
     def _validate(self, constraints: Sequence[Any], offset: int = 0) -> None:
         K = len(self.characters)
         for i, c in enumerate(constraints, start=offset):
-            if not isinstance(c, SPATIAL + TEMPORAL + (EndEffectorConstraint,)) and not _is_effector(c):
+            if not isinstance(c, SPATIAL + TEMPORAL + (EndEffectorConstraint, EndEffector)):
                 raise TypeError(f"constraint #{i}: expected a mocaplab.editing constraint, got {type(c).__name__}")
-            if _is_effector(c):
+            if isinstance(c, (EndEffector, EndEffectorConstraint)):
                 if not 0 <= c.character < K:
                     raise ValueError(
                         f"constraint #{i} {c!r}: unknown character {c.character} (the scene has {K} characters)"
@@ -390,18 +399,34 @@ class SceneEditor:
                             [i],
                         )
 
+    def snapshot(self) -> tuple[Any, ...]:
+        """The editor's state (constraints, factorisations in use, solutions), for :meth:`restore`."""
+        return (
+            self._sd.snapshot(),
+            self._td.snapshot(),
+            self._space_sol,
+            self._time_sol,
+            self._effectors,
+            self._constraints,
+            self._result,
+        )
+
+    def restore(self, state: tuple[Any, ...]) -> None:
+        """Go back to a :meth:`snapshot` (the factorisation caches keep what they hold)."""
+        self._sd.restore(state[0])
+        self._td.restore(state[1])
+        self._space_sol, self._time_sol, self._effectors, self._constraints, self._result = state[2:]
+
     def _set(self, constraints: tuple[Any, ...], changed: int | None) -> EditResult:
         """Install constraints; ``changed`` = index whose target alone may have moved (fast path).
 
         On any error the editor keeps its previous state.
         """
-        saved = (self._sd.snapshot(), self._td.snapshot(), self._space_sol, self._time_sol, self._effectors)
+        saved = self.snapshot()
         try:
             return self._install(constraints, changed)
         except Exception:
-            self._sd.restore(saved[0])
-            self._td.restore(saved[1])
-            self._space_sol, self._time_sol, self._effectors = saved[2], saved[3], saved[4]
+            self.restore(saved)
             raise
 
     def _install(self, constraints: tuple[Any, ...], changed: int | None) -> EditResult:
@@ -414,6 +439,7 @@ class SceneEditor:
         )
         if fast:
             assert changed is not None
+            previous_factors = self._sd.factors
             c = constraints[changed]
             self._validate([c], offset=changed)
             dom = self._sd if isinstance(c, SPATIAL) else self._td if isinstance(c, TEMPORAL) else None
@@ -431,7 +457,10 @@ class SceneEditor:
                         ]
                     )
                 if dom is self._sd:
-                    self._space_sol = self._space.solve(self._sd.factors, self._sd.bw, self._sd.h)
+                    same = dom.factors is previous_factors
+                    self._space_sol = self._space.solve(
+                        self._sd.factors, self._sd.bw, self._sd.h, previous=self._space_sol if same else None
+                    )
                 else:
                     self._time_sol = self._time.solve(self._td.factors, self._td.bw, self._td.h)
         else:
@@ -442,18 +471,8 @@ class SceneEditor:
             self._space_sol = self._space.solve(self._sd.factors, self._sd.bw, self._sd.h)
             self._time_sol = self._time.solve(self._td.factors, self._td.bw, self._td.h)
         self._constraints = constraints
-        result = EditResult(self, constraints)
-        if self.options["discrete"]:
-            try:
-                from . import graph  # type: ignore[attr-defined]
-            except ImportError:
-                raise NotImplementedError(
-                    "discrete editing (Kim et al. 2009, section 5) is provided by mocaplab.editing.graph, "
-                    "which is not available yet"
-                ) from None
-            result = graph.discrete_update(self, result)
-        self._result = result
-        return result
+        self._result = EditResult(self, constraints)
+        return self._result
 
     # -------------------------------------------------------- public API
     @property
@@ -507,15 +526,14 @@ class SceneEditor:
         """Replace every constraint and re-solve."""
         return self._set(tuple(constraints), changed=None)
 
-    def evaluate(self, characters: Any, constraints: Sequence[Any]) -> EditResult:
-        """A fresh continuous edit of other characters/constraints with this editor's options.
+    @property
+    def tangent_rows(self) -> Any:
+        """The tangent-operator rows of the input paths (``row(k, i) -> (columns, weights)``), cached."""
+        return self._space.tangent_rows
 
-        For section 5 (discrete editing) to score candidate transformations;
-        this editor's state is not changed.
-        """
-        opts = dict(self.options)
-        opts["discrete"] = False
-        return SceneEditor(characters, constraints, **opts).result
+    def evaluate(self, characters: Any, constraints: Sequence[Any]) -> EditResult:
+        """A fresh continuous edit of other characters/constraints with this editor's options (state untouched)."""
+        return SceneEditor(characters, constraints, **self.options).result
 
     def _check_index(self, index: Any) -> int:
         n = len(self._constraints)
@@ -619,9 +637,43 @@ class EditResult:
     end_effectors : sequence of tuple
         End-effector constraints per character (for full-body refinement).
     transformations : tuple
-        Discrete transformations applied (section 5; empty unless the
-        editor runs with ``discrete`` on).
+        Discrete transformations applied (section 5; empty but for the
+        results of a :class:`~mocaplab.editing.discrete.DiscreteEditor`).
+    notes : tuple of str
+        What the solver did that the user may want to know: redundant hard
+        constraints left out of the factorisation (and checked), relative
+        constraints whose metric targets had not settled.
+    relative_iterations : int
+        Solves made for the relative constraints' metric targets (1 without any).
+
+    Attributes cannot be reassigned; :meth:`with_transformations` returns a copy.
     """
+
+    _frozen = False
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if self._frozen:
+            raise AttributeError(f"EditResult is immutable: cannot set {name!r}")
+        object.__setattr__(self, name, value)
+
+    def with_transformations(self, transformations: Sequence[Any]) -> EditResult:
+        """A copy listing these discrete transformations (the edit itself is shared)."""
+        out = copy.copy(self)
+        object.__setattr__(out, "transformations", tuple(transformations))
+        return out
+
+    def spatial_rhs(self) -> dict[int, Array]:
+        """Right-hand sides (unweighted) each spatial constraint's rows were solved for, by index.
+
+        For a :class:`~mocaplab.editing.constraints.Relative` these are the
+        metric corrections of its linear rows (see
+        :mod:`~mocaplab.editing.laplacian`); for the others, their targets.
+        """
+        out = {}
+        for i, (which, sl) in self._sslices.items():
+            r = self._sbw[sl] / math.sqrt(self.constraints[i].weight) if which == "soft" else self._sh[sl]
+            out[i] = _ro(np.array(r))
+        return out
 
     def __init__(self, editor: SceneEditor, constraints: tuple[Any, ...]) -> None:
         self._ed = editor
@@ -632,10 +684,20 @@ class EditResult:
         self.transformations: tuple[Any, ...] = ()
         sp_, tm = editor._space_sol, editor._time_sol
         assert sp_ is not None and tm is not None
-        self._pbar, self._phat = sp_
+        self._pbar, self._phat = sp_.pbar, sp_.phat
         self._t, self.active_steps = tm
         self._sfac: SpatialFactors = editor._sd.factors
-        self._sbw, self._sh, self._sslices = editor._sd.bw, editor._sd.h, editor._sd.slices
+        # the right-hand sides solved for (relative rows corrected to metres)
+        self._sbw, self._sh, self._sslices = sp_.bw, sp_.h, editor._sd.slices
+        self.relative_iterations = sp_.iterations
+        notes = list(self._sfac.notes()) + list(editor._td.factors.notes())
+        tol = float(editor.options["relative_tolerance"])
+        if self._sfac.metric is not None and sp_.change > tol:
+            notes.append(
+                f"relative constraints: metric targets still changing by {sp_.change:.2g} m after "
+                f"{sp_.iterations} solves (relative_tolerance {tol:g} m); residuals() shows the metric errors"
+            )
+        self.notes: tuple[str, ...] = tuple(notes)
         self._tfac: TimeFactors = editor._td.factors
         self._tbw, self._th, self._tslices = editor._td.bw, editor._td.h, editor._td.slices
         off = editor._space.layout.offsets
@@ -652,6 +714,7 @@ class EditResult:
         self._plain = _Lazy(K, self._motion)
         self._refined = _Lazy(K, lambda k: self._refine_all()[k])
         self.motions = self._refined if editor.options["refine"] else self._plain
+        self._frozen = True
 
     def __repr__(self) -> str:
         return (
@@ -666,6 +729,7 @@ class EditResult:
             self.paths[k],
             segments=self.stationary[k],
             flip_threshold=self._ed.options["flip_threshold"],
+            flip_window=self._ed.options["flip_window"],
         )
         return _ro(d), _ro(f), _ro(t)
 
@@ -728,17 +792,18 @@ class EditResult:
         """Clock tick nearest to character ``k``'s frame ``frame``."""
         return int(round((float(self.times[k][frame]) - float(self.clock[0])) * self.clock_fps))
 
-    def _effector_on_clock(self, ee: Any) -> Any:
+    def _effector_on_clock(self, ee: EndEffector) -> EndEffector:
+        """``ee`` with its frames (the character's own) moved to the nearest clock ticks."""
         k = ee.character
-        f = ee.frames
         n = len(self.clock)
-        if isinstance(f, (int, np.integer)):
-            frames: Any = min(self._tick(k, int(f)), n - 1)
-        elif isinstance(f, tuple) and len(f) == 2:
-            a, b = self._tick(k, int(f[0])), self._tick(k, int(f[1]) - 1) + 1
-            frames = (a, min(max(b, a + 1), n))
+        runs = effector_frames(ee, len(self.times[k]))
+        if isinstance(ee.frames, (int, np.integer)):
+            frames: Any = min(self._tick(k, int(ee.frames)), n - 1)
+        elif len(runs) == 1:
+            a, b = self._tick(k, runs[0][0]), self._tick(k, runs[0][1]) + 1
+            frames = (a, min(max(b, a + 1), n))  # refinement's half-open tuple
         else:
-            frames = sorted({min(self._tick(k, int(i)), n - 1) for i in f})
+            frames = sorted({min(self._tick(k, i), n - 1) for a, b in runs for i in range(a, b + 1)})
         return dataclasses.replace(ee, frames=frames)
 
     @cached_property
@@ -792,19 +857,47 @@ class EditResult:
         return self._hard_res(self._tfac, self._t, self._th, 0)
 
     def residuals(self) -> dict[int, float]:
-        """Largest absolute residual of each path constraint, by index (metres or seconds)."""
+        """Largest residual of each path constraint, by index.
+
+        Metres for positions, seconds for times; for a :class:`~mocaplab.editing.constraints.Relative`
+        the *metric* error on the edited paths: the distance from the
+        character to where its offset (metres, in the other's edited tangent
+        frame) puts it, and for its ``direction`` the chord between the unit
+        directions (about the angle, radians).  Direction pins: the tangent's
+        distance from its target (metres per two frames).
+        """
         out: dict[int, float] = {}
+        metric = self._sfac.metric
         for fac, x, bw, h, slices in (
             (self._sfac, self._phat, self._sbw, self._sh, self._sslices),
             (self._tfac, self._t, self._tbw, self._th, self._tslices),
         ):
             H = fac.H if hasattr(fac, "H") else fac.Hu
             for i, (which, sl) in slices.items():
+                c = self.constraints[i]
                 if which == "soft":
-                    w = math.sqrt(self.constraints[i].weight)
+                    w = math.sqrt(c.weight)
                     r = (fac.Bw[sl] @ x - bw[sl]) / w
                 else:
                     r = H[sl] @ x - h[sl]
+                if isinstance(c, Relative) and metric is not None:
+                    sel = (metric.soft == (which == "soft")) & (metric.index >= sl.start) & (metric.index < sl.stop)
+                    rows = (fac.Bw[sl] @ x / w) if which == "soft" else H[sl] @ x
+                    pairs = metric.index[sel] - sl.start
+                    vals = np.stack([rows[pairs], rows[pairs + 1]], axis=1)
+                    sub = dataclasses.replace(
+                        metric,
+                        tangent=metric.tangent[np.stack([2 * np.flatnonzero(sel), 2 * np.flatnonzero(sel) + 1], 1).ravel()],
+                        coef=metric.coef[sel],
+                        length=metric.length[sel],
+                        linear=metric.linear[sel],
+                        soft=metric.soft[sel],
+                        index=metric.index[sel],
+                        scale=metric.scale[sel],
+                        direction=metric.direction[sel],
+                    )
+                    out[i] = float(np.max(sub.errors(x, vals))) if sel.any() else 0.0
+                    continue
                 out[i] = float(np.max(np.abs(r))) if len(r) else 0.0
         return dict(sorted(out.items()))
 

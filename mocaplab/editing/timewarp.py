@@ -38,7 +38,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from .constraints import AbsoluteTime, ConstraintError, Duration, Sync
-from .laplacian import KKT, Layout, Rows, _mode_matrix, assemble, check_hard_rows, gauge_rows
+from .laplacian import KKT, HardRows, Layout, Rows, _mode_matrix, assemble, gauge_rows, independent_hard_rows
 
 __all__ = ["TimeSolver", "TimeFactors", "temporal_rows", "uniformity_matrix"]
 
@@ -84,19 +84,44 @@ def temporal_rows(c: Any, layout: Layout, dts: Sequence[float] | Array, step: in
     return Rows([np.asarray(x, dtype=np.int64) for x in cols], vals, np.asarray(rhs, dtype=float))
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(frozen=True)
 class TimeFactors:
-    """Factorisations for one temporal constraint structure."""
+    """Factorisations for one temporal constraint structure.
+
+    Attributes
+    ----------
+    N : sparse
+        Normal matrix ``T^T T + B^T W B``.
+    Bw, BwT : sparse
+        Weighted soft rows and their transpose.
+    Hu : sparse
+        User hard rows.
+    G, g : sparse, ndarray
+        Gauge rows (time shifts no constraint fixes) and their values.
+    groups : list of (label, rows)
+        The user hard rows per constraint (for messages).
+    hard : HardRows
+        The user hard rows with their independent subset.
+    cache : OrderedDict
+        ``active steps -> (KKT, HardRows)`` for each set of inserted
+        monotonicity equalities (the one mutable part: a bounded cache).
+    base : KKT
+        The factorisation with no inserted equality.
+    """
 
     N: sp.csr_matrix
     Bw: sp.csr_matrix
     BwT: sp.csr_matrix
-    Hu: sp.csr_matrix  # user hard rows
-    Hg: sp.csr_matrix  # user hard rows and gauge rows
-    g: Array  # gauge right-hand side
+    Hu: sp.csr_matrix
+    G: sp.csr_matrix
+    g: Array
     groups: list[tuple[Any, NDArray[np.int64]]]
-    cache: OrderedDict[tuple[int, ...], KKT]
+    hard: HardRows
+    cache: OrderedDict[tuple[int, ...], tuple[KKT, HardRows]]
     base: KKT
+
+    def notes(self) -> tuple[str, ...]:
+        return self.hard.notes()
 
 
 class TimeSolver:
@@ -162,17 +187,16 @@ class TimeSolver:
         for lab, block in zip(labels, hard, strict=True):
             groups.append((lab, np.arange(r, r + block.n)))
             r += block.n
-        check_hard_rows(Hu, groups, "temporal")
+        rows = independent_hard_rows(Hu, groups, "temporal")
         BwT = Bw.T.tocsr()
         N = (self.TtT + BwT @ Bw).tocsr()
         G = gauge_rows(self.Q, self.owner, sp.vstack([Bw, Hu], format="csr"), len(self.layout.n_frames))
-        Hg = sp.vstack([Hu, G], format="csr")
-        base = KKT(N, Hg)
-        return TimeFactors(N, Bw, BwT, Hu, Hg, G @ self.t0, groups, OrderedDict(), base), bw, h
+        base = KKT(N, sp.vstack([rows.kept, G], format="csr"))
+        return TimeFactors(N, Bw, BwT, Hu, G, G @ self.t0, groups, rows, OrderedDict(), base), bw, h
 
-    def _kkt(self, f: TimeFactors, active: tuple[int, ...]) -> KKT:
+    def _kkt(self, f: TimeFactors, active: tuple[int, ...]) -> tuple[KKT, HardRows]:
         if not active:
-            return f.base
+            return f.base, f.hard
         if active in f.cache:
             f.cache.move_to_end(active)
             return f.cache[active]
@@ -182,32 +206,34 @@ class TimeSolver:
         groups = list(f.groups) + [
             (f"time-step bounds [h_min, h_max] of {len(a)} steps", np.arange(f.Hu.shape[0], H.shape[0]))
         ]
-        try:
-            check_hard_rows(H, groups, "temporal")
-        except ConstraintError as exc:
-            raise ConstraintError(
-                "Hard temporal constraints cannot be met with time steps within [min_step, max_step] of the "
-                f"frame time: {exc}",
-                exc.constraints,
-                exc.indices,
-            ) from None
-        kkt = KKT(f.N, sp.vstack([f.Hg, E], format="csr"))
-        f.cache[active] = kkt
+        hard = independent_hard_rows(H, groups, "temporal")
+        kkt = KKT(f.N, sp.vstack([hard.kept, f.G], format="csr"))
+        f.cache[active] = (kkt, hard)
         if len(f.cache) > self.cache_size:
             f.cache.popitem(last=False)
-        return kkt
+        return kkt, hard
 
     def solve(self, f: TimeFactors, bw: Array, h: Array) -> tuple[Array, tuple[int, ...]]:
         """Monotone time warp ``t`` (shape (total,)) and the inserted equalities (step rows)."""
         r = self.Tth + (f.BwT @ bw if len(bw) else 0.0)
-        h = np.concatenate([h, f.g])
         active: dict[int, float] = {}
         tol = 1e-9 * self.h
         for _ in range(len(self.steps) + 1):
             key = tuple(sorted(active))
-            kkt = self._kkt(f, key)
-            hh = np.concatenate([h, [active[s] for s in key]]) if key else h
-            t = kkt.solve(r, hh)
+            kkt, hard = self._kkt(f, key)
+            full = np.concatenate([h, [active[s] for s in key]]) if key else h
+            t = kkt.solve(r, np.concatenate([full[hard.keep], f.g]))
+            try:
+                hard.check(t, full)
+            except ConstraintError as exc:
+                if not key:
+                    raise
+                raise ConstraintError(
+                    "Hard temporal constraints cannot be met with time steps within [min_step, max_step] of the "
+                    f"frame time: {exc}",
+                    exc.constraints,
+                    exc.indices,
+                ) from None
             dt = t[self.steps + 1] - t[self.steps]
             low = np.flatnonzero(dt < self.hmin - tol)
             high = np.flatnonzero(dt > self.hmax + tol)

@@ -1,0 +1,529 @@
+"""The discrete editor: Algorithm 1 of Kim et al. 2009 around a continuous editor (section 5.2).
+
+:class:`DiscreteEditor` owns the discrete state (the characters' current
+structure as :class:`~mocaplab.editing.discrete.transformations.Track`, the
+transformations applied, the history) and a continuous
+:class:`~mocaplab.editing.scene.SceneEditor` of the current, transformed
+scene, which it replaces when a transformation is applied.  Its interface is
+the scene editor's (``drag``, ``add``, ``remove``, ``replace``,
+``set_constraints``, ``constraints``, ``result``), so the widgets drive either.
+
+Greedy optimisation (Algorithm 1)
+---------------------------------
+On every constraint update, every surviving transformation of every
+character (:func:`~mocaplab.editing.discrete.transformations.enumerate_transformations`,
+pruned by :func:`~mocaplab.editing.discrete.pruning.prune`) is scored with
+equation 10 on subsampled paths, all in one batch
+(:class:`~mocaplab.editing.discrete.evaluation.SubsampledScene`).  The best
+candidate is applied if it lowers ``E`` by more than ``min_gain``; at most one
+transformation per update (section 5.2).  The first solve (and so
+``edit(..., discrete=True)``) repeats the greedy step up to ``max_initial``
+times (a jump from no constraints to the given ones is like a long drag).
+Our addition (``DiscreteOptions.verify``): the few best candidates are
+re-scored on paths subsampled 1 in 5, and the chosen one is kept only if the
+full solve confirms the gain, because the 1/25 subsampling sometimes
+misjudges strongly curved paths and the transformation would be undone at
+the next update.  The transformed scene's continuous editor reuses the
+stationary segments of the characters that did not change.
+
+Constraints keep referring to the frames of the *input* clips; they are
+mapped to the current frames of the transformed characters (a frame follows
+its pose: :attr:`Track.origin`; constraints on removed frames, which the
+pruning rules never allow for existing constraints, go to the nearest
+surviving frame).  The returned :class:`~mocaplab.editing.scene.EditResult`
+is that of the transformed scene: ``result.characters`` are the transformed
+clips, ``result.constraints`` the mapped constraints (same order and
+indices), ``result.transformations`` every transformation applied so far.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..constraints import ConstraintError
+from ..energy import deformation_energy
+from ..graph import MotionGraph, SimilarityWeights, build_graph
+from ..paths import stationary_segments
+from ..scene import EditResult, SceneEditor
+from .evaluation import SubsampledScene
+from .pruning import Locality, protected_by_character, prune
+from .transformations import (
+    GraphArrays,
+    Track,
+    Transformation,
+    apply_transformation,
+    enumerate_transformations,
+    map_constraint,
+)
+
+__all__ = ["DiscreteOptions", "DiscreteEditor", "Step", "Timing"]
+
+Array = NDArray[np.float64]
+
+
+@dataclasses.dataclass(frozen=True)
+class DiscreteOptions:
+    """Options of discrete editing (``DiscreteEditor(..., discrete=DiscreteOptions(...))``; ``True`` = defaults).
+
+    Parameters
+    ----------
+    graphs : mapping {character: MotionGraph}, optional
+        Motion graph of each character; it must contain a clip with the
+        character's poses (:meth:`MotionGraph.clip_index`).  Default: a graph
+        of the character's own clip (:func:`~mocaplab.editing.graph.build_graph`
+        with ``threshold``, ``window``, ``min_gap``, ``weights``).
+    locality : Locality or mapping {character: Locality}
+    min_duration, max_duration : float
+        Duration pruning, seconds (0.3 and 2.0 in the paper).
+    cs, ct : float
+        Weights of the length (per metre) and duration (per second) terms of
+        equation 10.
+    subsample : int
+        One frame in ``subsample`` is kept for the evaluation (1/25 in the
+        paper), plus the frames listed in the module docstring.
+    blend : float
+        Seconds blended on each side of a seam.
+    min_gain : float
+        A transformation is applied only if it lowers the energy by more than this.
+    max_initial : int
+        Greedy steps on the first solve (``edit``); later updates apply at most one.
+    verify : int
+        Our safeguard (0 turns it off: the paper's procedure).  The 1/25
+        subsampling can misjudge strongly curved paths, so the best
+        ``verify`` candidates are re-scored on paths subsampled
+        ``verify_subsample``; the best that still gains is applied and
+        solved at full resolution, and kept only if its full-resolution
+        equation-10 energy is lower than the current one by more than
+        ``min_gain`` (otherwise nothing changes at this update).  This
+        keeps a transformation from being applied and undone at the next
+        update.
+    verify_subsample : int
+        Subsampling ratio of that second scoring (1 in 5 frames).
+    """
+
+    graphs: Mapping[int, MotionGraph] | None = None
+    locality: Locality | Mapping[int, Locality] = Locality()
+    min_duration: float = 0.3
+    max_duration: float = 2.0
+    cs: float = 1.0
+    ct: float = 1.0
+    subsample: int = 25
+    blend: float = 0.2
+    min_gain: float = 0.1
+    max_initial: int = 8
+    verify: int = 3
+    verify_subsample: int = 5
+    threshold: float = 0.1
+    window: float = 0.5
+    min_gap: float = 0.3
+    weights: SimilarityWeights | None = None
+
+    def __post_init__(self) -> None:
+        if not 0 < self.min_duration <= self.max_duration:
+            raise ValueError(
+                f"Expected 0 < min_duration <= max_duration, got {self.min_duration} and {self.max_duration}"
+            )
+        for name in ("cs", "ct", "blend", "min_gain"):
+            v = float(getattr(self, name))
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"Expected `{name}` >= 0, got {getattr(self, name)!r}")
+        for name in ("subsample", "verify_subsample"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"Expected `{name}` >= 1, got {getattr(self, name)!r}")
+        if int(self.verify) < 0:
+            raise ValueError(f"Expected `verify` >= 0, got {self.verify!r}")
+        if int(self.max_initial) < 0:
+            raise ValueError(f"Expected `max_initial` >= 0, got {self.max_initial!r}")
+        if not isinstance(self.locality, Locality) and not isinstance(self.locality, Mapping):
+            raise TypeError(f"Expected `locality` as a Locality or a mapping of them, got {self.locality!r}")
+
+    def locality_of(self, character: int) -> Locality:
+        if isinstance(self.locality, Locality):
+            return self.locality
+        return self.locality.get(character, Locality())
+
+
+
+
+@dataclasses.dataclass(frozen=True)
+class Step:
+    """One applied transformation and what it was chosen from.
+
+    Attributes
+    ----------
+    transformation : Transformation
+    candidates : tuple of Transformation
+        The pruned candidates of that greedy step.
+    energies : tuple of float
+        Their subsampled equation-10 energies (same order).
+    baseline : float
+        The energy without a transformation.
+    constraints : tuple
+        The constraints mapped to the frames before the transformation.
+    times, positions : ndarray
+        The transformed character's edited frame times (F,) and ground
+        positions (F, 2) before it (for locality checks).
+    """
+
+    transformation: Transformation
+    candidates: tuple[Transformation, ...]
+    energies: tuple[float, ...]
+    baseline: float
+    constraints: tuple[Any, ...]
+    times: Array
+    positions: Array
+
+
+@dataclasses.dataclass(frozen=True)
+class Timing:
+    """Seconds spent by one greedy step: enumerate + prune, evaluate, verify; CPU seconds; candidates."""
+
+    enumerate: float
+    evaluate: float
+    verify: float
+    cpu: float
+    candidates: int
+
+
+def _update(scene: SceneEditor, constraints: tuple[Any, ...]) -> None:
+    """Give ``scene`` these constraints: a target drag (right-hand sides only) when one constraint moved."""
+    old = scene.constraints
+    if old == constraints:
+        return
+    diff = [i for i, (x, y) in enumerate(zip(old, constraints, strict=False)) if x != y]
+    if len(old) == len(constraints) and len(diff) == 1 and type(old[diff[0]]) is type(constraints[diff[0]]):
+        scene.replace(diff[0], constraints[diff[0]])
+    else:
+        scene.set_constraints(constraints)
+
+
+def _options(discrete: Any) -> DiscreteOptions:
+    if discrete is True:
+        return DiscreteOptions()
+    if isinstance(discrete, DiscreteOptions):
+        return discrete
+    raise TypeError(f"Expected `discrete` as True or a DiscreteOptions, got {type(discrete).__name__} {discrete!r}")
+
+
+class DiscreteEditor:
+    """Interactive editing with discrete transformations (section 5; see the module docstring).
+
+    Parameters
+    ----------
+    characters : Motion or sequence of Motion
+        The input clips (never modified).
+    constraints : sequence of constraints
+        On the input clips' frames.
+    discrete : True or DiscreteOptions
+        The discrete-editing options (``True``: the defaults).
+    **options
+        Options of the continuous :class:`~mocaplab.editing.scene.SceneEditor`.
+
+    Attributes
+    ----------
+    characters : tuple of Motion
+        The input clips (with the ``roles`` option applied).
+    tracks : tuple of Track
+        Current structure of each character.
+    applied : tuple of Transformation
+    history : tuple of Step
+    timings : tuple of Timing
+        One per greedy step.
+    updates : int
+        Constraint updates so far.
+
+    Examples
+    --------
+    >>> ed = DiscreteEditor([walk], [PinPosition(0, 0, p0, hard=True), PinPosition(0, F - 1, p1, hard=True)])  # doctest: +SKIP
+    >>> ed.drag(1, p1 + (0.0, 2.0)).transformations  # doctest: +SKIP
+    """
+
+    def __init__(self, characters: Any, constraints: Sequence[Any] = (), *, discrete: Any = True, **options: Any) -> None:
+        self.discrete_options = _options(discrete)
+        o = self.discrete_options
+        scene = SceneEditor(characters, constraints, **options)
+        self.characters = scene.characters
+        self.options = dict(scene.options)
+        graphs: dict[int, MotionGraph] = {}
+        built: dict[int, MotionGraph] = {}
+        given = dict(o.graphs or {})
+        for k, m in enumerate(self.characters):
+            if k in given:
+                g = given[k]
+                if not isinstance(g, MotionGraph):
+                    raise TypeError(f"Expected graphs[{k}] to be a MotionGraph, got {type(g).__name__}")
+            elif id(m) in built:
+                g = built[id(m)]
+            else:
+                g = build_graph([m], weights=o.weights, threshold=o.threshold, window=o.window, min_gap=o.min_gap)
+                built[id(m)] = g
+            graphs[k] = g
+        self.graphs = graphs
+        arrays: dict[int, GraphArrays] = {}
+        tracks = []
+        for k, m in enumerate(self.characters):
+            g = graphs[k]
+            if id(g) not in arrays:
+                arrays[id(g)] = GraphArrays(g)
+            tracks.append(Track.from_motion(m, g, arrays[id(g)]))
+        self.tracks: tuple[Track, ...] = tuple(tracks)
+        self._nodes0 = [t.nodes for t in self.tracks]
+        self.applied: tuple[Transformation, ...] = ()
+        self.history: tuple[Step, ...] = ()
+        self.timings: tuple[Timing, ...] = ()
+        self.updates = 0
+        self._scene = scene
+        self._retired_factorizations = 0
+        self._constraints: tuple[Any, ...] = ()
+        self._result: EditResult | None = None
+        self._set(scene.constraints)
+
+    # ------------------------------------------------------------ public
+    @property
+    def constraints(self) -> tuple[Any, ...]:
+        """The constraints, on the input clips' frames."""
+        return self._constraints
+
+    @property
+    def result(self) -> EditResult:
+        """The current edit (of the transformed scene)."""
+        assert self._result is not None
+        return self._result
+
+    @property
+    def scene(self) -> SceneEditor:
+        """The continuous editor of the current, transformed scene."""
+        return self._scene
+
+    @property
+    def factorizations(self) -> int:
+        """Factorisations so far, over every continuous editor this one has used."""
+        return self._retired_factorizations + self._scene.factorizations
+
+    def contact_joints(self, character: int) -> tuple[str, ...]:
+        return self._scene.contact_joints(character)
+
+    def drag(self, constraint_index: int, new_target: Any) -> EditResult:
+        """Move constraint ``constraint_index``'s target and run one update of Algorithm 1."""
+        i = self._check_index(constraint_index)
+        c = self._constraints[i]
+        if not hasattr(c, "with_target"):
+            raise TypeError(f"constraint #{i} {c!r} has no draggable target")
+        new = list(self._constraints)
+        new[i] = c.with_target(new_target)
+        return self._set(tuple(new))
+
+    def add(self, constraint: Any) -> int:
+        """Append a constraint (update); returns its index."""
+        self._set(self._constraints + (constraint,))
+        return len(self._constraints) - 1
+
+    def remove(self, index: int) -> EditResult:
+        i = self._check_index(index)
+        return self._set(self._constraints[:i] + self._constraints[i + 1 :])
+
+    def replace(self, index: int, constraint: Any) -> EditResult:
+        i = self._check_index(index)
+        new = list(self._constraints)
+        new[i] = constraint
+        return self._set(tuple(new))
+
+    def set_constraints(self, constraints: Sequence[Any]) -> EditResult:
+        return self._set(tuple(constraints))
+
+    def _check_index(self, index: Any) -> int:
+        n = len(self._constraints)
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not -n <= index < n:
+            raise IndexError(f"Expected a constraint index in 0..{n - 1}, got {index!r}")
+        return int(index) % n
+
+    # ----------------------------------------------------------- mapping
+    def _changed(self, tracks: Sequence[Track]) -> list[bool]:
+        return [t.nodes is not self._nodes0[k] for k, t in enumerate(tracks)]
+
+    def map_constraints(self, constraints: Sequence[Any], tracks: Sequence[Track] | None = None) -> tuple[Any, ...]:
+        """``constraints`` (input-clip frames) on the current frames of ``tracks`` (default: the editor's)."""
+        tracks = self.tracks if tracks is None else tracks
+        ch = self._changed(tracks)
+        if not any(ch):
+            return tuple(constraints)
+        return tuple(map_constraint(c, tracks, ch) for c in constraints)
+
+    def _scene_options(self, tracks: Sequence[Track], base: SceneEditor, k: int) -> dict[str, Any]:
+        """Options of a continuous editor for ``tracks`` where only character ``k`` differs from ``base``.
+
+        The stationary segments of the other characters are reused; ``k``'s
+        are detected again on its new motion (or mapped, if they were given).
+        """
+        opts = dict(self.options)
+        st = self.options["stationary"]
+        segs = [list(s) for s in base.segments]
+        if st is None or st is False:
+            return opts
+        if isinstance(st, str):
+            segs[k] = stationary_segments(
+                tracks[k].motion,
+                speed=opts["stationary_speed"],
+                min_duration=opts["stationary_min_duration"],
+                contacts="auto" if st == "auto" else None,
+                joints=base.contact_joints(k),
+            )
+        else:
+            out = []
+            for a, b in st[k]:
+                a2, b2 = tracks[k].frame_of(a), tracks[k].frame_of(b - 1) + 1
+                if b2 - a2 >= 3:
+                    out.append((a2, b2))
+            segs[k] = out
+        opts["stationary"] = segs
+        return opts
+
+    # ------------------------------------------------------------ greedy
+    def _scored(self, tracks: Sequence[Track], scene: SceneEditor, mapped: tuple[Any, ...], subsample: int) -> SubsampledScene:
+        o = self.discrete_options
+        result = scene.result
+        starts = self.options.get("start_times") or [0.0] * len(tracks)
+        return SubsampledScene(
+            tracks,
+            scene.paths,
+            mapped,
+            scene.segments,
+            starts,
+            subsample=subsample,
+            cs=o.cs,
+            ct=o.ct,
+            step=int(self.options["variational_step"]),
+            tangents=scene.tangent_rows,
+            deformed=result.paths,
+        )
+
+    def _best(
+        self, tracks: Sequence[Track], scene: SceneEditor, mapped: tuple[Any, ...]
+    ) -> tuple[list[Transformation], dict[str, Any], Timing]:
+        o = self.discrete_options
+        result = scene.result
+        t0 = time.perf_counter()
+        c0 = time.process_time()
+        cands: list[Transformation] = []
+        protected = protected_by_character(mapped)
+        for k, tr in enumerate(tracks):
+            loc = o.locality_of(k)
+            if loc.characters is not None and k not in loc.characters:
+                continue
+            raw = enumerate_transformations(tr, character=k, min_duration=o.min_duration, max_duration=o.max_duration)
+            cands += prune(
+                raw,
+                constraints=mapped,
+                locality=loc,
+                times={k: result.times[k]},
+                positions={k: result.paths[k]},
+                min_duration=o.min_duration,
+                max_duration=o.max_duration,
+                protected=protected,
+            )
+        t1 = time.perf_counter()
+        if not cands:
+            return [], {}, Timing(t1 - t0, 0.0, 0.0, time.process_time() - c0, 0)
+        scored = self._scored(tracks, scene, mapped, int(o.subsample))
+        energies = scored.energies(cands)
+        base = scored.baseline
+        t2 = time.perf_counter()
+        timing = Timing(t1 - t0, t2 - t1, 0.0, time.process_time() - c0, len(cands))
+        order = [int(i) for i in np.argsort(energies, kind="stable") if energies[i] < base - o.min_gain]
+        best = [
+            dataclasses.replace(cands[i], energy=float(energies[i]), baseline=float(base), update=self.updates)
+            for i in order
+        ]
+        info = {"candidates": tuple(cands), "energies": tuple(float(e) for e in energies), "baseline": float(base)}
+        return best, info, timing
+
+    def _refine_ranking(
+        self, ranked: list[Transformation], tracks: Sequence[Track], scene: SceneEditor, mapped: tuple[Any, ...]
+    ) -> list[Transformation]:
+        """Re-score the best ``verify`` candidates on paths subsampled ``verify_subsample``; keep those that still gain."""
+        o = self.discrete_options
+        top = ranked[: int(o.verify)]
+        if int(o.verify_subsample) == int(o.subsample):
+            return top
+        scored = self._scored(tracks, scene, mapped, int(o.verify_subsample))
+        fine = scored.energies(top)
+        base = scored.baseline
+        keep = [(float(e), i) for i, e in enumerate(fine) if e < base - o.min_gain]
+        return [top[i] for _, i in sorted(keep)]
+
+    def _set(self, constraints: tuple[Any, ...]) -> EditResult:
+        """Algorithm 1 for one constraint update; on any error the editor keeps its state."""
+        o = self.discrete_options
+        steps = int(o.max_initial) if self.updates == 0 else 1
+        tracks = list(self.tracks)
+        applied = list(self.applied)
+        history: list[Step] = []
+        timings: list[Timing] = []
+        retired = 0
+        mapped = self.map_constraints(constraints, tracks)
+        scene = self._scene
+        snapshot = scene.snapshot()
+        try:
+            _update(scene, mapped)
+            result = scene.result
+            for _ in range(steps):
+                ranked, info, timing = self._best(tracks, scene, mapped)
+                if not ranked:
+                    timings.append(timing)
+                    break
+                t0 = time.perf_counter()
+                if o.verify:
+                    ranked = self._refine_ranking(ranked, tracks, scene, mapped)
+                current = deformation_energy(result, cs=o.cs, ct=o.ct) if o.verify else math.nan
+                accepted = None
+                for best in ranked[:1] if o.verify else ranked:
+                    k = best.character
+                    trial = list(tracks)
+                    trial[k] = apply_transformation(tracks[k], best, blend=o.blend)
+                    trial_mapped = self.map_constraints(constraints, trial)
+                    try:
+                        t_scene = SceneEditor(
+                            [t.motion for t in trial], trial_mapped, **self._scene_options(trial, scene, k)
+                        )
+                    except ConstraintError:
+                        continue  # the transformed scene cannot be edited under these constraints
+                    t_result = t_scene.result
+                    if o.verify:
+                        full = deformation_energy(t_result, cs=o.cs, ct=o.ct)
+                        if not full < current - o.min_gain:
+                            continue
+                        best = dataclasses.replace(best, full_energy=float(full), full_baseline=float(current))
+                    accepted = (best, trial, trial_mapped, t_scene, t_result)
+                    break
+                timings.append(dataclasses.replace(timing, verify=time.perf_counter() - t0))
+                if accepted is None:
+                    break
+                best, new_tracks, new_mapped, new_scene, new_result = accepted
+                k = best.character
+                history.append(
+                    Step(best, info["candidates"], info["energies"], info["baseline"], mapped, result.times[k], result.paths[k])
+                )
+                applied.append(best)
+                if new_scene is not scene:
+                    retired += scene.factorizations
+                tracks, mapped, scene, result = new_tracks, new_mapped, new_scene, new_result
+        except Exception:
+            self._scene.restore(snapshot)
+            raise
+        self._retired_factorizations += retired
+        self.tracks = tuple(tracks)
+        self.applied = tuple(applied)
+        self.history += tuple(history)
+        self.timings += tuple(timings)
+        self._scene = scene
+        self._constraints = constraints
+        self.updates += 1
+        self._result = result.with_transformations(self.applied)
+        return self._result

@@ -145,6 +145,12 @@ class JupyterLabServer:
         note = settings / "@jupyterlab" / "apputils-extension" / "notification.jupyterlab-settings"
         note.parent.mkdir(parents=True, exist_ok=True)
         note.write_text(json.dumps({"fetchNews": "false", "checkForUpdates": False}))
+        # render every cell: with JupyterLab's windowed notebooks, cells far from
+        # the viewport are laid out lazily, so an output below a long lesson keeps
+        # moving while it is scrolled to and never counts as stable for a screenshot
+        tracker = settings / "@jupyterlab" / "notebook-extension" / "tracker.jupyterlab-settings"
+        tracker.parent.mkdir(parents=True, exist_ok=True)
+        tracker.write_text(json.dumps({"windowingMode": "none"}))
         return settings
 
     def start(self, *, timeout: float = 90.0) -> None:

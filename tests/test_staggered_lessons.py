@@ -12,35 +12,14 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from pathlib import Path
 
-import nbformat
 import numpy as np
 import pytest
+from lesson_support import first_failing_assert
 
-LESSONS = Path(__file__).resolve().parent.parent / "lessons"
 L11 = "11_staggered_pose_representation.ipynb"
 L12 = "12_extracting_staggered_poses.ipynb"
 L13 = "13_editing_staggered_poses.ipynb"
-
-
-def first_failing_assert(name: str) -> tuple[int, AssertionError] | None:
-    """Run the lesson's code cells until an assert fails: (cell index, error), or None if all pass."""
-    import matplotlib.pyplot as plt
-
-    nb = nbformat.read(LESSONS / name, as_version=4)
-    namespace: dict[str, object] = {"__name__": "__lesson__"}
-    try:
-        for k, cell in enumerate(nb.cells):
-            if cell.cell_type != "code":
-                continue
-            try:
-                exec(compile(cell.source, f"{name}[{k}]", "exec"), namespace)  # noqa: S102 (our own lessons)
-            except AssertionError as exc:
-                return k, exc
-    finally:
-        plt.close("all")
-    return None
 
 
 # ------------------------------------------------------------------ the switches

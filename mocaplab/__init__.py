@@ -34,8 +34,8 @@ _ENTRY_POINTS = {
     "extract": ("mocaplab.staggered", "extract"),
 }
 _SUBMODULES = (
-    "contacts", "data", "displacement", "editing", "ik", "io", "kinematics", "motion", "physics", "quat",
-    "refinement", "roles", "staggered",
+    "contacts", "data", "displacement", "editing", "ik", "io", "kinematics", "lessons", "motion", "physics",
+    "quat", "refinement", "roles", "staggered", "undo",
 )
 
 __all__ = ["Motion", "Skeleton", "concatenate", *_ENTRY_POINTS, "__version__"]

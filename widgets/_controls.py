@@ -1,0 +1,130 @@
+"""Controls every editing widget shares: undo/redo/reset buttons and BVH export.
+
+The buttons only forward: ``undo``, ``redo`` and ``reset`` are the editor's
+methods (its :class:`mocaplab.undo.UndoStack` does the work); export writes
+the editor's current motions with :func:`mocaplab.io.save_bvh`.  A widget
+calls :meth:`HistoryButtons.sync` after every change so a button is enabled
+exactly when its action is possible.
+"""
+
+from __future__ import annotations
+
+import html
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import ipywidgets as W
+
+from mocaplab.io import save_bvh
+from mocaplab.motion import Motion
+
+__all__ = ["HistoryButtons", "ExportControl", "export_paths"]
+
+
+class HistoryButtons:
+    """Undo, redo and reset buttons over an editor with ``undo``/``redo``/``reset``/``can_undo``/``can_redo``.
+
+    Parameters
+    ----------
+    editor : object
+        Has ``undo()``, ``redo()``, ``reset()`` and the ``can_undo`` /
+        ``can_redo`` properties.
+    after : callable
+        Called with no argument after each action (the widget redraws).
+    guard : callable, optional
+        Wraps each action (the widget's error display); default runs it.
+    """
+
+    def __init__(
+        self,
+        editor: Any,
+        after: Callable[[], None],
+        *,
+        guard: Callable[[Callable[[], None]], None] | None = None,
+    ) -> None:
+        self.editor = editor
+        self._after = after
+        self._guard = guard or (lambda action: action())
+        layout = W.Layout(width="auto")
+        self.undo = W.Button(description="Undo", icon="undo", tooltip="Undo the last edit", layout=layout)
+        self.redo = W.Button(description="Redo", icon="repeat", tooltip="Redo the edit undone", layout=layout)
+        self.reset = W.Button(
+            description="Reset", icon="refresh", tooltip="Back to the input (undoable)", layout=layout
+        )
+        for button, name in ((self.undo, "undo"), (self.redo, "redo"), (self.reset, "reset")):
+            button.add_class(f"mocaplab-{name}")
+            button.on_click(lambda _b, name=name: self._run(name))
+        self.box = W.HBox([self.undo, self.redo, self.reset])
+        self.sync()
+
+    def _run(self, name: str) -> None:
+        def action() -> None:
+            try:
+                getattr(self.editor, name)()
+            finally:
+                self.sync()
+            self._after()
+
+        self._guard(action)
+
+    def sync(self) -> None:
+        """Enable each button exactly when its action is possible."""
+        self.undo.disabled = not self.editor.can_undo
+        self.redo.disabled = not self.editor.can_redo
+
+
+def export_paths(path: str | os.PathLike[str], n: int) -> list[Path]:
+    """File names for ``n`` motions exported to ``path``: the path itself, or ``stem_1.bvh`` ... for several."""
+    p = Path(os.fspath(path)).expanduser()
+    if p.suffix.lower() != ".bvh":
+        p = p.with_name(p.name + ".bvh")
+    if n == 1:
+        return [p]
+    return [p.with_name(f"{p.stem}_{k + 1}{p.suffix}") for k in range(n)]
+
+
+class ExportControl:
+    """A file-name box and an "Export BVH" button writing the editor's current motions.
+
+    Parameters
+    ----------
+    motions : callable
+        Returns the Motion (or sequence of Motions) to write.
+    default : str
+        Initial file name.
+    guard : callable, optional
+        Wraps the write (the widget's error display).
+    """
+
+    def __init__(
+        self,
+        motions: Callable[[], Motion | Sequence[Motion]],
+        *,
+        default: str = "edited.bvh",
+        guard: Callable[[Callable[[], None]], None] | None = None,
+    ) -> None:
+        self._motions = motions
+        self._guard = guard or (lambda action: action())
+        self.path = W.Text(value=default, description="", layout=W.Layout(width="220px"))
+        self.path.add_class("mocaplab-export-path")
+        self.button = W.Button(description="Export BVH", icon="download", tooltip="Write the edited motion as BVH")
+        self.button.add_class("mocaplab-export")
+        self.label = W.HTML()
+        self.label.add_class("mocaplab-export-status")
+        self.written: list[Path] = []
+        self.button.on_click(lambda _b: self._guard(self.export))
+        self.box = W.HBox([self.path, self.button, self.label])
+
+    def export(self, path: str | os.PathLike[str] | None = None) -> list[Path]:
+        """Write the current motions (to ``path`` or the box's name); returns the files written."""
+        motions = self._motions()
+        ms = [motions] if isinstance(motions, Motion) else list(motions)
+        files = export_paths(self.path.value if path is None else path, len(ms))
+        for m, f in zip(ms, files, strict=True):
+            save_bvh(m, f)
+        self.written = files
+        names = ", ".join(html.escape(str(f)) for f in files)
+        self.label.value = f"<span class='mocaplab-ok'>wrote {names}</span>"
+        return files

@@ -1,19 +1,16 @@
-"""Lessons 03, 05 and 07 assert what they teach: switch the method off and they fail (STYLE 18).
+"""Mutations of the Kim et al. 2009 lessons (01-07), run by ``test_lessons_falsifiable.py``.
 
-Each case runs a lesson's code cells in this process (fast mode, Agg), in
-order, with one piece of the method replaced by a do-nothing stand-in, and
-expects an ``assert`` of the lesson to fail; any other exception is a broken
-lesson and fails the test.  nbval runs the unmodified lessons (they pass).
+Each case is ``(lesson, switch, message)``: ``switch(monkeypatch)`` breaks one
+piece of the method, and the lesson must then fail an ``assert`` whose
+message contains ``message`` (None: any assert).
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 
 import numpy as np
 import pytest
-from lesson_support import first_failing_assert
 
 L03 = "03_laplacian_path_editing.ipynb"
 L05 = "05_synchronized_characters.ipynb"
@@ -49,7 +46,7 @@ def no_discrete_transformations(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(editor, "enumerate_transformations", lambda track, **kw: [])
 
 
-CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str]] = [
+CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
     (L03, no_flip_repair, "30 degrees per frame"),
     (L03, linear_relative, "in metres"),
     (L03, no_end_effectors, "hold the object"),
@@ -57,17 +54,3 @@ CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str]] = [
     (L05, no_discrete_transformations, "added frames"),
     (L07, no_discrete_transformations, "steps are added"),
 ]
-
-
-@pytest.mark.parametrize(
-    "lesson, switch, message", CASES, ids=[f"{lesson[:2]}-{switch.__name__}" for lesson, switch, _ in CASES]
-)
-def test_lesson_fails_with_the_method_switched_off(lesson, switch, message, monkeypatch, mocap_dir):
-    monkeypatch.setenv("MOCAPLAB_FAST", "1")
-    monkeypatch.setenv("MPLBACKEND", "Agg")
-    assert os.environ["MOCAPLAB_FAST"] == "1"
-    switch(monkeypatch)
-    failed = first_failing_assert(lesson)
-    assert failed is not None, f"{lesson} passes with {switch.__name__}: its asserts do not test the method"
-    cell, exc = failed
-    assert message in str(exc), f"{lesson} cell {cell} failed on another assert: {exc}"

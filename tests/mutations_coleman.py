@@ -1,21 +1,16 @@
-"""Lessons 11-13 assert what they teach: switch the method off and they fail (STYLE 18).
+"""Mutations of the Coleman et al. 2008 lessons (11-13), run by ``test_lessons_falsifiable.py``.
 
-Each case runs a lesson's code cells in this process (fast mode, Agg), in
-order, with one piece of the method replaced by a do-nothing stand-in, and
-expects an ``assert`` of the lesson to fail; any other exception is a broken
-lesson and fails the test.  nbval runs the unmodified lessons (they pass).
-Cells after the first failing assert are not run, so a case costs only the
-lesson's prefix.
+Each case is ``(lesson, switch, message)``: ``switch(monkeypatch)`` breaks one
+piece of the method, and the lesson must then fail an ``assert`` whose
+message contains ``message`` (None: any assert).
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 
 import numpy as np
 import pytest
-from lesson_support import first_failing_assert
 
 L11 = "11_staggered_pose_representation.ipynb"
 L12 = "12_extracting_staggered_poses.ipynb"
@@ -56,9 +51,11 @@ def fixed_stillness(monkeypatch: pytest.MonkeyPatch) -> None:
     """Appendix B with the paper's fixed 0.25 s, whatever the gait."""
     from mocaplab import contacts
 
-    monkeypatch.setattr(contacts, "_gait_windows", lambda motion, travel, cap=0.25: np.full(
-        motion.n_frames, max(2, int(round(cap * motion.fps)))
-    ))
+    monkeypatch.setattr(
+        contacts,
+        "_gait_windows",
+        lambda motion, travel, cap=0.25: np.full(motion.n_frames, max(2, int(round(cap * motion.fps)))),
+    )
 
 
 def no_constraint_layer(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -68,22 +65,12 @@ def no_constraint_layer(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(ConstraintLayer, "apply", lambda self, sm, motion, t, staggered=True: motion)
 
 
-CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None]]] = [
-    (L11, identity_tangents),
-    (L12, identity_tangents),
-    (L13, identity_tangents),
-    (L12, every_maximum),
-    (L12, fixed_stillness),
-    (L13, no_filter),
-    (L13, no_constraint_layer),
+CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
+    (L11, identity_tangents, None),
+    (L12, identity_tangents, None),
+    (L13, identity_tangents, None),
+    (L12, every_maximum, None),
+    (L12, fixed_stillness, None),
+    (L13, no_filter, None),
+    (L13, no_constraint_layer, None),
 ]
-
-
-@pytest.mark.parametrize(("lesson", "switch"), CASES, ids=[f"{n[:2]}-{s.__name__}" for n, s in CASES])
-def test_lesson_fails_without_its_method(lesson: str, switch, monkeypatch, mocap_dir) -> None:
-    monkeypatch.setenv("MOCAPLAB_FAST", "1")
-    monkeypatch.setenv("MPLBACKEND", "Agg")
-    switch(monkeypatch)
-    failed = first_failing_assert(lesson)
-    assert failed is not None, f"{lesson} passes with {switch.__name__}: its asserts do not test the method"
-    assert os.environ["MOCAPLAB_FAST"] == "1"

@@ -453,3 +453,43 @@ def test_relative_iteration_stops_when_it_stops_improving(tied):
     res = edit(tied, cons, relative_iterations=50)
     assert res.relative_iterations < 50
     assert np.all(np.isfinite(res.paths[1])) and np.abs(res.paths[1]).max() < 100.0
+
+
+def test_hard_pins_are_met_or_raise_at_any_magnitude(walk):
+    """A hard pin double precision cannot place near the scene raises instead of being silently missed (#17)."""
+    import warnings
+
+    from mocaplab.editing import ConstraintError
+
+    F = walk.n_frames
+    ed = SceneEditor([walk], [PinPosition(0, 0, (0.0, 0.0), hard=True), PinPosition(0, F - 1, (3.0, 1.0), hard=True)])
+    before = np.array(ed.result.paths[0])
+    raised = 0
+    for far in 10.0 ** np.arange(3, 301, 3):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                path = np.asarray(ed.drag(1, (far, 1.0)).paths[0])
+        except ConstraintError as err:
+            raised += 1
+            assert "out of numeric range" in str(err) and "scene 4" in str(err), str(err)
+            assert err.indices and set(err.indices) <= {0, 1}
+            continue
+        # met: both pins hold to the scene's tolerance (never a silently violated hard pin)
+        assert abs(path[-1, 0] - far) <= 1e-5 and abs(path[-1, 1] - 1.0) <= 1e-5 and np.abs(path[0]).max() <= 1e-5
+    assert raised >= 10  # most magnitudes past ~1e12 m cannot be met
+    ed.drag(1, (3.0, 1.0))
+    np.testing.assert_allclose(np.array(ed.result.paths[0]), before, atol=1e-9)
+    with pytest.raises(ConstraintError, match="out of numeric range"):
+        ed.drag(1, (1e150, 1.0))
+    np.testing.assert_allclose(np.array(ed.result.paths[0]), before, atol=1e-9)  # the editor kept its last good edit
+
+
+def test_hard_times_far_away_raise(walk):
+    from mocaplab.editing import ConstraintError
+
+    ed = SceneEditor([walk], [AbsoluteTime(0, walk.n_frames - 1, 1.0, hard=True)])
+    assert abs(ed.drag(0, 10.0).times[0][-1] - 10.0) < 1e-9
+    for far in (1e15, 1e20, 1e100):
+        with pytest.raises(ConstraintError, match="missed by"):
+            ed.drag(0, far)

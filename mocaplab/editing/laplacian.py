@@ -837,6 +837,8 @@ _STALE = 3  # iterations without a smaller change before the metric-target itera
 _INFLUENCE = 8  # at most this many moved right-hand-side entries update phase 1 through cached columns
 _INFLUENCE_CACHE = 16  # supports kept per factorisation
 _CONSISTENCY_TOL = 1e-7  # metres or seconds: how far a left-out redundant hard row may miss
+_UPDATE_RANGE = 1e6  # phase 1 is updated from the previous solution only within this many scene extents
+_RANGE_TOL = 1e-6  # fraction of the scene's extent a kept hard row may miss (round-off is ~1e-15 of it)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -866,6 +868,7 @@ class HardRows:
     keep: NDArray[np.bool_]
     redundant: tuple[Redundancy, ...]
     what: str
+    groups: tuple[tuple[Any, NDArray[np.int64]], ...] = ()
 
     @property
     def kept(self) -> sp.csr_matrix:
@@ -874,8 +877,17 @@ class HardRows:
     def notes(self) -> tuple[str, ...]:
         return tuple(r.note(self.what) for r in self.redundant)
 
-    def check(self, x: Array, h: Array) -> None:
-        """Raise :class:`ConstraintError` if a left-out row is not met by ``x`` (``h``: all right-hand sides)."""
+    def check(self, x: Array, h: Array, *, scale: float = 1.0) -> None:
+        """Raise :class:`ConstraintError` if a hard row is not met by ``x`` (``h``: all right-hand sides).
+
+        The kept rows hold by construction up to round-off: a miss beyond
+        ``_RANGE_TOL * scale`` (``scale``: the scene's extent, metres or
+        seconds) means the targets are too far from the scene for double
+        precision (a pin 1e15 m away is met only to about 0.1 m) and raises
+        instead of handing back a silently violated "hard" constraint.  The
+        left-out redundant rows must agree with the kept ones.
+        """
+        self._check_range(x, h, scale)
         for r in self.redundant:
             miss = float(np.max(np.abs(self.H[r.rows] @ x - h[r.rows])))
             if miss > _CONSISTENCY_TOL * max(1.0, float(np.max(np.abs(h), initial=0.0))):
@@ -890,10 +902,31 @@ class HardRows:
                     [lab[0] for lab in labels if isinstance(lab, tuple)],
                 )
 
+    def _check_range(self, x: Array, h: Array, scale: float) -> None:
+        kept = np.flatnonzero(self.keep)
+        if not kept.size:
+            return
+        miss = np.abs(self.H[kept] @ x - h[kept])
+        tol = _RANGE_TOL * max(float(scale), 1.0)
+        bad = ~(miss <= tol)  # NaN counts as missed
+        if not bad.any():
+            return
+        rows = kept[bad]
+        labels = [lab for lab, g in self.groups if np.isin(g, rows).any()]
+        worst = float(np.nanmax(np.where(np.isfinite(miss), miss, np.inf)))
+        unit = "m" if self.what == "spatial" else "s"
+        top = float(np.max(np.abs(h[kept]), initial=0.0))
+        names = ", ".join(_label_text(lab) for lab in labels) or "automatic rows"
+        raise ConstraintError(
+            f"Hard {self.what} constraints are missed by {worst:.3g} {unit} after the solve ({names}): the targets "
+            f"are out of numeric range for this scene (largest target {top:.3g} {unit}, scene {scale:.3g} {unit} "
+            f"across; a hard constraint must hold to {tol:.3g} {unit}). Bring the targets near the characters.",
+            [lab[1] if isinstance(lab, tuple) else lab for lab in labels],
+            [lab[0] for lab in labels if isinstance(lab, tuple)],
+        )
 
-def independent_hard_rows(
-    H: sp.spmatrix, groups: Sequence[tuple[Any, NDArray[np.int64]]], what: str
-) -> HardRows:
+
+def independent_hard_rows(H: sp.spmatrix, groups: Sequence[tuple[Any, NDArray[np.int64]]], what: str) -> HardRows:
     """Split hard rows into an independent set to factorise and redundant rows to check (:class:`HardRows`).
 
     ``groups`` are ``(label, rows)`` pairs in order of preference: when rows
@@ -909,8 +942,9 @@ def independent_hard_rows(
     m = H.shape[0]
     keep = np.ones(m, bool)
     redundant: list[Redundancy] = []
+    labelled = tuple((lab, np.asarray(rows, np.int64)) for lab, rows in groups)
     if m == 0 or full_row_rank_screen(H):
-        return HardRows(H, keep, (), what)
+        return HardRows(H, keep, (), what, labelled)
     for _ in range(m):
         live = [(lab, rows[keep[rows]]) for lab, rows in groups]
         index = [i for i, (_, rows) in enumerate(live) if len(rows)]
@@ -937,7 +971,7 @@ def independent_hard_rows(
         redundant.append(Redundancy(culprit[0], np.asarray(dropped, np.int64), tuple(sub[b][0] for b in bad[:-1])))
         if full_row_rank_screen(H[np.flatnonzero(keep)]):
             break
-    return HardRows(H, keep, tuple(redundant), what)
+    return HardRows(H, keep, tuple(redundant), what, labelled)
 
 
 class KKT:
@@ -1070,6 +1104,9 @@ class SpatialSolver:
         self.paths = list(paths)
         self.layout = Layout(tuple(p.n_frames for p in paths))
         self.p0 = np.concatenate([p.positions for p in paths]).reshape(-1)
+        P = self.p0.reshape(-1, 2)
+        #: the scene's extent in metres (hard residuals are checked against it)
+        self.extent = float(np.max(np.ptp(P, axis=0), initial=0.0)) if len(P) else 0.0
         self.A = shape_matrix(paths, self.layout)
         self.AtA = (self.A.T @ self.A).tocsr()
         self.Ahat = scale_matrix(self.layout)
@@ -1230,7 +1267,13 @@ class SpatialSolver:
         support ``S`` and kept in ``f.influence`` (an O(frames) update instead
         of a back-substitution through the whole factorisation).
         """
-        if previous is not None and len(previous.bw) == len(bw) and len(previous.h) == len(h):
+        if (
+            previous is not None
+            and len(previous.bw) == len(bw)
+            and len(previous.h) == len(h)
+            # an update adds to the previous solution: from far away it would lose every digit of the new one
+            and float(np.max(np.abs(previous.pbar), initial=0.0)) <= _UPDATE_RANGE * max(self.extent, 1.0)
+        ):
             dsoft = np.flatnonzero(bw != previous.bw)
             dhard = np.flatnonzero(h != previous.h)
             keep_rows = np.flatnonzero(f.hard1.keep[: len(h)])
@@ -1263,7 +1306,7 @@ class SpatialSolver:
         Btb = f.BwT @ bw if len(bw) else np.zeros(2 * self.layout.total)
         full1 = np.concatenate([h, zr])
         pbar = self._phase1(f, Btb, np.concatenate([full1[f.hard1.keep], f.g1]), previous, bw, h)
-        f.hard1.check(pbar, full1)
+        f.hard1.check(pbar, full1, scale=self.extent)
         if f.scale is None or f.hard2 is None:
             return pbar, pbar
         a, v = self._scale_terms(pbar)
@@ -1271,7 +1314,7 @@ class SpatialSolver:
         r2 = v[self._rigid_step_rows].reshape(-1)
         full2 = np.concatenate([h, r2])
         phat = f.scale.solve(rhs + Btb, np.concatenate([full2[f.hard2.keep], f.G2 @ pbar]))
-        f.hard2.check(phat, full2)
+        f.hard2.check(phat, full2, scale=self.extent)
         return pbar, phat
 
     def scale_rhs(self, pbar: Array) -> Array:

@@ -158,6 +158,8 @@ class TimeSolver:
             [s + np.arange(n) * d for n, d, s in zip(self.layout.n_frames, self.dts, start_times, strict=True)]
         )
         self.T = uniformity_matrix(self.layout)
+        #: the scene's duration in seconds (hard residuals are checked against it)
+        self.extent = float(np.ptp(self.t0)) if len(self.t0) else 0.0
         self.steps = self.layout.steps()
         self.h = self.dts[self.layout.character_of()[self.steps]]
         self.TtT = (self.T.T @ self.T).tocsr()
@@ -224,7 +226,7 @@ class TimeSolver:
             full = np.concatenate([h, [active[s] for s in key]]) if key else h
             t = kkt.solve(r, np.concatenate([full[hard.keep], f.g]))
             try:
-                hard.check(t, full)
+                hard.check(t, full, scale=self.extent)
             except ConstraintError as exc:
                 if not key:
                     raise

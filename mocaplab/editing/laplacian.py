@@ -80,6 +80,7 @@ updated through cached columns of its inverse for the moved entries
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 from functools import cached_property
 from typing import Any
@@ -870,9 +871,13 @@ class HardRows:
     what: str
     groups: tuple[tuple[Any, NDArray[np.int64]], ...] = ()
 
-    @property
+    @functools.cached_property
+    def kept_rows(self) -> NDArray[np.int64]:
+        return np.flatnonzero(self.keep)
+
+    @functools.cached_property
     def kept(self) -> sp.csr_matrix:
-        return self.H if self.keep.all() else self.H[np.flatnonzero(self.keep)]
+        return self.H if self.keep.all() else self.H[self.kept_rows]
 
     def notes(self) -> tuple[str, ...]:
         return tuple(r.note(self.what) for r in self.redundant)
@@ -903,10 +908,10 @@ class HardRows:
                 )
 
     def _check_range(self, x: Array, h: Array, scale: float) -> None:
-        kept = np.flatnonzero(self.keep)
+        kept = self.kept_rows
         if not kept.size:
             return
-        miss = np.abs(self.H[kept] @ x - h[kept])
+        miss = np.abs(self.kept @ x - h[kept])
         tol = _RANGE_TOL * max(float(scale), 1.0)
         bad = ~(miss <= tol)  # NaN counts as missed
         if not bad.any():

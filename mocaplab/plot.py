@@ -433,3 +433,236 @@ def contact_timeline(
     ax.set_title("contacts")
     ax.grid(True, axis="x", alpha=0.3)
     return ax
+
+
+# --------------------------------------------------------------------------
+def balance_top(
+    balance: Any,
+    *,
+    frames: Sequence[int] | None = None,
+    ax: Axes | None = None,
+    margin: float = 0.25,
+    min_width: float = 1.0,
+) -> Axes:
+    """Support polygons, ZMP and the centre of mass's ground track, seen from above.
+
+    Parameters
+    ----------
+    balance : mocaplab.physics.Balance
+        The analysis to draw (its ``com``, ``zmp`` and ``polygon(frame)``).
+    frames : sequence of int, optional
+        Frames whose support polygons are drawn and whose ZMP is circled
+        (default about twelve spread over the clip).
+    ax : Axes, optional
+    margin : float
+        Metres of ground shown around the drawn points.
+    min_width : float
+        The across-travel extent shown is at least this many metres, so a
+        straight walk is not drawn as a sliver.
+
+    Returns
+    -------
+    Axes
+
+    Notes
+    -----
+    Equal aspect.  The ground axis along which the clip travels furthest is
+    horizontal; the view looks down from +Y as :func:`root_path` does (with
+    ``x`` horizontal, ``z`` grows down the page; with ``z`` horizontal, ``x``
+    grows up).  The legend sits outside the axes, to their right, never over
+    the data.
+    """
+    for attr in ("com", "zmp", "polygon"):
+        if not hasattr(balance, attr):
+            raise TypeError(f"Expected `balance` to be a mocaplab.physics.Balance, got {type(balance).__name__}")
+    com = np.asarray(balance.com, dtype=float)
+    zmp = np.asarray(balance.zmp, dtype=float)
+    n = len(com)
+    frames = list(range(0, n, max(1, n // 12))) if frames is None else [int(f) for f in frames]
+    for f in frames:
+        if not 0 <= f < n:
+            raise IndexError(f"Expected every frame of `frames` in [0, {n}), got {f}")
+    ax = _new_axes(ax, figsize=(9.0, 3.5))
+    span = np.ptp(com[:, [0, 2]], axis=0)
+    h, v = (0, 2) if span[0] >= span[1] else (2, 0)
+    shown = [com[:, [h, v]], zmp[:, [h, v]][np.all(np.isfinite(zmp), axis=1)]]
+    for f in frames:
+        poly = np.asarray(balance.polygon(f), dtype=float)
+        if len(poly) >= 2:
+            closed = np.vstack([poly, poly[:1]])
+            ax.fill(closed[:, h], closed[:, v], color=COLORS[2], alpha=0.15, lw=0)
+            ax.plot(closed[:, h], closed[:, v], color=COLORS[2], lw=0.8)
+            shown.append(closed[:, [h, v]])
+    ax.plot(com[:, h], com[:, v], color=COLORS[1], lw=1.2, label="centre of mass (ground track)")
+    ax.plot(zmp[:, h], zmp[:, v], ".", color=COLORS[3], ms=3, label="ZMP")
+    ax.plot(zmp[frames, h], zmp[frames, v], "o", mfc="none", color=COLORS[3], ms=6, label="ZMP at the drawn polygons")
+    ax.fill([], [], color=COLORS[2], alpha=0.3, label="support polygon")
+    pts = np.concatenate(shown)
+    lo, hi = pts.min(axis=0) - margin, pts.max(axis=0) + margin
+    mid, half = 0.5 * (lo[1] + hi[1]), max(0.5 * (hi[1] - lo[1]), 0.5 * min_width)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(mid - half, mid + half)
+    ax.set_aspect("equal", adjustable="box")
+    if h == 0:
+        _top_view(ax)
+    ax.set_xlabel(f"{_AXIS_NAMES[h]} (m)")
+    ax.set_ylabel(f"{_AXIS_NAMES[v]} (m)")
+    ax.set_title("Support polygons at the circled frames, seen from above")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize="small")
+    ax.grid(True, alpha=0.3)
+    return ax
+
+
+__all__ += ["balance_top"]
+
+
+# --------------------------------------------------------------------------
+def path_vectors(
+    path: Any,
+    *,
+    ax: Axes | None = None,
+    frames: Sequence[int] | None = None,
+    every: int = 8,
+    tangents: bool = True,
+    normals: bool = True,
+    headings: bool = False,
+    length: float | None = None,
+    color: str = "0.6",
+    label: str | None = None,
+) -> Axes:
+    """Top view of a motion path with its tangents, normals and headings as arrows.
+
+    Tangents are black, normals (the character's left, ``R t``) crimson,
+    headings (where the pelvis faces) in the path's ``color`` if it is not
+    grey, else green.  Degenerate frames (:attr:`MotionPath.degenerate`) are
+    marked with a cross.  Same top view as :func:`root_path`.
+
+    Parameters
+    ----------
+    path : MotionPath
+        From :meth:`mocaplab.editing.MotionPath.from_motion`.
+    ax : Axes, optional
+    frames : sequence of int, optional
+        Frames that get arrows (default every ``every``-th frame).
+    every : int
+        Spacing of the arrows when ``frames`` is not given.
+    tangents, normals, headings : bool
+        Which arrows to draw.
+    length : float, optional
+        Draw unit arrows this long (metres).  Default: tangents and normals
+        at three times their size (a central difference spans two frames,
+        a few centimetres), headings 0.25 m.
+    color : str
+        Colour of the path line.
+    label : str, optional
+        Legend label of the path line.
+
+    Returns
+    -------
+    Axes
+    """
+    from .editing.paths import MotionPath
+
+    if not isinstance(path, MotionPath):
+        raise TypeError(f"Expected `path` to be a MotionPath, got {type(path).__name__}")
+    if frames is None:
+        if int(every) < 1:
+            raise ValueError(f"Expected `every` >= 1, got {every!r}")
+        idx = np.arange(0, path.n_frames, int(every))
+    else:
+        idx = np.asarray(frames, dtype=np.int64).reshape(-1)
+        if idx.size and not (-path.n_frames <= idx.min() and idx.max() < path.n_frames):
+            raise IndexError(f"Expected `frames` in [0, {path.n_frames}), got {idx.tolist()}")
+    ax = _new_axes(ax, figsize=(6.0, 5.0))
+    p = np.asarray(path.positions)
+    ax.plot(p[:, 0], p[:, 1], color=color, label=label)
+    if path.degenerate.any():
+        ax.plot(*p[path.degenerate].T, "x", color="crimson", label="degenerate")
+    at = p[idx]
+
+    def arrows(v: NDArray[np.float64], c: str, default: float | None) -> None:
+        size = length if length is not None else default
+        if size is not None:
+            n = np.linalg.norm(v, axis=1, keepdims=True)
+            v = v / np.where(n > 0, n, 1.0) * size
+        else:
+            v = 3.0 * v
+        ax.quiver(at[:, 0], at[:, 1], v[:, 0], v[:, 1], angles="xy", scale_units="xy", scale=1.0, color=c, width=0.004)
+
+    if tangents:
+        arrows(np.asarray(path.tangents)[idx], "k", None)
+    if normals:
+        arrows(np.asarray(path.normals)[idx], "crimson", None)
+    if headings:
+        h = np.asarray(path.headings)[idx]
+        arrows(np.c_[np.sin(h), np.cos(h)], "green" if color == "0.6" else color, 0.25)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
+    _top_view(ax)
+    ax.grid(True, alpha=0.3)
+    return ax
+
+
+def time_warps(
+    warps: Sequence[Any],
+    labels: Sequence[str],
+    *,
+    h: float,
+    character: int = 0,
+    axes: Sequence[Axes] | None = None,
+    title: str = "",
+) -> tuple[Axes, Axes]:
+    """Time warps side by side: reference time per frame, and the step per frame in units of ``h``.
+
+    Parameters
+    ----------
+    warps : sequence of EditResult or array_like
+        Each an edit result (its ``times[character]`` is drawn) or an array
+        of reference times, one per frame, shape (F,).
+    labels : sequence of str
+        One per warp.
+    h : float
+        The clip's frame time (seconds): the unedited step.
+    character : int
+        Which character of the edit results.
+    axes : pair of Axes, optional
+        Where to draw (default: a new figure with two panels).
+    title : str
+
+    Returns
+    -------
+    (Axes, Axes)
+    """
+    if len(labels) != len(warps):
+        raise ValueError(f"Expected one label per warp ({len(warps)}), got {len(labels)}")
+    if not (np.isfinite(h) and h > 0):
+        raise ValueError(f"Expected `h` > 0 seconds, got {h!r}")
+    fig: Any
+    if axes is None:
+        import matplotlib.pyplot as plt
+
+        fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.5), layout="constrained")
+    else:
+        a1, a2 = axes
+        fig = a1.figure
+    for k, (w, label) in enumerate(zip(warps, labels, strict=True)):
+        t = np.asarray(w.times[character] if hasattr(w, "times") else w, dtype=float)
+        if t.ndim != 1:
+            raise ValueError(f"Expected warp {k} as an edit result or times of shape (F,), got shape {t.shape}")
+        a1.plot(t, label=label)
+        a2.plot(np.diff(t) / h, label=label)
+    a2.axhline(0.0, color="0.5", linewidth=0.8)
+    a1.set_xlabel("frame i")
+    a1.set_ylabel("reference time t_i (s)")
+    a2.set_xlabel("frame i")
+    a2.set_ylabel("step (t[i+1] - t[i]) / h")
+    a1.legend(fontsize="small")
+    a1.grid(True, alpha=0.3)
+    a2.grid(True, alpha=0.3)
+    if title:
+        fig.suptitle(title)
+    return a1, a2
+
+
+__all__ += ["path_vectors", "time_warps"]

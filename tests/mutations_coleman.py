@@ -66,11 +66,11 @@ def no_constraint_layer(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
-    (L11, identity_tangents, None),
-    (L12, identity_tangents, None),
-    (L13, identity_tangents, None),
-    (L12, every_maximum, None),
-    (L12, fixed_stillness, None),
-    (L13, no_filter, None),
-    (L13, no_constraint_layer, None),
+    (L11, identity_tangents, "the fitted splines carry the motion"),
+    (L12, identity_tangents, "the fitted splines carry the motion"),
+    (L13, identity_tangents, "the fitted splines carry the motion (lesson 11)"),
+    (L12, every_maximum, "no two poses closer than 50 ms"),
+    (L12, fixed_stillness, "the run gets its stances"),
+    (L13, no_filter, "filtering before timing edits keeps the noise from coming apart"),
+    (L13, no_constraint_layer, "the constraint layer keeps planted feet planted"),
 ]

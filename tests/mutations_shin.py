@@ -9,6 +9,46 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
 import pytest
 
-CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = []
+L08 = "08_center_of_mass_and_zmp.ipynb"
+L09 = "09_touch_up_ground.ipynb"
+L10 = "10_touch_up_flight.ipynb"
+
+
+# ------------------------------------------------------------------ the switches
+def no_horizontal_acceleration(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Equation 4 without its horizontal-acceleration terms (the ZMP as a weighted centre of mass)."""
+    from mocaplab.physics import zmp
+
+    real = zmp._zmp_xz
+
+    def vertical_only(r, a, m, weight):
+        a = np.array(a, dtype=float, copy=True)
+        a[..., 0] = 0.0
+        a[..., 2] = 0.0
+        return real(r, a, m, weight)
+
+    monkeypatch.setattr(zmp, "_zmp_xz", vertical_only)
+
+
+def no_ground_adjustment(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every ground adjustment of the touch-up leaves the motion as it is."""
+    from mocaplab.physics import touchup
+
+    monkeypatch.setattr(touchup, "_ground_step", lambda posed, *args, **kwargs: posed)
+
+
+def no_flight_adjustment(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every flight adjustment of the touch-up leaves the motion as it is (the ground ones still run)."""
+    from mocaplab.physics import touchup
+
+    monkeypatch.setattr(touchup, "_flight_step", lambda posed, *args, **kwargs: posed)
+
+
+CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
+    (L08, no_horizontal_acceleration, "carry the ZMP away from the COM"),
+    (L09, no_ground_adjustment, "one adjustment already helps"),
+    (L10, no_flight_adjustment, "no swerve left in the air"),
+]

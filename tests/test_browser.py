@@ -14,6 +14,9 @@ with Chromium's screencast (targets: 15 per second for one character, 8 for
 the eight-character relay), check the slider's time and frame agree and keep
 up with the wall clock, check the layout (a 300 px slider track, toolbar
 icons apart, the legend outside the view), and fail on any console error.
+Lesson 03's path editor is also undone (Undo brings back the first path and
+handles exactly), redone and exported (the BVH file the Export button writes
+holds the edited root path, read back with ``mocaplab.io.load_bvh``).
 
 The server is started with ``MOCAPLAB_JUPYTER_BACKEND=trame`` so pyvista's
 view is the interactive trame iframe a student gets, not the static image of
@@ -604,6 +607,91 @@ def test_lesson_03_drag_a_path_handle(open_lesson: Any) -> None:
         f"iframe src {src_before} -> {trame_frame(editor).get_attribute('src')})"
     )
     assert_no_widget_errors(lesson)
+
+
+_KERNEL_PATHS = """
+import json as _j
+_r = {name}.editor.result
+print("@@json@@" + _j.dumps({{"paths": [_p.tolist() for _p in _r.paths],
+    "motion": [_m.pelvis_positions[:, [0, 2]].tolist() for _m in _r.motions],
+    "n": len({name}.editor.constraints)}}))
+del _j, _r
+"""
+
+
+def _published_handles(info: Any) -> list[Any]:
+    return [h["data"] for h in json.loads(info.text_content() or "[]")]
+
+
+def _wait_handles(page: Any, info: Any, want: list[Any], what: str) -> None:
+    """Wait until the page publishes handles at ``want`` (data coordinates, exactly)."""
+    page.wait_for_function(
+        "([el, want]) => JSON.stringify(JSON.parse(el.textContent || '[]').map(h => h.data)) === want",
+        arg=[info.element_handle(), json.dumps(want, separators=(",", ":"))],
+        timeout=60000,
+    )
+    assert _published_handles(info) == want, what
+
+
+def test_lesson_03_undo_and_export_in_the_path_editor(open_lesson: Any, tmp_path: Path) -> None:
+    """Drag, then Undo restores the first path and handles; Redo, then Export writes the edited walk as BVH."""
+    from mocaplab.io import load_bvh
+
+    lesson = open_lesson("03", "PathEditor")
+    lesson.run_all()
+    page = lesson.page
+    editor = page.locator(".mocaplab-path-editor").first  # by its class: lessons gain cells
+    editor.wait_for(timeout=60000)
+    info = editor.locator(".mocaplab-path-handles").first
+    first_handles = _published_handles(info)
+    name = _kernel_json(lesson, _KERNEL_FIND.format(cls="PathEditor", data=json.dumps(first_handles)))
+    assert name, f"no PathEditor in the kernel has the handles shown: {first_handles}"
+    first = _kernel_json(lesson, _KERNEL_PATHS.format(name=name))
+    undo = editor.locator(".mocaplab-undo").first
+    redo = editor.locator(".mocaplab-redo").first
+    assert undo.is_disabled() and redo.is_disabled(), "nothing to undo before any edit"
+
+    result = _drag_handle(lesson, "path", "PathEditor", (70.0, -45.0))
+    assert result["name"] == name
+    dragged_handles = _published_handles(info)
+    dragged = _kernel_json(lesson, _KERNEL_PATHS.format(name=name))
+    assert dragged_handles != first_handles and dragged["paths"] != first["paths"]
+    lesson.screenshot("path-editor-before-undo", editor)
+
+    page.wait_for_function("(el) => !el.disabled", arg=undo.element_handle(), timeout=30000)
+    undo.click()
+    _wait_handles(page, info, first_handles, "Undo did not bring the handles back")
+    lesson.wait_idle()
+    lesson.screenshot("path-editor-undone", editor)
+    back = _kernel_json(lesson, _KERNEL_PATHS.format(name=name))
+    assert back["paths"] == first["paths"], "Undo did not restore the first path exactly"
+    assert back["n"] == first["n"]
+    status = text_of(editor.locator(".mocaplab-path-status").first)
+    assert "restored" in status, f"status after Undo: {status!r}"
+    page.wait_for_function("(el) => el.disabled", arg=undo.element_handle(), timeout=30000)
+
+    redo.click()
+    _wait_handles(page, info, dragged_handles, "Redo did not bring the dragged handles back")
+    lesson.wait_idle()
+    target = tmp_path / "edited_walk.bvh"
+    box = editor.locator(".mocaplab-export-path input").first
+    box.fill(str(target))
+    box.press("Tab")
+    page.wait_for_timeout(300)
+    editor.locator(".mocaplab-export").first.click()
+    label = editor.locator(".mocaplab-export-status").first
+    page.wait_for_function("(el) => /wrote/.test(el.textContent)", arg=label.element_handle(), timeout=60000)
+    lesson.screenshot("path-editor-exported", editor)
+    assert target.exists(), f"Export did not write {target}; label {text_of(label)!r}"
+    written = load_bvh(target, scale=0.01)
+    edited = np.asarray(_kernel_json(lesson, _KERNEL_PATHS.format(name=name))["motion"][0])
+    path = written.pelvis_positions[:, [0, 2]]
+    assert path.shape == edited.shape
+    assert np.abs(path - edited).max() < 1e-4, "the file's root path is not the edited one"
+    original = np.asarray(first["motion"][0])
+    assert np.abs(path - original).max() > 0.05, "the file holds the input walk, not the edited one"
+    assert_no_widget_errors(lesson)
+    assert_no_console_errors(lesson)
 
 
 def test_lesson_04_drag_a_time_handle(open_lesson: Any) -> None:

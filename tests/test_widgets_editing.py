@@ -7,6 +7,7 @@ through ipympl) and checks what reached the editor and what the view shows.
 
 from __future__ import annotations
 
+import html
 import json
 
 import ipywidgets
@@ -545,3 +546,348 @@ def test_discrete_editing_from_editor_options_drives_a_discrete_editor(walks):
     handles = json.loads(pe.handles_info.value.replace("&quot;", '"'))
     assert np.allclose(handles[1]["data"], pin.position), "and is drawn at its target"
     assert np.allclose(res.paths[0][-1], pin.position, atol=1e-6), "which the transformed path reaches"
+
+
+# --------------------------------------------------------------------------- undo, redo, reset, export
+def _handles(view):
+    return [(h["index"], h["kind"], h["data"]) for h in view.handle_positions()]
+
+
+def _published(view):
+    return json.loads(view.handles_info.value.replace("&quot;", '"'))
+
+
+def test_undo_redo_reset_buttons_restore_the_drawn_paths_handles_and_3d_view(walks):
+    P = walks[0].root_positions[:, [0, 2]]
+    F = walks[0].n_frames
+    pe = PathEditor(walks, [PinPosition(0, 0, P[0], hard=True), PinPosition(0, F - 1, P[-1])], viewer=ViewerStub([]))
+    pe.figure.canvas.draw()
+    undo, redo, reset = pe.history_buttons.undo, pe.history_buttons.redo, pe.history_buttons.reset
+    assert undo.disabled and redo.disabled, "nothing to undo or redo yet"
+    first_paths = [np.array(p) for p in pe.result.paths]
+    first_handles, first_result = _handles(pe), pe.result
+    _drag(pe, P[-1], P[-1] + np.array([1.0, -0.5]))  # gesture 1: five drags of pin 1
+    dragged_paths = [np.array(p) for p in pe.result.paths]
+    dragged_handles = _handles(pe)
+    start = np.array(pe.result.paths[1][40])
+    _drag(pe, start, start + 0.6)  # gesture 2: a new pin on character 1, dragged
+    assert not undo.disabled and len(pe.editor.undo_stack) == 3, "one undo step per gesture"
+    _drag(pe, start + 0.6, start + 0.9)  # gesture 3: the same pin again, a step of its own (checkpoint on release)
+    assert len(pe.editor.undo_stack) == 4
+    undo.click()
+
+    undo.click()
+    assert pe.last_error is None
+    assert _handles(pe) == dragged_handles and len(pe.editor.constraints) == 2
+    assert all(np.array_equal(a, b) for a, b in zip(pe.result.paths, dragged_paths, strict=True))
+    undo.click()
+    assert pe.result is first_result and _handles(pe) == first_handles
+    assert [h["data"] for h in _published(pe)] == [h[2] for h in first_handles], "the page gets the first handles"
+    for line, path in zip(pe._lines, first_paths, strict=True):
+        assert np.array_equal(line.get_xydata(), path), "the drawn paths are the first ones, bitwise"
+    assert pe.viewer.motions[0] is first_result.motions[0], "the 3D view shows the restored motions"
+    assert undo.disabled and not redo.disabled
+    assert "restored: 2 constraints" in _status(pe)
+
+    redo.click()
+    assert _handles(pe) == dragged_handles
+    reset.click()
+    assert pe.result is first_result and not undo.disabled, "reset is an undoable step"
+    undo.click()
+    assert _handles(pe) == dragged_handles
+
+
+def test_time_track_undo_after_a_drag(walks):
+    tt = TimeTrackEditor(walks, [AbsoluteTime(0, 0, 0.0, hard=True)])
+    tt.figure.canvas.draw()
+    first = [np.array(t) for t in tt.result.times]
+    t = float(tt.result.times[0][60])
+    _drag(tt, (t, 0.0), (t + 0.8, 0.0))
+    assert not np.allclose(tt.result.times[0], first[0])
+    tt.history_buttons.undo.click()
+    assert len(tt.editor.constraints) == 1, "the pressed and dragged handle was one step"
+    assert all(np.array_equal(a, b) for a, b in zip(tt.result.times, first, strict=True))
+    ticks = tt._tracks[0].get_segments()
+    assert np.array_equal([s[0, 0] for s in ticks], first[0]), "the ticks are back"
+
+
+def test_export_writes_the_edited_motions_as_bvh(walks, tmp_path):
+    from mocaplab.io import load_bvh
+
+    pe = PathEditor(walks, viewer=False)
+    pe.figure.canvas.draw()
+    start = np.array(pe.result.paths[0][50])
+    _drag(pe, start, start + np.array([0.7, 0.4]))
+    assert pe.export_control.path.value == "16_15_edited.bvh", "named after the first clip"
+    pe.export_control.path.value = str(tmp_path / "scene.bvh")
+    pe.export_control.button.click()
+    assert pe.last_error is None, pe.last_error
+    files = pe.export_control.written
+    assert [f.name for f in files] == ["scene_1.bvh", "scene_2.bvh"], "one file per character"
+    for k, f in enumerate(files):
+        back = load_bvh(f, scale=0.01)
+        edited = pe.result.motions[k]
+        assert back.n_frames == edited.n_frames
+        np.testing.assert_allclose(back.pelvis_positions[:, [0, 2]], edited.pelvis_positions[:, [0, 2]], atol=1e-5)
+    back = load_bvh(files[0], scale=0.01)
+    moved = np.linalg.norm(back.pelvis_positions[:, [0, 2]] - walks[0].root_positions[: back.n_frames, [0, 2]], axis=1)
+    assert moved.max() > 0.3, "the file holds the edited path, not the input"
+    assert "wrote" in pe.export_control.label.value
+
+
+def test_export_error_is_shown_and_the_view_stays_in_sync(walks, tmp_path):
+    pe = PathEditor([walks[0]], viewer=False)
+    pe.export_control.path.value = str(tmp_path / "missing-folder" / "x.bvh")
+    pe.export_control.button.click()
+    assert pe.last_error is not None and "mocaplab-error" in _status(pe)
+
+
+class FailingEditor(Spy):
+    """A SceneEditor whose drag fails from the ``fail_at``-th call on, and whose undo crashes after undoing."""
+
+    def __init__(self, editor, fail_at=3):
+        super().__init__(editor)
+        self.fail_at = fail_at
+
+    def drag(self, index, target):
+        if sum(c[0] == "drag" for c in self.calls) + 1 >= self.fail_at:
+            self.calls.append(("failed drag", index))
+            raise ValueError("engine rejected the target <b>bold</b>")
+        return super().drag(index, target)
+
+    def undo(self):
+        self._editor.undo()
+        raise RuntimeError("crashed after undoing")
+
+
+def test_after_a_callback_error_the_view_shows_the_editors_state(walks):
+    P = walks[0].root_positions[:, [0, 2]]
+    F = walks[0].n_frames
+    spy = FailingEditor(SceneEditor([walks[0]], [PinPosition(0, 0, P[0], hard=True), PinPosition(0, F - 1, P[-1])]))
+    pe = PathEditor(spy, viewer=ViewerStub([]))
+    pe.figure.canvas.draw()
+    _drag(pe, P[-1], P[-1] + np.array([1.5, 0.0]), steps=6)  # the third motion event fails
+    assert "ValueError" in _status(pe) and "&lt;b&gt;bold&lt;/b&gt;" in _status(pe) and "<b>" not in _status(pe)
+    accepted = np.asarray(spy.constraints[1].position)
+    assert not np.allclose(accepted, P[-1] + np.array([1.5, 0.0])), "the engine kept its last accepted target"
+    assert np.allclose(_published(pe)[1]["data"], accepted), "the handle is drawn where the engine has it"
+    assert pe.result is spy.result
+    assert np.array_equal(pe._lines[0].get_xydata(), spy.result.paths[0]), "the drawn path is the engine's"
+    assert not pe.history_buttons.undo.disabled
+
+    # undo changes the engine, then crashes: the view follows the engine, not its own last picture
+    pe.history_buttons.undo.click()
+    assert "crashed after undoing" in _status(pe)
+    assert np.allclose(_published(pe)[1]["data"], P[-1]), "the handle is back where the engine put it"
+    assert np.array_equal(pe._lines[0].get_xydata(), spy.result.paths[0])
+    assert pe.history_buttons.undo.disabled and not pe.history_buttons.redo.disabled
+
+
+# --------------------------------------------------------------------------- ground view: legend, footplants, discrete
+def test_legend_names_hard_and_soft_pins_and_every_mark(walks):
+    pe = PathEditor([walks[0]], viewer=False)
+    (legend,) = pe.figure.legends
+    labels = [t.get_text() for t in legend.get_texts()]
+    for name in ("hard pin", "soft pin", "direction pin", "relative offset", "footplant", "input path"):
+        assert name in labels, labels
+    hard, soft = (legend.legend_handles[labels.index(n)] for n in ("hard pin", "soft pin"))
+    assert hard.get_markerfacecolor() == pe._hard_pins.get_markerfacecolor() != soft.get_markerfacecolor()
+    assert soft.get_markerfacecolor() == pe._pins.get_markerfacecolor()
+    assert "last discrete change" not in labels, "continuous editing draws no transformation"
+    box = legend.get_window_extent(pe.figure.canvas.get_renderer())
+    assert box.y1 <= pe.ax.get_window_extent().y0 + 1, "the legend sits under the plot, not over the paths"
+
+
+def _expected_plants(motion, edited, joints):
+    """Mid frames of each foot's contacts (ankle or toe planted), and the edited ankle-toe midpoints there."""
+    from mocaplab.contacts import foot_contacts, intervals_from_mask
+
+    c = foot_contacts(motion, joints=joints)
+    g = edited.global_positions()
+    out = []
+    for ankle, toe in motion.skeleton.roles.feet():
+        mask = c.of(ankle) | c.of(toe)
+        for a, b in intervals_from_mask(mask):
+            m = (a + b - 1) // 2
+            out.append(0.5 * (g[m, motion.skeleton.index(ankle), [0, 2]] + g[m, motion.skeleton.index(toe), [0, 2]]))
+    return np.array(out)
+
+
+def test_footplants_are_drawn_where_the_edited_motion_plants_its_feet(walks):
+    P = walks[0].root_positions[:, [0, 2]]
+    F = walks[0].n_frames
+    pe = PathEditor(
+        [walks[0]], [PinPosition(0, 0, P[0], hard=True), PinPosition(0, F - 1, P[-1], hard=True)], viewer=False
+    )
+    pe.figure.canvas.draw()
+    before = pe.footplants[0].copy()
+    assert len(before) >= 4, "a 4 s walk plants its feet several times"
+    want = _expected_plants(walks[0], pe.result.edited_motions[0], pe.editor.contact_joints(0))
+    assert np.allclose(np.sort(before[:, :2], axis=0), np.sort(want, axis=0), atol=1e-9)
+    assert len(pe._feet.get_paths()) == len(before), "one footprint drawn per plant"
+    _drag(pe, P[-1], P[-1] + np.array([2.0, 0.0]))
+    after = pe.footplants[0]
+    want = _expected_plants(walks[0], pe.result.edited_motions[0], pe.editor.contact_joints(0))
+    assert np.allclose(np.sort(after[:, :2], axis=0), np.sort(want, axis=0), atol=1e-9), "they follow the edit"
+    assert np.abs(after[:, 0] - before[:, 0]).max() > 0.5, "the footprints moved with the dragged path"
+    # a footprint lies heel to toe: along the walking direction, within 35 degrees
+    tangent = np.asarray(pe.result.tangents[0])
+    walking = np.arctan2(tangent[:, 1], tangent[:, 0]).mean()
+    assert np.all(np.abs(np.angle(np.exp(1j * (after[:, 2] - walking)))) < np.radians(35))
+
+    # a large scene updates them on release only
+    pe.live_footplant_frames = 0
+    handle = np.asarray(pe.editor.constraints[1].position)
+    _event(pe, "button_press_event", handle)
+    _event(pe, "motion_notify_event", handle + np.array([-1.0, 0.0]))
+    assert np.array_equal(pe.footplants[0], after), "not during the drag"
+    _event(pe, "button_release_event", handle + np.array([-1.0, 0.0]))
+    assert not np.allclose(pe.footplants[0], after), "on release"
+
+
+def test_discrete_transformation_is_highlighted_and_named_then_undone(walks):
+    walk = walks[0]
+    P = walk.root_positions[:, [0, 2]]
+    end = walk.n_frames - 1
+    cons = [PinPosition(0, 0, P[0], hard=True), PinPosition(0, end, P[-1], hard=True)]
+    pe = PathEditor([walk], cons, editor_options={"discrete": True}, viewer=False)
+    labels = [t.get_text() for t in pe.figure.legends[0].get_texts()]
+    assert "last discrete change" in labels
+    assert pe.highlighted is None and len(pe._changed.get_xydata()) == 0
+    pe.figure.canvas.draw()
+    _drag(pe, P[-1], P[0] + 1.5 * (P[-1] - P[0]), steps=10)
+    res = pe.result
+    assert res.transformations
+    last = res.transformations[-1]
+    a, b = last.frames
+    k, first, final = pe.highlighted
+    assert (k, first, final) == (0, a - 1, min(b, len(res.paths[0]) - 1))
+    assert np.array_equal(pe._changed.get_xydata(), res.paths[0][first : final + 1]), "those frames are highlighted"
+    assert f"applied {last} (frames {first}-{final} highlighted)" in html.unescape(_status(pe)), _status(pe)
+    assert "moved PinPosition #1" in _status(pe)
+
+    pe.history_buttons.undo.click()  # the whole drag was one step: the inserted steps go
+    assert pe.result.transformations == () and len(pe.result.paths[0]) == walk.n_frames
+    assert pe.highlighted is None and len(pe._changed.get_xydata()) == 0
+    assert np.array_equal(pe._lines[0].get_xydata(), pe.editor.result.paths[0])
+    pe.history_buttons.redo.click()
+    assert pe.result.transformations == res.transformations and f"applied {last}" in html.unescape(_status(pe))
+
+
+def test_status_lines_wrap_and_show_the_whole_text(walks):
+    pe = PathEditor([walks[0]], viewer=False)
+    long = "word " * 80
+    pe._set_status(long)
+    assert "ellipsis" not in pe.status.value and "nowrap" not in pe.status.value
+    assert "white-space:normal" in pe.status.value and long.strip() in pe.status.value
+    assert pe.status.layout.overflow in (None, "", "visible"), "nothing is clipped"
+
+
+# --------------------------------------------------------------------------- any Motion, escaped text
+EVIL = "<img src=x onerror=alert(1)>"
+
+
+def _evil(motion):
+    """``motion`` named EVIL, with its left toe joint named EVIL."""
+    import dataclasses
+
+    sk = motion.skeleton
+    names = tuple(EVIL if n == "LeftToeBase" else n for n in sk.names)
+    return motion.replace(skeleton=dataclasses.replace(sk, names=names), name=EVIL)
+
+
+def test_text_from_data_and_exceptions_is_escaped(walks, tmp_path):
+    m = _evil(walks[0])
+    P = m.root_positions[:, [0, 2]]
+    pe = PathEditor([m], [PinPosition(0, 0, P[0], hard=True)], viewer=False)
+    tt = TimeTrackEditor(pe.editor)
+    pe.figure.canvas.draw()
+    assert len(pe.footplants[0]) >= 4, "the roles still find the renamed toe"
+    _drag(pe, P[-1], P[-1] + 0.5)  # a new pin: the status names the character and its clip
+    assert "&lt;img src=x onerror=alert(1)&gt;" in _status(pe) and "<img" not in _status(pe)
+    tt.refresh()
+    tt.figure.canvas.draw()
+    t = float(tt.result.times[0][30])
+    _drag(tt, (t, 0.0), (t + 0.3, 0.0))
+    assert "&lt;img" in _status(tt) and "<img" not in _status(tt)
+
+    def broken(index, target):
+        raise ValueError(f"joint {EVIL!r} is not allowed")
+
+    pe.editor.drag = broken  # type: ignore[method-assign]
+    _drag(pe, P[-1] + 0.5, P[-1] + 1.0)
+    assert "mocaplab-error" in _status(pe) and "<img" not in _status(pe) and "&lt;img" in _status(pe)
+    assert "<" not in pe.export_control.path.value, "the default export name keeps only safe characters"
+    pe.export(tmp_path / "evil.bvh")
+    assert "<img" not in pe.export_control.label.value
+
+
+@pytest.fixture(scope="module")
+def converted(walks, tmp_path_factory):
+    from conventions import load_converted
+
+    folder = tmp_path_factory.mktemp("conventions")
+    return {c: load_converted(walks[0], c, folder)[0] for c in ("mixamo", "game_studio")}
+
+
+@pytest.mark.filterwarnings("ignore:The motion path follows joint")
+@pytest.mark.parametrize("convention", ["mixamo", "game_studio"])
+def test_converted_clip_drag_undo_export(walks, converted, convention, tmp_path):
+    """A mixamo file, and a static root above a travelling pelvis: footplants, drag, undo and export all work."""
+    from mocaplab.io import load_bvh
+
+    m = converted[convention]
+    P = m.pelvis_positions[:, [0, 2]]
+    pe = PathEditor([m], [PinPosition(0, 0, P[0], hard=True)], viewer=ViewerStub([]))
+    pe.figure.canvas.draw()
+    assert len(pe.footplants[0]) >= 4, "feet found through the joint roles"
+    first = np.array(pe.result.paths[0])
+    assert np.allclose(first, P, atol=1e-6), "the path is the pelvis' (not the static root's)"
+    start = np.array(pe.result.paths[0][60])
+    _drag(pe, start, start + np.array([0.8, 0.3]))
+    assert pe.last_error is None, pe.last_error
+    dragged = np.array(pe.result.paths[0])
+    assert np.linalg.norm(dragged[60] - first[60]) > 0.3
+    (f,) = pe.export(tmp_path / f"{convention}.bvh")
+    back = load_bvh(f, scale=0.01)
+    np.testing.assert_allclose(
+        back.pelvis_positions[:, [0, 2]], pe.result.motions[0].pelvis_positions[:, [0, 2]], atol=1e-5
+    )
+    pe.history_buttons.undo.click()
+    assert np.array_equal(pe.result.paths[0], first) and len(pe.editor.constraints) == 1
+    tt = TimeTrackEditor([m], roles=None)
+    tt.figure.canvas.draw()
+    times = np.array(tt.result.times[0])
+    _drag(tt, (times[40], 0.0), (times[40] + 0.5, 0.0))
+    assert tt.last_error is None and abs(tt.result.times[0][40] - times[40] - 0.5) < 0.05
+    tt.history_buttons.undo.click()
+    assert np.array_equal(tt.result.times[0], times)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_roles_reach_the_editor_and_the_footplants(walks):
+    import dataclasses
+
+    feet = {"LeftFoot": "knob_a", "LeftToeBase": "knob_b", "RightFoot": "knob_c", "RightToeBase": "knob_d"}
+    sk = walks[0].skeleton
+    m = walks[0].replace(skeleton=dataclasses.replace(sk, names=tuple(feet.get(n, n) for n in sk.names)))
+    roles = {"left_ankle": "knob_a", "left_toe": "knob_b", "right_ankle": "knob_c", "right_toe": "knob_d"}
+    pe = PathEditor([m], viewer=False, roles=roles)
+    assert pe.editor.options["roles"] == roles
+    assert pe.editor.contact_joints(0) == ("knob_a", "knob_b", "knob_c", "knob_d")
+    reference = PathEditor([walks[0]], viewer=False)
+    assert np.allclose(pe.footplants[0], reference.footplants[0], atol=1e-9), "the named feet are the CMU feet"
+
+
+def test_an_edit_in_code_and_a_gesture_are_two_undo_steps(walks):
+    P = walks[0].root_positions[:, [0, 2]]
+    F = walks[0].n_frames
+    pe = PathEditor([walks[0]], [PinPosition(0, 0, P[0], hard=True), PinPosition(0, F - 1, P[-1])], viewer=False)
+    pe.editor.drag(1, P[-1] + np.array([0.5, 0.0]))  # in code, as lesson cells do
+    pe.refresh()
+    in_code = pe.result
+    pe.figure.canvas.draw()
+    handle = np.asarray(pe.editor.constraints[1].position)
+    _drag(pe, handle, handle + np.array([0.0, 0.6]))  # then the mouse, on the same pin
+    pe.history_buttons.undo.click()
+    assert pe.result is in_code, "undo goes back to the code edit, not before it"

@@ -126,5 +126,5 @@ class ExportControl:
             save_bvh(m, f)
         self.written = files
         names = ", ".join(html.escape(str(f)) for f in files)
-        self.label.value = f"<span class='mocaplab-ok'>wrote {names}</span>"
+        self.label.value = f"<span class='mocaplab-ok' style='overflow-wrap:anywhere'>wrote {names}</span>"
         return files

@@ -28,7 +28,16 @@ motion event; the release applies its own position too (front ends may drop
 motion events); a press and release without moving on an existing handle
 removes it.  Every callback is :func:`guarded`: an exception is shown in the
 status line (CSS class ``mocaplab-error``) and kept in ``last_error`` instead
-of being lost in the kernel log.
+of being lost in the kernel log, and the view is then redrawn from the
+editor (:meth:`DragView.resync`), so what it shows is what the editor holds
+(a failed edit changes nothing in the editor).
+
+History and export: every view shows Undo / Redo / Reset buttons
+(:class:`~mocaplab.widgets._controls.HistoryButtons` over the editor's own
+``undo``/``redo``/``reset``) and an "Export BVH" control writing the current
+edited motions (``result.motions``, one file per character).  The release
+of the mouse ends a gesture: the view calls ``editor.checkpoint()``, so one
+drag is one undo step.
 """
 
 from __future__ import annotations
@@ -37,6 +46,7 @@ import functools
 import html
 import io
 import json
+import re
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -51,13 +61,16 @@ from numpy.typing import NDArray
 
 from mocaplab import editing
 
+from ._controls import ExportControl, HistoryButtons
+
 Backend = Literal["auto", "ipympl", "agg"]
 
 #: CSS pixels kept free along the left edge of an interactive figure: ipympl lays
 #: its toolbar (vertical, on the left) over the canvas, where it hid the tick labels.
 TOOLBAR_PX = 44
 
-_STATUS_STYLE = "display:block; max-width:{px}px; overflow:hidden; text-overflow:ellipsis; white-space:{wrap}"
+#: Status lines wrap at the figure's width: the whole text is always shown (never cut by an ellipsis).
+_STATUS_STYLE = "display:block; max-width:{px}px; white-space:normal; overflow-wrap:anywhere"
 
 #: One draggable handle: (constraint index, kind, position in data coordinates, shape (2,)).
 Handle = tuple[int, str, NDArray[np.float64]]
@@ -167,7 +180,7 @@ def guarded(method: Callable[..., Any]) -> Callable[..., Any]:
         try:
             return method(self, *args, **kwargs)
         except Exception as exc:  # noqa: BLE001 - shown to the user, kept in .last_error
-            self._show_error(exc)
+            self._fail(exc)
             return None
 
     return wrapper
@@ -214,6 +227,17 @@ class DragView:
         self._handles: list[Handle] = []
         self._listeners: list[Callable[[Any], None]] = []
         self.result = current_result(self.editor)
+        self.history_buttons = HistoryButtons(self.editor, self._after_history, guard=self._guard)
+        self.export_control = ExportControl(self._export_motions, default=_export_name(self.editor), guard=self._guard)
+        self.controls = W.HBox(
+            [self.history_buttons.box, self.export_control.box], layout=W.Layout(flex_flow="row wrap")
+        )
+        self.controls.add_class("mocaplab-edit-controls")
+        # the "wrote ..." note goes under the button when it does not fit beside it (never squeezing it)
+        self.export_control.box.layout.flex_flow = "row wrap"
+        self.export_control.button.layout.flex = "0 0 auto"
+        self.export_control.path.layout.flex = "0 0 auto"
+        self.export_control.label.layout.flex = "1 1 auto"
 
     # -- public
     def on_edit(self, callback: Callable[[Any], None]) -> None:
@@ -270,6 +294,16 @@ class DragView:
         self._apply(current_result(self.editor))
         self._settle(grow_only=self._refresh_grows_view)
 
+    def resync(self) -> None:
+        """Make every control and drawing show the editor's state (after an error; the status is kept)."""
+        self.result = current_result(self.editor)
+        self.history_buttons.sync()
+        self._redraw(final=True)
+
+    def export(self, path: Any = None) -> list[Any]:
+        """Write the current edited motions as BVH (to ``path`` or the export box's name); returns the files."""
+        return self.export_control.export(path)
+
     def _ipython_display_(self) -> None:
         from IPython.display import display
 
@@ -289,11 +323,11 @@ class DragView:
             # the toolbar floats over the canvas' left edge: lay the axes out to its right
             free = min(TOOLBAR_PX / width_px, 0.2)
             self.figure.set_layout_engine(ConstrainedLayoutEngine(rect=(free, 0.0, 1.0 - free, 1.0)))
-        # a status as wide as the figure: a long message is cut with an ellipsis (full text
-        # in its tooltip) instead of widening the layout and pushing the 3D view sideways
+        # a status as wide as the figure: a long message wraps onto more lines instead of
+        # widening the layout and pushing the 3D view sideways
         self._status_px = width_px
         self.status.layout.width = f"{width_px}px"
-        self.status.layout.overflow = "hidden"
+        self.controls.layout.width = f"{width_px}px"
         self.ax = self.figure.add_subplot()
         self.ax.set_title(title)
         plain_ticks(self.ax)
@@ -313,8 +347,40 @@ class DragView:
     def _apply(self, result: Any) -> None:
         self.result = result
         self.last_error = None
+        self.history_buttons.sync()
         for callback in self._listeners:
             callback(result)
+
+    def _export_motions(self) -> list[Any]:
+        """The motions the Export button writes: the edited motions of every character."""
+        return list(current_result(self.editor).motions)
+
+    def _after_history(self) -> None:
+        """After Undo, Redo or Reset: redraw everything (handles, paths, 3D view) from the editor."""
+        self._drag = None
+        self._apply(current_result(self.editor))
+        self._settle(grow_only=self._refresh_grows_view)
+        n = len(self.editor.constraints)
+        self._set_status(f"restored: {n} constraint{'s' if n != 1 else ''}" + self._history_note())
+
+    def _history_note(self) -> str:
+        """Extra status text after an undo, redo or reset (subclasses add to it)."""
+        return ""
+
+    def _guard(self, action: Callable[[], None]) -> None:
+        """Run a button's action; an exception is shown and the view resynced (as :func:`guarded`)."""
+        try:
+            action()
+        except Exception as exc:  # noqa: BLE001 - shown to the user, kept in .last_error
+            self._fail(exc)
+
+    def _fail(self, exc: BaseException) -> None:
+        """Show ``exc`` and redraw from the editor, so nothing shows a state the editor does not hold."""
+        self._show_error(exc)
+        try:
+            self.resync()
+        except Exception:  # noqa: BLE001 - the first error is the one to show
+            pass
 
     def _add(self, constraint: Any) -> int:
         out = self.editor.add(constraint)
@@ -344,18 +410,24 @@ class DragView:
         self.last_error = exc
         where = traceback.extract_tb(exc.__traceback__)[-1] if exc.__traceback__ else None
         loc = f" ({where.name}, line {where.lineno})" if where else ""
-        style = _STATUS_STYLE.format(px=self._status_width(), wrap="normal; overflow-wrap:anywhere")
+        style = _STATUS_STYLE.format(px=self._status_width())
         self.status.value = (
             f'<span class="mocaplab-error" style="color:#b00020; {style}">'
             f"{html.escape(type(exc).__name__)}: {html.escape(str(exc))}{html.escape(loc)}</span>"
         )
 
     def _set_status(self, text: str) -> None:
-        """One line of status, cut with an ellipsis at the figure's width; the full text in the tooltip."""
-        style = _STATUS_STYLE.format(px=self._status_width(), wrap="nowrap")
+        """The status text, wrapped at the figure's width (all of it shown), html-escaped."""
+        style = _STATUS_STYLE.format(px=self._status_width())
         self.status.value = (
             f'<span class="mocaplab-ok" style="{style}" title="{html.escape(text)}">{html.escape(text)}</span>'
         )
+
+    def _character(self, k: int) -> str:
+        """``character k`` with the clip's name when it has one (escaped later, with the status)."""
+        characters = getattr(self.editor, "characters", None)
+        name = getattr(characters[k], "name", "") if characters is not None and k < len(characters) else ""
+        return f"character {k} ({name})" if name else f"character {k}"
 
     def _status_width(self) -> int:
         return int(getattr(self, "_status_px", 600))
@@ -399,6 +471,7 @@ class DragView:
         if event.inaxes is not self.ax or event.button != 1 or self._toolbar_busy():
             return
         self.last_error = None
+        self.editor.checkpoint()  # a gesture starts: edits made before (in code, say) stay a step of their own
         self._press(event, (float(event.x), float(event.y)))
 
     @guarded
@@ -435,16 +508,20 @@ class DragView:
                     self._move_to(event)  # the front end may drop motion events: end under the mouse
         finally:
             self._drag = None
+            self.editor.checkpoint()  # the gesture ends: the next edit is a new undo step
         if self.last_error is not None:
             pass  # keep the error of the failed update on show
         elif not drag.moved and not drag.created:
             c = self.editor.constraints[drag.index]
             self._remove(drag.index)
-            self._set_status(f"removed {kind_of(c)} #{drag.index} (character {int(c.character)}, frame {frame_of(c)})")
+            self._set_status(
+                f"removed {kind_of(c)} #{drag.index} ({self._character(int(c.character))}, frame {frame_of(c)})"
+            )
         elif drag.moved:
             self._describe(drag.index, prefix="moved")
         self.result = current_result(self.editor)
         self._settle()
+        self.history_buttons.sync()
 
     # -- subclasses implement
     def _press(self, event: Any, press: tuple[float, float]) -> None:  # pragma: no cover - abstract
@@ -492,6 +569,14 @@ def as_scene_editor(
     characters = list(editor_or_characters) if isinstance(editor_or_characters, Sequence) else [editor_or_characters]
     # a SceneEditor, or a DiscreteEditor with editor_options={"discrete": True or DiscreteOptions(...)}
     return editing.make_editor(characters, list(constraints or ()), **(options or {}))
+
+
+def _export_name(editor: Any) -> str:
+    """Default export file: ``<first clip's name>_edited.bvh`` (letters, digits, ``._-`` only)."""
+    characters = getattr(editor, "characters", None) or ()
+    name = str(getattr(characters[0], "name", "") or "") if len(characters) else ""
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "motion"
+    return f"{stem}_edited.bvh"
 
 
 def current_result(editor: Any, returned: Any = None) -> Any:

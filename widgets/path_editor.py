@@ -33,9 +33,25 @@ Drawing conventions
 The view looks down the vertical axis from above: ground ``x`` to the right
 and ground ``z`` down the page (the z axis is inverted), so a character's left
 is on its left on screen.  Pins are
-circles drawn at their target position, direction pins are arrows from the
-pinned path point whose tip is the handle, the current time is a triangle on
-every path.  Handle positions, in data and in canvas pixels, are published in
+circles drawn at their target position (filled: hard, white: soft, with a
+red line to the path point a soft pin pulls on), direction pins are arrows
+from the pinned path point whose tip is the handle, the current time is a
+triangle on every path; the legend under the plot names every mark.  The
+footplants of the edited motions are small footprints on the ground: the
+foot contacts the core detects on each clip
+(:func:`mocaplab.contacts.foot_contacts` of the editor's
+:meth:`~mocaplab.editing.SceneEditor.contact_joints`, so any skeleton's feet
+through its joint roles), each drawn where the edited motion plants that
+foot, heel to toe.  They follow the drag live for small scenes and are
+updated on release for large ones (``live_footplant_frames``).  With
+discrete editing (:class:`~mocaplab.editing.DiscreteEditor`) the frames the
+last applied transformation changed are highlighted on the path and the
+status line names it (the core's own description, e.g. ``character 0:
+duplicate frames 40..75 (1.20 s)``).
+
+Undo, Redo and Reset buttons and an "Export BVH" control sit under the
+status line (:mod:`widgets._drag`): each drag is one undo step, and export
+writes the edited motions, one BVH file per character.  Handle positions, in data and in canvas pixels, are published in
 the hidden HTML widget ``handles_info`` (CSS class ``mocaplab-path-handles``) as
 JSON, for browser tests.  The gesture itself (press, drag, release, click to
 remove, errors shown in the status line) is shared with
@@ -55,9 +71,12 @@ from typing import Any
 
 import ipywidgets as W
 import numpy as np
+from matplotlib.collections import PolyCollection
+from matplotlib.lines import Line2D
 from numpy.typing import NDArray
 
 from mocaplab import editing
+from mocaplab.contacts import foot_contacts, intervals_from_mask
 
 from ._drag import (
     Backend,
@@ -146,6 +165,17 @@ class PathEditor(DragView):
         Given the edited motions with ``set_motions`` when the mouse is
         released after an edit (the same viewer and 3D view are kept);
         ``viewer_updates`` counts these updates.
+    history_buttons : HistoryButtons
+        Undo / Redo / Reset (CSS classes ``mocaplab-undo``, ``-redo``, ``-reset``).
+    export_control : ExportControl
+        File name box and "Export BVH" button (CSS ``mocaplab-export``);
+        :meth:`export` does the same in code.
+    footplants : list of ndarray, shape (n_k, 3)
+        Drawn footplants of each character: ground ``(x, z)`` of the planted
+        foot and its heel-to-toe angle (radians, from +x towards +z).
+    highlighted : tuple (character, first, last) or None
+        The frames (inclusive) of the last applied discrete transformation
+        drawn highlighted.
     widget : ipywidgets.Box
         The whole layout (CSS class ``mocaplab-path-editor``).
     handles_info : ipywidgets.HTML
@@ -159,6 +189,10 @@ class PathEditor(DragView):
     canvas_class = "mocaplab-path-canvas"
     editor_class = "mocaplab-path-editor"
     _refresh_grows_view = False  # refresh() fits the view anew
+    #: Footplants follow a drag live up to this many frames in the scene; beyond, they update on release.
+    live_footplant_frames = 3000
+    #: Footprint size on the ground, metres (heel to toe, across).
+    footprint_size = (0.24, 0.10)
 
     def __init__(
         self,
@@ -205,8 +239,18 @@ class PathEditor(DragView):
         (self._tips,) = self.ax.plot([], [], "D", ms=8, mfc="gold", mec="k", zorder=6)
         (self._links,) = self.ax.plot([], [], "--", color="0.3", lw=1.2, zorder=3)
         (self._misses,) = self.ax.plot([], [], "-", color="crimson", lw=1.0, zorder=4)  # soft pin -> path point
-        if n > 1:
+        self._changed = self.ax.plot(
+            [], [], "-", color="orange", lw=8.0, alpha=0.45, solid_capstyle="round", zorder=1.5
+        )[0]  # frames of the last discrete transformation
+        self._feet = PolyCollection([], edgecolors="0.2", linewidths=0.6, alpha=0.7, zorder=2.5)
+        self.ax.add_collection(self._feet)
+        self._plant_cache: dict[int, tuple[Any, list[tuple[str, str | None, list[int]]]]] = {}
+        self.footplants: list[NDArray[np.float64]] = [np.zeros((0, 3)) for _ in range(n)]
+        self.highlighted: tuple[int, int, int] | None = None
+        self._gesture_transformations = 0
+        if 1 < n <= 10:
             self.ax.legend(loc="best", fontsize="small")
+        self._legend()
 
         t0, t1 = self._time_range()
         self.time = W.FloatSlider(
@@ -226,7 +270,7 @@ class PathEditor(DragView):
         self.viewer_updates = 0  # how many times the 3D viewer received new motions
         self.viewer = self._make_viewer(viewer)
         self._viewer_box = W.Box([self._viewer_widget()] if self.viewer is not None else [])
-        left = W.VBox([self._view.widget, self.time, self.status, self.handles_info])
+        left = W.VBox([self._view.widget, self.time, self.status, self.controls, self.handles_info])
         self._open(
             W.HBox([left, self._viewer_box]),
             "press a path to pin it; drag a pin to move it; click a pin to unpin; shift-drag for a direction",
@@ -327,6 +371,25 @@ class PathEditor(DragView):
         y0, y1 = self.ax.get_ylim()
         return 0.08 * float(np.hypot(x1 - x0, y1 - y0))
 
+    def _legend(self) -> None:
+        """One legend under the plot naming every kind of mark this view draws (fixed: no layout jump)."""
+        entries = [
+            (Line2D([], [], color="0.3", lw=1.0, ls=":"), "input path"),
+            (Line2D([], [], marker="o", ms=9, mfc="k", mec="k", mew=2.0, ls="none"), "hard pin"),
+            (Line2D([], [], marker="o", ms=9, mfc="white", mec="k", mew=2.0, ls="none"), "soft pin"),
+            (Line2D([], [], color="crimson", lw=1.0), "soft pin to its path point"),
+            (Line2D([], [], color="k", lw=1.5, marker="D", ms=6, mfc="gold", mec="k", markevery=[1]), "direction pin"),
+            (Line2D([], [], color="0.3", lw=1.2, ls="--"), "relative offset"),
+            (Line2D([], [], marker="^", ms=8, color="0.5", mec="k", ls="none"), "now (time slider)"),
+            (Line2D([], [], marker="o", ms=6, mfc=self.colors[0], mec="0.2", alpha=0.7, ls="none"), "footplant"),
+        ]
+        if _is_discrete(self.editor):
+            entries.append((Line2D([], [], color="orange", lw=6.0, alpha=0.45), "last discrete change"))
+        handles, labels = zip(*entries, strict=True)
+        self.figure.legend(
+            handles, labels, loc="outside lower center", ncols=3, fontsize="x-small", frameon=False, handlelength=2.0
+        )
+
     def _draw_result(self, *, final: bool) -> None:
         if final:
             self._update_time_range()
@@ -334,6 +397,77 @@ class PathEditor(DragView):
             p = np.asarray(path, dtype=float)
             line.set_data(p[:, 0], p[:, 1])
         self._draw_now()
+        self._draw_changed()
+        frames = sum(len(p) for p in self.result.paths)
+        if final or frames <= self.live_footplant_frames:
+            self._draw_footplants()
+
+    def _draw_changed(self) -> None:
+        """Highlight the frames of the last discrete transformation (its new frames and seams)."""
+        self.highlighted = _changed_frames(self.result)
+        if self.highlighted is None:
+            self._changed.set_data([], [])
+            return
+        k, a, b = self.highlighted
+        p = np.asarray(self.result.paths[k], dtype=float)[a : b + 1]
+        self._changed.set_data(p[:, 0], p[:, 1])
+
+    def _plants(self, k: int) -> list[tuple[str, str | None, list[int]]]:
+        """``(ankle, toe, mid frames of its contacts)`` per foot of character ``k``'s (transformed) clip, cached."""
+        clip = self.result.characters[k]
+        cached = self._plant_cache.get(k)
+        if cached is not None and cached[0] is clip:
+            return cached[1]
+        out: list[tuple[str, str | None, list[int]]] = []
+        try:
+            contacts = foot_contacts(clip, joints=self.editor.contact_joints(k))
+            feet = clip.skeleton.roles.feet()
+        except ValueError:  # no feet the roles can name (RolesError): no footplants, the editing works
+            feet = []
+        for ankle, toe in feet:
+            own = [j for j in (ankle, toe) if j is not None and j in contacts.joints]
+            if not own:
+                continue
+            mask = np.any(np.stack([contacts.of(j) for j in own], axis=1), axis=1)
+            mids = [(a + b - 1) // 2 for a, b in intervals_from_mask(mask)]
+            out.append((ankle, toe if toe in clip.skeleton.names else None, mids))
+        self._plant_cache[k] = (clip, out)
+        return out
+
+    def _draw_footplants(self) -> None:
+        """Footprints where the edited motions plant their feet (heel to toe, on the ground view)."""
+        polys, plants, colors = [], [], []
+        length, width = self.footprint_size
+        u = np.linspace(0.0, 2.0 * np.pi, 13)[:-1]
+        outline = np.column_stack([0.5 * length * np.cos(u), 0.5 * width * np.sin(u)])
+        for k in range(len(self.result.paths)):
+            found = []
+            feet = self._plants(k)
+            if feet and any(mids for _, _, mids in feet):
+                motion = self.result.edited_motions[k]
+                g = motion.global_positions()
+                names = motion.skeleton.names
+                for ankle, toe, mids in feet:
+                    if not mids:
+                        continue
+                    heel = g[mids, names.index(ankle)][:, [0, 2]]
+                    if toe is not None:
+                        tip = g[mids, names.index(toe)][:, [0, 2]]
+                        centre, d = 0.5 * (heel + tip), tip - heel
+                    else:
+                        tangent = np.asarray(self.result.tangents[k], dtype=float)[mids]
+                        centre, d = heel, tangent
+                    angle = np.arctan2(d[:, 1], d[:, 0])
+                    found.append(np.column_stack([centre, angle]))
+            plants_k = np.concatenate(found) if found else np.zeros((0, 3))
+            plants.append(plants_k)
+            for x, z, a in plants_k:
+                c, s_ = np.cos(a), np.sin(a)
+                polys.append(outline @ np.array([[c, s_], [-s_, c]]) + (x, z))
+                colors.append(self.colors[k])
+        self.footplants = plants
+        self._feet.set_verts(polys)
+        self._feet.set_facecolor(colors or "none")
 
     def _draw_now(self) -> None:
         t = float(self.time.value)
@@ -381,6 +515,7 @@ class PathEditor(DragView):
 
     # ------------------------------------------------------------------ events
     def _press(self, event: Any, press: tuple[float, float]) -> None:
+        self._gesture_transformations = len(getattr(self.result, "transformations", ()) or ())
         shift = "shift" in getattr(event, "modifiers", ()) or event.key == "shift"
         handle = self._pick_handle(event)
         if handle is not None and not (shift and handle[1] == "pin"):
@@ -424,9 +559,24 @@ class PathEditor(DragView):
         self._view.draw(final=True)
 
     # ------------------------------------------------------------------ status
+    def _transformation_note(self, *, new_only: bool) -> str:
+        """`` · applied <the core's description> (frames a-b highlighted)`` for the last transformation."""
+        done = tuple(getattr(self.result, "transformations", ()) or ())
+        if not done or (new_only and len(done) <= self._gesture_transformations) or self.highlighted is None:
+            return ""
+        _, a, b = self.highlighted
+        return f" · applied {done[-1]} (frames {a}-{b} highlighted)"
+
+    def _history_note(self) -> str:
+        return self._transformation_note(new_only=False)
+
     def _describe(self, index: int, *, prefix: str) -> None:
+        self._set_status(self._description(index, prefix=prefix) + self._transformation_note(new_only=True))
+
+    def _description(self, index: int, *, prefix: str) -> str:
         c = self._drawn_constraints()[index]
         k, f = int(c.character), frame_of(c)
+        who = self._character(k)
         p = np.asarray(self.result.paths[k], dtype=float)
         if is_a(c, "PinPosition"):
             target = np.asarray(c.position, dtype=float).reshape(2)
@@ -434,7 +584,7 @@ class PathEditor(DragView):
             if residual is None:
                 residual = float(np.max(np.linalg.norm(p[_frames(c)] - target, axis=-1)))
             text = (
-                f"{prefix} PinPosition #{index} · character {k} frame {f} · "
+                f"{prefix} PinPosition #{index} · {who} frame {f} · "
                 f"target (x, z) = {_fmt_vec(target)} m · path {_fmt_vec(p[f])} m · residual {residual:.2e} m"
             )
         elif is_a(c, "PinDirection"):
@@ -442,15 +592,36 @@ class PathEditor(DragView):
             t = _tangent(p, f)
             angle = abs(float(np.degrees(np.arctan2(d[0] * t[1] - d[1] * t[0], d @ t))))
             text = (
-                f"{prefix} PinDirection #{index} · character {k} frame {f} · "
+                f"{prefix} PinDirection #{index} · {who} frame {f} · "
                 f"direction {_fmt_vec(d / max(np.linalg.norm(d), 1e-12))} · tangent off by {angle:.2f} deg"
             )
             residual = core_residual(self.result, index)
             if residual is not None:
                 text += f" · residual {residual:.2e} m"
         else:
-            text = f"{prefix} {kind_of(c)} #{index} · character {k} frame {f}"
-        self._set_status(text)
+            text = f"{prefix} {kind_of(c)} #{index} · {who} frame {f}"
+        return text
+
+
+def _is_discrete(editor: Any) -> bool:
+    """Whether the editor applies discrete transformations (a DiscreteEditor)."""
+    return hasattr(editor, "discrete_options") or hasattr(editor, "applied")
+
+
+def _changed_frames(result: Any) -> tuple[int, int, int] | None:
+    """``(character, first, last)``: the frames (inclusive, seams included) of the last transformation.
+
+    Its new frames ``Transformation.frames`` in the transformed clip, with the
+    frame before and after (a deletion's seam is those two frames).
+    """
+    done = tuple(getattr(result, "transformations", ()) or ())
+    if not done:
+        return None
+    t = done[-1]
+    k = int(t.character)
+    n = len(result.paths[k])
+    a, b = (int(v) for v in t.frames)
+    return k, max(a - 1, 0), min(b, n - 1)
 
 
 def _frames(c: Any) -> NDArray[np.int64]:

@@ -34,6 +34,7 @@ from typing import Any
 import ipywidgets as W
 import numpy as np
 from matplotlib.collections import LineCollection
+from matplotlib.lines import Line2D
 from numpy.typing import NDArray
 
 from mocaplab import editing
@@ -150,12 +151,27 @@ class TimeTrackEditor(DragView):
         (self._dur_bars,) = self.ax.plot([], [], "-", color="k", lw=2.5, alpha=0.7, zorder=4)
         (self._dur_ends,) = self.ax.plot([], [], "s", ms=9, mfc="gold", mec="k", zorder=6)
         (self._syncs,) = self.ax.plot([], [], "-", color="crimson", lw=1.5, zorder=3)
+        self._legend()
         self._open(
-            W.VBox([self._view.widget, self.status, self.handles_info]),
+            W.VBox([self._view.widget, self.status, self.controls, self.handles_info]),
             "press a frame tick to pin its time; drag a handle to move it; click a handle to remove it",
         )
 
     # ------------------------------------------------------------------ drawing
+    def _legend(self) -> None:
+        """A legend right of the tracks naming the handle kinds (hard and soft times apart)."""
+        entries = [
+            (Line2D([], [], marker="v", ms=9, mfc="k", mec="k", mew=2.0, ls="none"), "hard time"),
+            (Line2D([], [], marker="v", ms=9, mfc="white", mec="k", mew=2.0, ls="none"), "soft time"),
+            (
+                Line2D([], [], color="k", lw=2.5, alpha=0.7, marker="s", ms=7, mfc="gold", mec="k", markevery=[1]),
+                "duration",
+            ),
+            (Line2D([], [], color="crimson", lw=1.5), "sync"),
+        ]
+        handles, labels = zip(*entries, strict=True)
+        self.figure.legend(handles, labels, loc="outside right upper", fontsize="x-small", frameon=False)
+
     def _fit_view(self, *, grow_only: bool = False) -> None:
         times = [np.asarray(t, dtype=float) for t in [*self.result.times, *self.original_times]]
         lo = min(float(t.min()) for t in times)
@@ -236,21 +252,22 @@ class TimeTrackEditor(DragView):
 
     # ------------------------------------------------------------------ status
     def _describe(self, index: int, *, prefix: str) -> None:
-        c = self.editor.constraints[index]
+        c = self._drawn_constraints()[index]
         k, f = int(c.character), frame_of(c)
+        who = self._character(k)
         t = np.asarray(self.result.times[k], dtype=float)
         steps = [np.diff(np.asarray(tt, dtype=float)) for tt in self.result.times if len(tt) > 1]
         min_step = min(float(s.min()) for s in steps) if steps else float("nan")
         if is_a(c, "AbsoluteTime"):
             residual = abs(t[f] - float(c.time))
-            text = f"{prefix} AbsoluteTime #{index} · character {k} frame {f} · t = {float(c.time):.3f} s"
+            text = f"{prefix} AbsoluteTime #{index} · {who} frame {f} · t = {float(c.time):.3f} s"
         elif is_a(c, "Duration"):
             e = int(c.end_frame)
             residual = abs(t[e] - t[f] - float(c.duration))
-            text = f"{prefix} Duration #{index} · character {k} frames {f}-{e} · duration {float(c.duration):.3f} s"
+            text = f"{prefix} Duration #{index} · {who} frames {f}-{e} · duration {float(c.duration):.3f} s"
         else:
             residual = float("nan")
-            text = f"{prefix} {kind_of(c)} #{index} · character {k} frame {f}"
+            text = f"{prefix} {kind_of(c)} #{index} · {who} frame {f}"
         core = core_residual(self.result, index)
         residual = residual if core is None else core
         self._set_status(f"{text} · residual {residual:.2e} s · min step {min_step:.4f} s")

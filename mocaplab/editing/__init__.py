@@ -82,8 +82,12 @@ Editing (:mod:`mocaplab.editing.scene`)
     ``.segments`` (rigid stationary segments), ``.options``,
     ``.factorizations`` (how many factorisations so far; a target drag adds
     none), ``.contact_joints(k)`` (the joints whose foot contacts are kept),
-    ``.snapshot()``/``.restore(state)``.
-    A failed update (ConstraintError) leaves the editor unchanged.
+    ``.snapshot()``/``.restore(state)``, and a history (:mod:`mocaplab.undo`):
+    ``.undo()``, ``.redo()``, ``.reset()`` (undoable), ``.checkpoint()`` (end a
+    gesture: drags of one constraint merge into one undo step until then),
+    ``.can_undo``, ``.can_redo``, ``.undo_stack``; a DiscreteEditor has the
+    same (its steps include the transformations a drag applied).
+    A failed update (ConstraintError) leaves the editor unchanged and records nothing.
     ``EditResult``: ``.paths[k] (F_k, 2)``, ``.times[k] (F_k,)``, ``.motions[k]``
     (lazy; all on one shared clock ``.clock (N,)``, pose held outside each
     character's own span, ``.active[k] (N,) bool``), ``.shape_paths[k]``

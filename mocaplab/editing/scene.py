@@ -88,6 +88,7 @@ from numpy.typing import NDArray
 
 from ..motion import Motion
 from ..refinement import EndEffector
+from ..undo import UndoStack
 from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint, Relative, effector_frames
 from .energy import Energies
 from .laplacian import Rows, SpatialFactors, SpatialSolution, SpatialSolver, heading_changes, spatial_rows
@@ -98,25 +99,29 @@ __all__ = ["edit", "SceneEditor", "EditResult"]
 
 Array = NDArray[np.float64]
 
-_OPTIONS: Mapping[str, Any] = MappingProxyType({
-    "scale_compensation": True,
-    "stationary": "auto",
-    "stationary_speed": 0.15,
-    "stationary_min_duration": 0.3,
-    "min_speed": 0.1,
-    "min_step": 0.25,
-    "max_step": 4.0,
-    "flip_threshold": math.pi / 6,
-    "flip_window": 1.0,
-    "relative_tolerance": 1e-3,
-    "relative_iterations": 20,
-    "variational_step": 10,
-    "start_times": None,
-    "clock_fps": None,
-    "refine": False,
-    "roles": None,
-    "joints": None,
-})
+_OPTIONS: Mapping[str, Any] = MappingProxyType(
+    {
+        "scale_compensation": True,
+        "stationary": "auto",
+        "stationary_speed": 0.15,
+        "stationary_min_duration": 0.3,
+        "min_speed": 0.1,
+        "min_step": 0.25,
+        "max_step": 4.0,
+        "flip_threshold": math.pi / 6,
+        "flip_window": 1.0,
+        "relative_tolerance": 1e-3,
+        "relative_iterations": 20,
+        "variational_step": 10,
+        "start_times": None,
+        "clock_fps": None,
+        "refine": False,
+        "roles": None,
+        "joints": None,
+    }
+)
+
+_UNDO_LIMIT = 200  # undo steps kept (each holds a result)
 
 
 def _effectors(constraints: Sequence[Any], K: int) -> tuple[tuple[EndEffector, ...], ...]:
@@ -262,10 +267,25 @@ class SceneEditor:
     system is not re-solved when only temporal constraints change, and vice
     versa.
 
+    History (:attr:`undo_stack`, a :class:`mocaplab.undo.UndoStack` of
+    :meth:`snapshot` states): every successful :meth:`drag`, :meth:`add`,
+    :meth:`remove`, :meth:`replace` and :meth:`set_constraints` records the
+    new state; a failed one records nothing and leaves the editor as it was.
+    One undo step is one gesture: consecutive :meth:`drag` calls on the same
+    constraint, and an :meth:`add` followed by drags of the constraint it
+    added (a press that pins a point, then drags it), merge into one step
+    until :meth:`checkpoint` (the widgets call it when the mouse is
+    released).  :meth:`undo` and :meth:`redo` restore a recorded state
+    exactly (the same constraints and the very same :class:`EditResult`);
+    :meth:`reset` returns to the constraints the editor was created with,
+    as one more (undoable) step.
+
     Examples
     --------
     >>> ed = SceneEditor([walk], [PinPosition(0, 0, start, hard=True), PinPosition(0, 100, goal)])  # doctest: +SKIP
     >>> res = ed.drag(1, (2.0, 1.0))  # doctest: +SKIP
+    >>> ed.checkpoint(); ed.undo() is not res  # doctest: +SKIP
+    True
     """
 
     def __init__(self, characters: Any, constraints: Sequence[Any] = (), **options: Any) -> None:
@@ -329,6 +349,7 @@ class SceneEditor:
         self._time_sol: tuple[Array, tuple[int, ...]] | None = None
         self._result: EditResult | None = None
         self._set(tuple(constraints), changed=None)
+        self.undo_stack: UndoStack[tuple[Any, ...]] = UndoStack(self.snapshot(), limit=_UNDO_LIMIT)
 
     # ------------------------------------------------------------ set-up
     def _stationary(self, spec: Any) -> list[list[tuple[int, int]]]:
@@ -495,36 +516,78 @@ class SceneEditor:
         return self._sd.factorizations + self._td.factorizations
 
     def drag(self, constraint_index: int, new_target: Any) -> EditResult:
-        """Move constraint ``constraint_index``'s target (see :attr:`Constraint.target`) and re-solve."""
+        """Move constraint ``constraint_index``'s target (see :attr:`Constraint.target`) and re-solve.
+
+        Consecutive drags of one constraint are one undo step (until :meth:`checkpoint`).
+        """
         i = self._check_index(constraint_index)
         c = self._constraints[i]
         if not hasattr(c, "with_target"):
             raise TypeError(f"constraint #{i} {c!r} has no draggable target")
         new = list(self._constraints)
         new[i] = c.with_target(new_target)
-        return self._set(tuple(new), changed=i)
+        return self._record(self._set(tuple(new), changed=i), merge=("edit", i))
 
     def add(self, constraint: Any) -> int:
-        """Append a constraint and re-solve; returns its index."""
-        self._set(self._constraints + (constraint,), changed=None)
-        return len(self._constraints) - 1
+        """Append a constraint and re-solve; returns its index.
+
+        Drags of the new constraint that follow merge into this undo step (until :meth:`checkpoint`).
+        """
+        index = len(self._constraints)
+        self._record(self._set(self._constraints + (constraint,), changed=None), merge=("edit", index))
+        return index
 
     def remove(self, index: int) -> EditResult:
-        """Remove constraint ``index`` (later indices shift down by one) and re-solve."""
+        """Remove constraint ``index`` (later indices shift down by one) and re-solve (one undo step)."""
         i = self._check_index(index)
-        return self._set(self._constraints[:i] + self._constraints[i + 1 :], changed=None)
+        return self._record(self._set(self._constraints[:i] + self._constraints[i + 1 :], changed=None))
 
     def replace(self, index: int, constraint: Any) -> EditResult:
-        """Put ``constraint`` in place of constraint ``index`` and re-solve."""
+        """Put ``constraint`` in place of constraint ``index`` and re-solve (one undo step)."""
         i = self._check_index(index)
         new = list(self._constraints)
         new[i] = constraint
         same = type(constraint) is type(self._constraints[i])
-        return self._set(tuple(new), changed=i if same else None)
+        return self._record(self._set(tuple(new), changed=i if same else None))
 
     def set_constraints(self, constraints: Sequence[Any]) -> EditResult:
-        """Replace every constraint and re-solve."""
-        return self._set(tuple(constraints), changed=None)
+        """Replace every constraint and re-solve (one undo step)."""
+        return self._record(self._set(tuple(constraints), changed=None))
+
+    # ----------------------------------------------------------- history
+    def _record(self, result: EditResult, merge: Any = None) -> EditResult:
+        self.undo_stack.push(self.snapshot(), merge=merge)
+        return result
+
+    @property
+    def can_undo(self) -> bool:
+        """Whether :meth:`undo` has a step to undo."""
+        return self.undo_stack.can_undo
+
+    @property
+    def can_redo(self) -> bool:
+        """Whether :meth:`redo` has an undone step to redo."""
+        return self.undo_stack.can_redo
+
+    def checkpoint(self) -> None:
+        """End a gesture: the next edit starts a new undo step."""
+        self.undo_stack.checkpoint()
+
+    def undo(self) -> EditResult:
+        """Go back one undo step (see the class notes); :class:`IndexError` when there is none."""
+        self.restore(self.undo_stack.undo())
+        return self.result
+
+    def redo(self) -> EditResult:
+        """Redo the step undone last; :class:`IndexError` when there is none."""
+        self.restore(self.undo_stack.redo())
+        return self.result
+
+    def reset(self) -> EditResult:
+        """Back to the constraints the editor was created with (an undoable step; none if already there)."""
+        if self.undo_stack.current is not self.undo_stack.initial:
+            self.restore(self.undo_stack.reset())
+        return self.result
 
     @property
     def tangent_rows(self) -> Any:
@@ -887,7 +950,9 @@ class EditResult:
                     vals = np.stack([rows[pairs], rows[pairs + 1]], axis=1)
                     sub = dataclasses.replace(
                         metric,
-                        tangent=metric.tangent[np.stack([2 * np.flatnonzero(sel), 2 * np.flatnonzero(sel) + 1], 1).ravel()],
+                        tangent=metric.tangent[
+                            np.stack([2 * np.flatnonzero(sel), 2 * np.flatnonzero(sel) + 1], 1).ravel()
+                        ],
                         coef=metric.coef[sel],
                         length=metric.length[sel],
                         linear=metric.linear[sel],

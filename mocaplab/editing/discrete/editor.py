@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ...undo import UndoStack
 from ..constraints import ConstraintError
 from ..energy import deformation_energy
 from ..graph import MotionGraph, SimilarityWeights, build_graph
@@ -66,6 +67,8 @@ from .transformations import (
 __all__ = ["DiscreteOptions", "DiscreteEditor", "Step", "Timing"]
 
 Array = NDArray[np.float64]
+
+_UNDO_LIMIT = 100  # undo steps kept (each holds a result and, after a transformation, its scene editor)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -150,8 +153,6 @@ class DiscreteOptions:
         return self.locality.get(character, Locality())
 
 
-
-
 @dataclasses.dataclass(frozen=True)
 class Step:
     """One applied transformation and what it was chosen from.
@@ -193,15 +194,20 @@ class Timing:
 
 
 def _update(scene: SceneEditor, constraints: tuple[Any, ...]) -> None:
-    """Give ``scene`` these constraints: a target drag (right-hand sides only) when one constraint moved."""
+    """Give ``scene`` these constraints: a target drag (right-hand sides only) when one constraint moved.
+
+    The inner scene keeps no history of its own (the discrete editor's
+    :attr:`DiscreteEditor.undo_stack` holds its snapshots), so its private
+    solve is called rather than its recording ``replace``.
+    """
     old = scene.constraints
     if old == constraints:
         return
     diff = [i for i, (x, y) in enumerate(zip(old, constraints, strict=False)) if x != y]
     if len(old) == len(constraints) and len(diff) == 1 and type(old[diff[0]]) is type(constraints[diff[0]]):
-        scene.replace(diff[0], constraints[diff[0]])
+        scene._set(constraints, changed=diff[0])
     else:
-        scene.set_constraints(constraints)
+        scene._set(constraints, changed=None)
 
 
 def _options(discrete: Any) -> DiscreteOptions:
@@ -238,6 +244,23 @@ class DiscreteEditor:
         One per greedy step.
     updates : int
         Constraint updates so far.
+    undo_stack : mocaplab.undo.UndoStack
+        The edit history (not to be confused with :attr:`history`, the
+        record of applied transformations).
+
+    Notes
+    -----
+    Undo, redo and reset work as for
+    :class:`~mocaplab.editing.scene.SceneEditor`, and one undo step is the
+    same: one constraint update, consecutive drags of one constraint (and
+    an :meth:`add` followed by drags of its constraint) merged until
+    :meth:`checkpoint`.  A state (:meth:`snapshot`) is the whole discrete
+    state: the constraints, the tracks (the current transformed motions),
+    the transformations applied (:attr:`applied`, :attr:`history`), the
+    continuous editor of the transformed scene and its own state, and the
+    result; so undoing a drag that inserted steps removes them.
+    :attr:`timings`, :attr:`updates` and :attr:`factorizations` count the
+    work done and are not undone.
 
     Examples
     --------
@@ -245,7 +268,9 @@ class DiscreteEditor:
     >>> ed.drag(1, p1 + (0.0, 2.0)).transformations  # doctest: +SKIP
     """
 
-    def __init__(self, characters: Any, constraints: Sequence[Any] = (), *, discrete: Any = True, **options: Any) -> None:
+    def __init__(
+        self, characters: Any, constraints: Sequence[Any] = (), *, discrete: Any = True, **options: Any
+    ) -> None:
         self.discrete_options = _options(discrete)
         o = self.discrete_options
         scene = SceneEditor(characters, constraints, **options)
@@ -284,6 +309,7 @@ class DiscreteEditor:
         self._constraints: tuple[Any, ...] = ()
         self._result: EditResult | None = None
         self._set(scene.constraints)
+        self.undo_stack: UndoStack[tuple[Any, ...]] = UndoStack(self.snapshot(), limit=_UNDO_LIMIT)
 
     # ------------------------------------------------------------ public
     @property
@@ -311,32 +337,95 @@ class DiscreteEditor:
         return self._scene.contact_joints(character)
 
     def drag(self, constraint_index: int, new_target: Any) -> EditResult:
-        """Move constraint ``constraint_index``'s target and run one update of Algorithm 1."""
+        """Move constraint ``constraint_index``'s target and run one update of Algorithm 1.
+
+        Consecutive drags of one constraint are one undo step (until :meth:`checkpoint`).
+        """
         i = self._check_index(constraint_index)
         c = self._constraints[i]
         if not hasattr(c, "with_target"):
             raise TypeError(f"constraint #{i} {c!r} has no draggable target")
         new = list(self._constraints)
         new[i] = c.with_target(new_target)
-        return self._set(tuple(new))
+        return self._record(self._set(tuple(new)), merge=("edit", i))
 
     def add(self, constraint: Any) -> int:
-        """Append a constraint (update); returns its index."""
-        self._set(self._constraints + (constraint,))
-        return len(self._constraints) - 1
+        """Append a constraint (update); returns its index.  Drags of it that follow merge into this undo step."""
+        index = len(self._constraints)
+        self._record(self._set(self._constraints + (constraint,)), merge=("edit", index))
+        return index
 
     def remove(self, index: int) -> EditResult:
+        """Remove constraint ``index`` (update; one undo step)."""
         i = self._check_index(index)
-        return self._set(self._constraints[:i] + self._constraints[i + 1 :])
+        return self._record(self._set(self._constraints[:i] + self._constraints[i + 1 :]))
 
     def replace(self, index: int, constraint: Any) -> EditResult:
+        """Put ``constraint`` in place of constraint ``index`` (update; one undo step)."""
         i = self._check_index(index)
         new = list(self._constraints)
         new[i] = constraint
-        return self._set(tuple(new))
+        return self._record(self._set(tuple(new)))
 
     def set_constraints(self, constraints: Sequence[Any]) -> EditResult:
-        return self._set(tuple(constraints))
+        """Replace every constraint (update; one undo step)."""
+        return self._record(self._set(tuple(constraints)))
+
+    # ----------------------------------------------------------- history
+    def snapshot(self) -> tuple[Any, ...]:
+        """The whole discrete state (see the class notes), for :meth:`restore`."""
+        return (
+            self._constraints,
+            self.tracks,
+            self.applied,
+            self.history,
+            self._scene,
+            self._scene.snapshot(),
+            self._result,
+        )
+
+    def restore(self, state: tuple[Any, ...]) -> None:
+        """Go back to a :meth:`snapshot` (the history of edits is not touched; see :meth:`undo`)."""
+        constraints, tracks, applied, history, scene, scene_state, result = state
+        if scene is not self._scene:  # keep `factorizations` counting the work done
+            self._retired_factorizations += self._scene.factorizations - scene.factorizations
+        scene.restore(scene_state)
+        self._constraints, self.tracks, self.applied, self.history = constraints, tracks, applied, history
+        self._scene, self._result = scene, result
+
+    def _record(self, result: EditResult, merge: Any = None) -> EditResult:
+        self.undo_stack.push(self.snapshot(), merge=merge)
+        return result
+
+    @property
+    def can_undo(self) -> bool:
+        """Whether :meth:`undo` has a step to undo."""
+        return self.undo_stack.can_undo
+
+    @property
+    def can_redo(self) -> bool:
+        """Whether :meth:`redo` has an undone step to redo."""
+        return self.undo_stack.can_redo
+
+    def checkpoint(self) -> None:
+        """End a gesture: the next edit starts a new undo step."""
+        self.undo_stack.checkpoint()
+
+    def undo(self) -> EditResult:
+        """Go back one undo step (transformations applied in it are removed); :class:`IndexError` if none."""
+        self.restore(self.undo_stack.undo())
+        return self.result
+
+    def redo(self) -> EditResult:
+        """Redo the step undone last; :class:`IndexError` when there is none."""
+        self.restore(self.undo_stack.redo())
+        return self.result
+
+    def reset(self) -> EditResult:
+        """Back to the input constraints and the untransformed clips (an undoable step; none if already there)."""
+        if self.undo_stack.current is not self.undo_stack.initial:
+            self.restore(self.undo_stack.reset())
+        return self.result
 
     def _check_index(self, index: Any) -> int:
         n = len(self._constraints)
@@ -386,7 +475,9 @@ class DiscreteEditor:
         return opts
 
     # ------------------------------------------------------------ greedy
-    def _scored(self, tracks: Sequence[Track], scene: SceneEditor, mapped: tuple[Any, ...], subsample: int) -> SubsampledScene:
+    def _scored(
+        self, tracks: Sequence[Track], scene: SceneEditor, mapped: tuple[Any, ...], subsample: int
+    ) -> SubsampledScene:
         o = self.discrete_options
         result = scene.result
         starts = self.options.get("start_times") or [0.0] * len(tracks)
@@ -508,7 +599,15 @@ class DiscreteEditor:
                 best, new_tracks, new_mapped, new_scene, new_result = accepted
                 k = best.character
                 history.append(
-                    Step(best, info["candidates"], info["energies"], info["baseline"], mapped, result.times[k], result.paths[k])
+                    Step(
+                        best,
+                        info["candidates"],
+                        info["energies"],
+                        info["baseline"],
+                        mapped,
+                        result.times[k],
+                        result.paths[k],
+                    )
                 )
                 applied.append(best)
                 if new_scene is not scene:

@@ -345,7 +345,9 @@ def _knee_flexion(m, hinges, legs) -> np.ndarray:
     for (u, k, a), h in zip(legs, hinges, strict=True):
         thigh, shank = p[:, u] - p[:, k], p[:, a] - p[:, k]
         axis = quat.rotate(g[:, k], h)
-        out.append(np.degrees(np.arctan2(np.einsum("ij,ij->i", np.cross(thigh, shank), axis), -np.sum(thigh * shank, -1))))
+        out.append(
+            np.degrees(np.arctan2(np.einsum("ij,ij->i", np.cross(thigh, shank), axis), -np.sum(thigh * shank, -1)))
+        )
     return np.stack(out, axis=1)
 
 
@@ -537,3 +539,151 @@ def test_editor_drives_the_representation(cmu) -> None:
     ed.set_random(tau=0.0)
     ed.set_exaggeration(0.0)
     assert max_diff(ed.evaluate(), walk)[0] < 1e-6
+
+
+# ------------------------------------------------------------ editor history
+def _snapshot(ed: StaggeredEditor) -> tuple:
+    m = ed.evaluate()
+    return ed.params, np.array(ed.current.refinements), np.array(m.rotations), np.array(m.root_positions)
+
+
+def _assert_snapshot(ed: StaggeredEditor, snap: tuple) -> None:
+    params, refinements, rotations, root = snap
+    assert ed.params == params
+    m = ed.evaluate()
+    assert np.array_equal(ed.current.refinements, refinements)
+    assert np.array_equal(m.rotations, rotations) and np.array_equal(m.root_positions, root)
+
+
+@pytest.fixture(scope="module")
+def jump16_05(mocap_dir):
+    from mocaplab import data
+
+    return data.cmu("16_05")
+
+
+def test_editor_undo_redo_reset_restore_current_exactly(jump16_05) -> None:
+    ed = StaggeredEditor(jump16_05, max_poses=8, optimize=False)
+    assert not ed.can_undo and not ed.can_redo
+    with pytest.raises(IndexError, match="nothing to undo"):
+        ed.undo()
+    snaps = [_snapshot(ed)]
+    edits = [
+        lambda: ed.set_succession(s=0.02),
+        lambda: ed.set_succession(l=2.0),
+        lambda: ed.set_random(tau=0.03, seed=3),
+        lambda: ed.set_random(by="limb"),
+        lambda: ed.set_exaggeration(0.3, joints=["LeftArm", "RightArm"]),
+        lambda: ed.set_pose_count(5),
+        lambda: ed.set_staggered(False),
+        lambda: ed.select(2),
+        lambda: ed.set_succession(joint="LeftArm"),
+    ]
+    for edit_ in edits:
+        edit_()
+        ed.checkpoint()
+        assert ed.params != snaps[-1][0], "every edit changes the record"
+        snaps.append(_snapshot(ed))
+    assert ed.params.exaggerate_joints == ("LeftArm", "RightArm") and ed.selected == 2 and ed.current.n_poses == 5
+    for snap in reversed(snaps[:-1]):  # undo walks back through every state, exactly
+        ed.undo()
+        _assert_snapshot(ed, snap)
+    assert not ed.can_undo and ed.can_redo
+    for snap in snaps[1:]:
+        ed.redo()
+        _assert_snapshot(ed, snap)
+    assert not ed.can_redo
+    # reset is an edit: back to the start, and undoable
+    ed.reset()
+    _assert_snapshot(ed, snaps[0])
+    assert ed.can_undo and max_diff(ed.evaluate(), jump16_05)[0] < 1e-6
+    ed.undo()
+    _assert_snapshot(ed, snaps[-1])
+    # a new edit drops the redo states
+    ed.undo()
+    ed.set_succession(s=-0.01)
+    assert not ed.can_redo and ed.s == -0.01
+
+
+def test_editor_refits_only_when_the_pose_count_changes(jump16_05, monkeypatch) -> None:
+    ed = StaggeredEditor(jump16_05, max_poses=8, optimize=False)
+    calls: list = []
+    extract_ = ed._extract
+    monkeypatch.setattr(ed, "_extract", lambda *a, **k: calls.append(k["max_poses"]) or extract_(*a, **k))
+    ed.set_succession(s=0.02)
+    ed.set_random(tau=0.02)
+    ed.undo()
+    ed.reset()
+    assert calls == []
+    base8 = ed.base
+    ed.set_pose_count(5)
+    assert calls == [5]
+    ed.undo()
+    assert ed.base is base8 and ed.current.n_poses == 8
+    ed.redo()
+    assert calls == [5] and ed.current.n_poses == 5
+
+
+def test_slider_changes_of_one_parameter_merge_until_checkpoint(jump16_05) -> None:
+    ed = StaggeredEditor(jump16_05, max_poses=8, optimize=False)
+    for s in (0.01, 0.02, 0.03):  # one slider drag
+        ed.set_succession(s=s)
+    ed.undo()
+    assert ed.s == 0.0 and not ed.can_undo
+    ed.set_succession(s=0.01)
+    ed.checkpoint()
+    ed.set_succession(s=0.02)
+    ed.undo()
+    assert ed.s == 0.01
+    # another parameter starts a new step, without a checkpoint
+    ed.set_succession(l=2.0)
+    ed.set_random(tau=0.02)
+    ed.undo()
+    assert (ed.s, ed.l, ed.tau) == (0.01, 2.0, 0.0)
+    # selections merge with each other, not with the edits
+    ed.select(2)
+    ed.select(3)
+    ed.undo()
+    assert ed.selected == 0 and ed.l == 2.0
+
+
+def test_no_change_and_rejected_edits_push_nothing(jump16_05) -> None:
+    ed = StaggeredEditor(jump16_05, max_poses=8, optimize=False)
+    ed.set_succession(s=0.02)
+    ed.checkpoint()
+    before = _snapshot(ed)
+    current = ed.current
+    ed.set_succession(s=0.02)  # the value it already has
+    ed.set_staggered(True)
+    ed.select(0)
+    for bad in (lambda: ed.set_succession(l=-1.0), lambda: ed.set_exaggeration(float("nan"))):
+        bad()
+        assert ed.message.startswith("edit rejected: Expected")
+        assert ed.current is current
+        _assert_snapshot(ed, before)
+    with pytest.raises(ValueError, match="max_poses"):
+        ed.set_pose_count(1)
+    _assert_snapshot(ed, before)
+    ed.undo()  # one step back is the start: nothing above was recorded
+    assert not ed.can_undo and ed.s == 0.0 and ed.message == ""
+
+
+def test_editor_parameters_are_read_only(jump16_05) -> None:
+    import dataclasses
+
+    ed = StaggeredEditor(jump16_05, max_poses=6, optimize=False)
+    with pytest.raises(AttributeError):
+        ed.s = 0.1  # type: ignore[misc]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        ed.params.s = 0.1  # type: ignore[misc]
+
+
+def test_reset_at_the_start_and_selection_beyond_a_smaller_pose_count(jump16_05) -> None:
+    ed = StaggeredEditor(jump16_05, max_poses=8, optimize=False)
+    ed.reset()  # already there: nothing to undo afterwards
+    assert not ed.can_undo
+    ed.select(7)
+    ed.set_pose_count(5)
+    assert ed.selected == 4 and ed.overlay()[1].n_frames == 1  # the last pose stays selected
+    ed.undo()
+    assert ed.selected == 7 and ed.current.n_poses == 8

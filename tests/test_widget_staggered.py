@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import json
 
 import numpy as np
@@ -21,7 +22,13 @@ def explorer(cmu, monkeypatch):
 
 
 def info(x) -> dict:
-    return json.loads(x.curves_info.value)
+    """The published curve statistics, as the browser reads them (the text of the HTML widget)."""
+    return json.loads(html.unescape(x.curves_info.value))
+
+
+def no_error(x) -> bool:
+    """No exception shown in the status line (timing warnings may be)."""
+    return "color:#b00" not in x.status.value
 
 
 def test_toggle_switches_to_non_staggered_curves(explorer) -> None:
@@ -135,3 +142,169 @@ def test_defaults_come_from_the_roles_below_a_static_root(cmu, monkeypatch) -> N
         assert np.abs(x.viewer.characters[3].motion.global_positions()[0] - m.global_positions()[f]).max() < 1e-9
     finally:
         x.close()
+
+
+# ------------------------------------------------------------ history, export, sync
+def test_undo_redo_reset_buttons_restore_the_sliders(explorer) -> None:
+    x = explorer
+    h = x.history
+    assert "mocaplab-undo" in h.undo._dom_classes and h.undo.disabled and h.redo.disabled
+    x.s_slider.value = 0.02
+    at_002 = info(x)["checksum"]
+    x.s_slider.value = 0.04  # a second release of the same slider is a step of its own
+    x.wr_slider.value = 0.3
+    assert not h.undo.disabled
+    h.undo.click()
+    assert x.wr_slider.value == x.editor.w_r == 0.0 and x.s_slider.value == 0.04
+    h.undo.click()
+    assert x.s_slider.value == x.editor.s == 0.02
+    assert info(x)["checksum"] == pytest.approx(at_002, rel=1e-12)
+    assert not h.redo.disabled
+    h.redo.click()
+    assert x.s_slider.value == 0.04 and no_error(x)
+    x.toggle.value = False
+    x.count_slider.value = 5
+    h.reset.click()
+    assert (x.s_slider.value, x.wr_slider.value, x.toggle.value, x.count_slider.value) == (0.0, 0.0, True, 8)
+    assert len(x.pose_list.options) == 8
+    h.undo.click()  # the reset is undoable
+    assert (x.s_slider.value, x.toggle.value, x.count_slider.value) == (0.04, False, 5)
+
+
+def test_controls_show_the_editors_values_after_an_error(explorer, monkeypatch) -> None:
+    """The issue's case: an unexpected error left the slider at 0.8 while the editor kept 0.0."""
+    from mocaplab.staggered import StaggeredMotion
+
+    x = explorer
+    monkeypatch.setattr(x.editor, "set_exaggeration", lambda w: (_ for _ in ()).throw(RuntimeError("boom")))
+    x.wr_slider.value = 0.8
+    assert "RuntimeError" in x.status.value and "boom" in x.status.value
+    assert x.wr_slider.value == x.editor.w_r == 0.0
+    monkeypatch.undo()
+    # the editor accepted the value, the drawing failed: the slider keeps the editor's 0.8
+    monkeypatch.setattr(x, "_draw_curves", lambda: (_ for _ in ()).throw(RuntimeError("draw")))
+    x.wr_slider.value = 0.8
+    assert "RuntimeError" in x.status.value and x.wr_slider.value == x.editor.w_r == 0.8
+    monkeypatch.undo()
+    # an edit the editor rejects: its reason in the status line, the slider back at the editor's value
+    monkeypatch.setattr(StaggeredMotion, "succession", lambda *a, **k: (_ for _ in ()).throw(ValueError("<crossing>")))
+    x.s_slider.value = 0.03
+    assert "edit rejected" in x.status.value and "&lt;crossing&gt;" in x.status.value
+    assert x.s_slider.value == x.editor.s == 0.0
+    # a value set on the editor directly (beyond a slider's range) is shown, not clamped
+    monkeypatch.undo()
+    x.editor.set_succession(s=0.1)
+    x._refresh_all()
+    assert x.s_slider.value == 0.1 and x.s_slider.max >= 0.1
+
+
+def test_export_writes_the_motion_being_played(explorer, tmp_path) -> None:
+    from mocaplab.io import load_bvh
+
+    x = explorer
+    x.s_slider.value = 0.03
+    x.toggle.value = False
+    x.export.path.value = str(tmp_path / "edited.bvh")
+    x.export.button.click()
+    assert "mocaplab-export" in x.export.button._dom_classes and no_error(x)
+    back = load_bvh(tmp_path / "edited.bvh", scale=0.01)  # save_bvh writes centimetres
+    played = x.editor.evaluate()
+    assert back.n_frames == played.n_frames and back.skeleton.names == played.skeleton.names
+    assert np.abs(back.global_positions() - played.global_positions()).max() < 1e-3
+    staggered = x.editor.current.evaluate(staggered=True)
+    assert np.abs(back.global_positions() - staggered.global_positions()).max() > 1e-2  # the non-staggered one
+
+
+def test_the_3d_view_keeps_its_scrubbed_time(cmu, monkeypatch) -> None:
+    """Toggles, sliders and undo keep the frame the 3D view was scrubbed to; selecting a pose moves it to t_k."""
+    monkeypatch.setenv("MOCAPLAB_JUPYTER_BACKEND", "static")
+    from mocaplab.widgets import StaggeredExplorer
+
+    x = StaggeredExplorer(cmu("16_05"), max_poses=6, backend="agg", optimize=False)
+    try:
+        v = x.viewer
+        v.set_frame(40)
+        for change in (
+            lambda: setattr(x.toggle, "value", False),
+            lambda: setattr(x.s_slider, "value", 0.02),
+            lambda: setattr(x.wr_slider, "value", 0.3),
+            lambda: setattr(x.count_slider, "value", 5),
+            x.history.undo.click,
+            x.history.reset.click,
+        ):
+            change()
+            assert x.viewer is v and v.frame == 40 and no_error(x)
+        x.pose_list.value = 3
+        assert v.time == pytest.approx(x.editor.current.times[3], abs=1.0 / v.fps)
+        v.set_frame(50)
+        x.tau_slider.value = 0.02
+        assert v.frame == 50
+        x.history.undo.click()  # the random timing: the selection stays, so does the clock
+        assert v.frame == 50
+        x.history.undo.click()  # the selection: back to pose 0, and the clock to t_0
+        assert x.editor.selected == 0 and v.frame == 0
+    finally:
+        x.close()
+
+
+def test_the_toolbar_leaves_the_y_label_clear(cmu) -> None:
+    """ipympl's toolbar floats over the canvas' left edge: the axes (y label included) start to its right."""
+    pytest.importorskip("ipympl")
+    from mocaplab.widgets import StaggeredExplorer
+    from mocaplab.widgets._drag import TOOLBAR_PX
+
+    x = StaggeredExplorer(cmu("16_05"), max_poses=6, backend="ipympl", viewer=False, optimize=False)
+    assert x.interactive
+    renderer = x.figure.canvas.get_renderer()
+    x.figure.draw(renderer)
+    # ipympl shows one figure pixel per CSS pixel, the unit of TOOLBAR_PX
+    assert x.ax.yaxis.label.get_window_extent(renderer).x0 >= TOOLBAR_PX
+    assert x.ax.get_tightbbox(renderer).x0 >= TOOLBAR_PX
+
+
+@pytest.mark.filterwarnings("ignore:The motion path follows joint")
+@pytest.mark.parametrize("convention", ["mixamo", "game_studio"])
+def test_any_skeleton_and_roles(converted, convention, monkeypatch) -> None:
+    """A clip with other joint names (and a static root above the pelvis): defaults from its roles; ``roles=`` reaches the editor."""
+    monkeypatch.setenv("MOCAPLAB_JUPYTER_BACKEND", "static")
+    from mocaplab.widgets import StaggeredExplorer
+
+    m, names = converted("16_15", convention)
+    pelvis = m.skeleton.roles["pelvis"]
+    x = StaggeredExplorer(m, max_poses=6, backend="agg", viewer=False, optimize=False)
+    assert x.editor.joint == pelvis == names["Hips"] and x.succession_dropdown.value == pelvis
+    x.s_slider.value = 0.02
+    assert no_error(x) and "rejected" not in x.status.value
+    assert not np.array_equal(x.editor.current.refinements, x.editor.base.refinements)
+    x.history.undo.click()
+    assert x.s_slider.value == 0.0
+    spine = names["LowerBack"]
+    y = StaggeredExplorer(m, max_poses=6, backend="agg", viewer=False, optimize=False, roles={"pelvis": spine})
+    assert y.editor.joint == spine and y.editor.motion.skeleton.roles["pelvis"] == spine
+
+
+def test_joint_names_and_messages_are_escaped(cmu, monkeypatch) -> None:
+    import dataclasses
+
+    from mocaplab.widgets import StaggeredExplorer
+
+    m = cmu("16_05")
+    sk = m.skeleton
+    evil = "<b>LeftArm</b>"
+    m = m.replace(skeleton=dataclasses.replace(sk, names=tuple(evil if n == "LeftArm" else n for n in sk.names)))
+    x = StaggeredExplorer(m, max_poses=6, backend="agg", viewer=False, optimize=False, curve_joint=evil)
+    assert "&lt;b&gt;LeftArm&lt;/b&gt;" in x.curves_info.value and "<b>" not in x.curves_info.value
+    assert info(x)["variable"] == evil
+    x.editor.message = f"a warning naming {evil}"
+    x._refresh_all(viewers=False)
+    assert "&lt;b&gt;" in x.status.value and "<b>" not in x.status.value
+
+
+def test_edits_on_the_editor_show_when_the_widget_is_displayed(explorer) -> None:
+    x = explorer
+    x.editor.set_succession(s=0.02, l=2.0)  # as lesson 13 does before showing the explorer
+    x.editor.set_staggered(False)
+    assert x.s_slider.value == 0.0
+    assert x.widget is not None  # displaying it (reading the box) draws the edits
+    assert (x.s_slider.value, x.l_slider.value, x.toggle.value) == (0.02, 2.0, False)
+    assert info(x)["staggered"] is False and not x.history.undo.disabled

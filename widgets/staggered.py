@@ -1,7 +1,8 @@
 """The staggered-pose explorer: a thin view over :class:`mocaplab.staggered.StaggeredEditor`.
 
 Coleman et al. 2008 represent a motion as staggered poses whose knots carry
-timing refinements.  :class:`StaggeredExplorer` shows, for one clip:
+timing refinements.  :class:`StaggeredExplorer` shows, for one clip (any
+skeleton: the defaults come from its joint roles, ``roles=`` overrides them):
 
 * **joint curves** of a chosen control variable (rotation vector
   components of a joint, the root position or a joint's animated
@@ -17,16 +18,22 @@ timing refinements.  :class:`StaggeredExplorer` shows, for one clip:
   *random per limb* box), relative **exaggeration** ``w_r`` against
   the average pose, and the **pose count** (culling by priority);
 * the **pose list** with the priorities ``w_k`` and number of refined knots;
+* **Undo**, **Redo** and **Reset** (:class:`~mocaplab.widgets._controls.HistoryButtons`
+  over the editor's history; each slider release is one step) and
+  **Export BVH** of the motion being played;
 * one 3D view (:class:`~mocaplab.widgets.MotionViewer`) playing the current
   motion (purple) over the original (pale blue), with the selected pose's
   non-staggered pose (orange) and true pose at ``t_k`` (yellow) standing
-  where they happen (Figure 6); selecting a pose moves the clock to ``t_k``.
+  where they happen (Figure 6).  Selecting a pose moves the clock to
+  ``t_k``; every other change keeps the time the 3D view was scrubbed to.
 
 Every control forwards its value in one line to the core editor; the widget
-only draws.  Messages (timing warnings, rejected edits) appear in a status
-line (class ``mocaplab-staggered-status``).  The current curve statistics
-are published as JSON in a hidden HTML widget (class
-``mocaplab-staggered-curves``) for browser tests.
+only draws, and after every action (an error included) each control is set
+back from the editor, so they never disagree.  Messages (timing warnings,
+rejected edits, errors) appear, HTML-escaped, in a status line (class
+``mocaplab-staggered-status``).  The current curve statistics are published
+as JSON in a hidden HTML widget (class ``mocaplab-staggered-curves``) for
+browser tests.
 
 Examples
 --------
@@ -38,6 +45,7 @@ Examples
 from __future__ import annotations
 
 import html
+import io
 import json
 import traceback
 from collections.abc import Callable, Mapping
@@ -46,17 +54,21 @@ from typing import Any
 import ipywidgets as W
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.layout_engine import ConstrainedLayoutEngine
 
 from mocaplab.motion import Motion
 from mocaplab.staggered import StaggeredEditor
 
-from .path_editor import make_canvas
+from ._controls import ExportControl, HistoryButtons
+from ._drag import TOOLBAR_PX, make_canvas
 
 __all__ = ["StaggeredExplorer"]
 
 _COMPONENT_COLORS = ("#d62728", "#2ca02c", "#1f77b4")
 NON_STAGGERED_COLOR = "#ff7f0e"  # orange, as in Figure 6
 TRUE_POSE_COLOR = "#e6c700"  # yellow
+_FIGSIZE = (7.5, 3.6)
+_DPI = 100  # one figure pixel per CSS pixel, as TOOLBAR_PX counts them
 
 
 class StaggeredExplorer:
@@ -65,7 +77,8 @@ class StaggeredExplorer:
     Parameters
     ----------
     motion : Motion or StaggeredEditor
-        The clip (an editor is built for it), or an existing editor.
+        The clip (any skeleton; an editor is built for it), or an existing
+        editor.
     max_poses : int, optional
         Initial pose count (culling by priority); default every candidate.
     curve_joint : str, optional
@@ -77,7 +90,8 @@ class StaggeredExplorer:
         the joint roles, :func:`mocaplab.staggered.default_joint`).
     roles : mapping, optional
         Joint-role overrides (:func:`mocaplab.roles.resolve_roles`) for the
-        defaults (pelvis, contact joints, constraint layer).
+        defaults (pelvis, contact joints, constraint layer), passed to the
+        editor.
     viewer : bool
         Build the 3D views (:class:`~mocaplab.widgets.MotionViewer`).
     backend : str, optional
@@ -98,6 +112,10 @@ class StaggeredExplorer:
     count_slider : ipywidgets.IntSlider
     pose_list : ipywidgets.Select
     joint_dropdown, succession_dropdown : ipywidgets.Dropdown
+    history : HistoryButtons
+        ``.undo``, ``.redo``, ``.reset`` buttons (CSS ``mocaplab-undo`` ...).
+    export : ExportControl
+        Writes :meth:`StaggeredEditor.evaluate` (the motion played) as BVH.
     figure : matplotlib.figure.Figure
     """
 
@@ -129,15 +147,15 @@ class StaggeredExplorer:
         self._viewer_enabled = bool(viewer)
         self._syncing = False
         self._viewer_backend = viewer_backend
+        self.status = W.HTML(value="")
+        self.status.add_class("mocaplab-staggered-status")
         self._build_controls()
         self._build_figure(backend)
         self.view_box = W.Box(layout=W.Layout(min_height="40px"))
         self.viewer: Any = None
-        self.status = W.HTML(value="")
-        self.status.add_class("mocaplab-staggered-status")
         self.curves_info = W.HTML(value="", layout=W.Layout(display="none"))
         self.curves_info.add_class("mocaplab-staggered-curves")
-        self._refresh_all()
+        self._refresh_all(move_clock=True)
 
     # ------------------------------------------------------------ controls
     def _build_controls(self) -> None:
@@ -149,68 +167,141 @@ class StaggeredExplorer:
         self.s_slider = W.FloatSlider(
             value=ed.s, min=-0.06, max=0.06, step=0.005, readout_format=".3f", description="succession s", **slider
         )
+        self.s_slider.add_class("mocaplab-staggered-s")
         self.l_slider = W.FloatSlider(value=ed.l, min=0.5, max=4.0, step=0.1, description="exponent l", **slider)
         self.tau_slider = W.FloatSlider(
             value=ed.tau, min=0.0, max=0.1, step=0.005, readout_format=".3f", description="random tau", **slider
         )
         self.limb_check = W.Checkbox(value=ed.random_by == "limb", description="random per limb", indent=False)
-        self.wr_slider = W.FloatSlider(value=ed.w_r, min=-0.5, max=1.0, step=0.05, description="exaggerate w_r", **slider)
-        n_cand = ed.n_candidates
+        self.wr_slider = W.FloatSlider(
+            value=ed.w_r, min=-0.5, max=1.0, step=0.05, description="exaggerate w_r", **slider
+        )
         self.count_slider = W.IntSlider(
-            value=ed.current.n_poses, min=2, max=n_cand, step=1, description="poses", **slider
+            value=ed.current.n_poses, min=2, max=ed.n_candidates, step=1, description="poses", **slider
         )
         self.joint_dropdown = W.Dropdown(
-            options=list(ed.current.variables), value=ed.curve_joint, description="curves",
+            options=list(ed.current.variables),
+            value=ed.curve_joint,
+            description="curves",
             layout=W.Layout(width="260px"),
         )
         self.succession_dropdown = W.Dropdown(
             options=list(sk.names), value=ed.joint, description="depth from", layout=W.Layout(width="260px")
         )
-        self.pose_list = W.Select(options=[], rows=8, description="poses", layout=W.Layout(width="330px"))
-        self.toggle.observe(self._guard(lambda v: self.editor.set_staggered(v), redraw_viewers=True), names="value")
-        self.s_slider.observe(self._guard(lambda v: self.editor.set_succession(s=v)), names="value")
-        self.l_slider.observe(self._guard(lambda v: self.editor.set_succession(l=v)), names="value")
-        self.tau_slider.observe(self._guard(lambda v: self.editor.set_random(tau=v)), names="value")
-        self.limb_check.observe(
-            self._guard(lambda v: self.editor.set_random(by="limb" if v else "variable")), names="value"
-        )
-        self.wr_slider.observe(self._guard(lambda v: self.editor.set_exaggeration(v)), names="value")
-        self.count_slider.observe(self._guard(lambda v: self.editor.set_pose_count(v)), names="value")
-        self.succession_dropdown.observe(self._guard(lambda v: self.editor.set_succession(joint=v)), names="value")
-        self.joint_dropdown.observe(self._guard(lambda v: self.editor.set_curve_joint(v), viewers=False), names="value")
-        self.pose_list.observe(self._guard(self._on_select, viewers=False), names="value")
+        self.pose_list = W.Select(options=[], rows=8, description="poses", layout=W.Layout(width="400px"))
+        edit = self._observer
+        self.toggle.observe(edit(lambda v: self.editor.set_staggered(v)), names="value")
+        self.s_slider.observe(edit(lambda v: self.editor.set_succession(s=v)), names="value")
+        self.l_slider.observe(edit(lambda v: self.editor.set_succession(l=v)), names="value")
+        self.tau_slider.observe(edit(lambda v: self.editor.set_random(tau=v)), names="value")
+        self.limb_check.observe(edit(lambda v: self.editor.set_random(by="limb" if v else "variable")), names="value")
+        self.wr_slider.observe(edit(lambda v: self.editor.set_exaggeration(v)), names="value")
+        self.count_slider.observe(edit(lambda v: self.editor.set_pose_count(v)), names="value")
+        self.succession_dropdown.observe(edit(lambda v: self.editor.set_succession(joint=v)), names="value")
+        self.joint_dropdown.observe(edit(lambda v: self.editor.set_curve_joint(v), viewers=False), names="value")
+        # selections merge into one undo step (no checkpoint); they move the 3D clock to t_k
+        self.pose_list.observe(edit(self._select, checkpoint=False, move_clock=True), names="value")
+        self.history = HistoryButtons(self.editor, self._after_history, guard=self._run)
+        self.export = ExportControl(self.editor.evaluate, default="staggered_edit.bvh", guard=self._run)
 
-    def _guard(self, action: Callable[[Any], None], *, viewers: bool = True, redraw_viewers: bool = False) -> Callable:
-        """An observer calling ``action(new value)`` then redrawing; errors go to the status line."""
+    def _run(self, action: Callable[[], None]) -> None:
+        """Run a widget action; an error goes to the status line, and the controls show the editor's values."""
+        try:
+            action()
+        except Exception as err:  # show it in the widget instead of losing it in the log
+            self.status.value = (
+                f"<pre style='color:#b00; white-space:pre-wrap'>{html.escape(type(err).__name__)}: "
+                f"{html.escape(str(err))}\n{html.escape(traceback.format_exc(limit=3))}</pre>"
+            )
+        finally:
+            self._sync_controls()
+
+    def _observer(
+        self,
+        action: Callable[[Any], None],
+        *,
+        viewers: bool = True,
+        checkpoint: bool = True,
+        move_clock: bool = False,
+    ) -> Callable[[dict[str, Any]], None]:
+        """An observer forwarding the new value to ``action``, then redrawing.
+
+        With ``continuous_update=False`` every slider event is a whole
+        gesture (a release), so it ends an undo step (``checkpoint``).
+        """
 
         def observer(change: dict[str, Any]) -> None:
             if self._syncing:
                 return
-            try:
+
+            def act() -> None:
                 action(change["new"])
-                self._refresh_all(viewers=viewers or redraw_viewers)
-            except Exception as err:  # show it in the widget instead of losing it in the log
-                self.status.value = (
-                    f"<pre style='color:#b00'>{html.escape(type(err).__name__)}: {html.escape(str(err))}\n"
-                    f"{html.escape(traceback.format_exc(limit=3))}</pre>"
-                )
+                if checkpoint:
+                    self.editor.checkpoint()
+                self._refresh_all(viewers=viewers, move_clock=move_clock)
+
+            self._run(act)
 
         return observer
 
-    def _on_select(self, value: Any) -> None:
-        if value is None or self._syncing:
-            return
-        self.editor.select(int(value))
-        self._draw_curves()
-        self._refresh_view()
+    def _select(self, value: Any) -> None:
+        if value is not None:
+            self.editor.select(int(value))
+
+    def _after_history(self) -> None:
+        """After undo, redo or reset: redraw; the clock moves only when the selected pose changed."""
+        self._refresh_all(move_clock=self.editor.selected != self._shown_pose)
+
+    @staticmethod
+    def _put(control: W.Widget, value: Any) -> None:
+        """Set a control's value, widening a slider's range rather than letting it clamp the value."""
+        if isinstance(control, (W.FloatSlider, W.IntSlider)):
+            if value > control.max:
+                control.max = value
+            if value < control.min:
+                control.min = value
+        if control.value != value:
+            control.value = value
+
+    def _sync_controls(self) -> None:
+        """Show the editor's values on every control (without echoing them back)."""
+        ed = self.editor
+        self._syncing = True
+        try:
+            self._put(self.toggle, ed.staggered)
+            self._put(self.s_slider, ed.s)
+            self._put(self.l_slider, ed.l)
+            self._put(self.tau_slider, ed.tau)
+            self._put(self.limb_check, ed.random_by == "limb")
+            self._put(self.wr_slider, ed.w_r)
+            self._put(self.count_slider, ed.current.n_poses)
+            self._put(self.succession_dropdown, ed.joint)
+            if ed.curve_joint in self.joint_dropdown.options:
+                self._put(self.joint_dropdown, ed.curve_joint)
+            opts = [
+                (f"{k:3d}  t={t:6.3f} s  w={w if np.isfinite(w) else float('inf'):7.4f}  refined {n:2d}", k)
+                for k, t, w, n in ed.pose_table()
+            ]
+            if list(self.pose_list.options) != opts:
+                self.pose_list.options = opts
+            self._put(self.pose_list, ed.selected)
+            self.history.sync()
+        finally:
+            self._syncing = False
 
     # -------------------------------------------------------------- figure
     def _build_figure(self, backend: str) -> None:
-        self.figure = Figure(figsize=(7.5, 3.6), layout="constrained")
+        self.figure = Figure(figsize=_FIGSIZE, dpi=_DPI, layout="constrained")
         self.ax = self.figure.add_subplot(1, 1, 1)
         self.canvas = make_canvas(self.figure, backend=backend)  # type: ignore[arg-type]
         self.interactive = isinstance(self.canvas, W.DOMWidget)
         self.image = None if self.interactive else W.Image(format="png")
+        if self.interactive:
+            # ipympl's toolbar floats over the canvas' left edge: lay the axes out to its right
+            free = min(TOOLBAR_PX / (_FIGSIZE[0] * _DPI), 0.2)
+            self.figure.set_layout_engine(ConstrainedLayoutEngine(rect=(free, 0.0, 1.0 - free, 1.0)))
+            # as wide as the figure: a growing canvas box pushed the controls 450 px to the right
+            self.canvas.layout.flex = "0 0 auto"
 
     def _draw_curves(self) -> None:
         ed = self.editor
@@ -234,37 +325,24 @@ class StaggeredExplorer:
         if self.interactive:
             self.canvas.draw_idle()
         else:
-            import io
-
             buf = io.BytesIO()
             self.figure.savefig(buf, format="png")
             self.image.value = buf.getvalue()  # type: ignore[union-attr]
-        self.curves_info.value = json.dumps(
-            {
-                "variable": name,
-                "staggered": ed.staggered,
-                "n_poses": int(c["pose_times"].size),
-                "mean": float(np.mean(c["values"])),
-                "checksum": float(np.sum(np.abs(c["values"]))),
-            }
-        )
+        info = {
+            "variable": name,
+            "staggered": ed.staggered,
+            "n_poses": int(c["pose_times"].size),
+            "mean": float(np.mean(c["values"])),
+            "checksum": float(np.sum(np.abs(c["values"]))),
+        }
+        self.curves_info.value = html.escape(json.dumps(info))  # joint names from a file are text, not markup
 
     # --------------------------------------------------------------- views
-    def _refresh_list(self) -> None:
-        rows = self.editor.pose_table()
-        opts = [(f"{k:3d}  t={t:6.3f} s  w={w if np.isfinite(w) else float('inf'):7.4f}  refined {n:2d}", k)
-                for k, t, w, n in rows]
-        self._syncing = True
-        try:
-            self.pose_list.options = opts
-            self.pose_list.value = self.editor.selected
-        finally:
-            self._syncing = False
-
-    def _refresh_view(self) -> None:
+    def _refresh_view(self, *, move_clock: bool = False) -> None:
         """One 3D view: original and played motion, and the selected pose's
         non-staggered (orange) and true (yellow) poses standing where they
-        happen (Figure 6); the clock is put at ``t_k``."""
+        happen (Figure 6).  The viewer keeps its time (the frame a student
+        scrubbed to) unless ``move_clock``: then it goes to ``t_k``."""
         if not self._viewer_enabled:
             return
         ed = self.editor
@@ -288,28 +366,31 @@ class StaggeredExplorer:
                 window_size=(640, 360),
             )
             self.view_box.children = [self.viewer.widget]
+            move_clock = True
         else:
-            self.viewer.set_motions(motions, labels=labels)
-        self.viewer.set_time(float(ed.current.times[ed.selected]))
+            self.viewer.set_motions(motions, labels=labels)  # keeps the viewer's time
+        if move_clock:
+            self.viewer.set_time(float(ed.current.times[ed.selected]))
 
-    def _refresh_all(self, *, viewers: bool = True) -> None:
+    def _refresh_all(self, *, viewers: bool = True, move_clock: bool = False) -> None:
         ed = self.editor
         self.status.value = html.escape(ed.message) if ed.message else ""
-        if self.count_slider.value != ed.current.n_poses:
-            self._syncing = True
-            try:
-                self.count_slider.value = ed.current.n_poses
-            finally:
-                self._syncing = False
-        self._refresh_list()
+        self._sync_controls()
         self._draw_curves()
         if viewers:
-            self._refresh_view()
+            self._refresh_view(move_clock=move_clock)
+        self._shown_pose = ed.selected
+        self._shown_params = ed.params
 
     # --------------------------------------------------------------- layout
     @property
     def widget(self) -> W.Widget:
-        """The whole explorer as one ipywidgets box (class ``mocaplab-staggered-explorer``)."""
+        """The whole explorer as one ipywidgets box (class ``mocaplab-staggered-explorer``).
+
+        Edits made on :attr:`editor` directly since the last redraw are drawn first.
+        """
+        if self.editor.params != self._shown_params:
+            self._run(self._refresh_all)
         if getattr(self, "_box", None) is None:
             canvas = self.canvas if self.interactive else self.image
             controls = W.VBox(
@@ -323,9 +404,12 @@ class StaggeredExplorer:
                     self.wr_slider,
                     self.count_slider,
                     self.pose_list,
+                    self.history.box,
                 ]
             )
-            self._box = W.VBox([W.HBox([canvas, controls]), self.view_box, self.status, self.curves_info])
+            self._box = W.VBox(
+                [W.HBox([canvas, controls]), self.view_box, self.status, self.export.box, self.curves_info]
+            )
             self._box.add_class("mocaplab-staggered-explorer")
         return self._box
 

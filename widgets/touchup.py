@@ -6,9 +6,17 @@
 The widget is a thin view over :class:`mocaplab.physics.TouchUpSession`:
 
 * **step** / **back** buttons move through the adjustments (a step already
-  computed is reused); the forward button carries the CSS class
-  ``mocaplab-touchup-step`` and the label with the mean ZMP distance the
-  class ``mocaplab-touchup-mean``;
+  computed is reused), **reset** goes back to the input (step 0, the
+  schedule the stepper started with); the forward button carries the CSS
+  class ``mocaplab-touchup-step``, the reset button ``mocaplab-reset``;
+* a header with the measures of the step shown: on the **ground**, the mean
+  ZMP distance over the ground frames (class ``mocaplab-touchup-mean``; a
+  flight step may raise it: the frames next to a flight take the flight's
+  change of velocity); for each **flight** (class
+  ``mocaplab-touchup-flight``), the gravity fitted to the centre of mass
+  (9.81 m/s^2 when it flies a parabola) and the spread of the angular
+  momentum about its mean (0 when constant), computed by the core
+  (:attr:`mocaplab.physics.TouchUpState.flights`);
 * a **schedule table** edits each adjustment's link sets (joint names or
   presets, comma separated; presets come from the skeleton's joint roles,
   so they work on any naming convention), ``sigma`` (seconds), ``rho`` and
@@ -20,9 +28,13 @@ The widget is a thin view over :class:`mocaplab.physics.TouchUpSession`:
   without a ZMP, which the means leave out);
 * a **3D view** (:class:`~mocaplab.widgets.MotionViewer`) of the input (grey)
   and the current motion with its centre of mass, its ZMP and its support
-  polygon drawn under it.
+  polygon drawn under it;
+* **Export BVH** of the motion of the step shown.
 
-Callbacks show their exceptions in the widget's status line.
+The stepper takes any Motion (the presets and contacts come from the
+skeleton's joint roles; ``roles=`` overrides them).  Callbacks show their
+exceptions, HTML-escaped, in the widget's status line, and every control is
+then set back from the session, so none disagrees with it.
 """
 
 from __future__ import annotations
@@ -35,15 +47,21 @@ from typing import Any
 import ipywidgets as W
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.layout_engine import ConstrainedLayoutEngine
 
 from mocaplab.motion import Motion
 from mocaplab.physics import Adjustment, TouchUpSession
+
+from ._controls import ExportControl
+from ._drag import TOOLBAR_PX
 
 __all__ = ["TouchUpStepper", "plot_zmp_distance", "plot_mean_distance", "plot_balance_top"]
 
 STEP_CLASS = "mocaplab-touchup-step"
 BACK_CLASS = "mocaplab-touchup-back"
 MEAN_CLASS = "mocaplab-touchup-mean"
+FLIGHT_CLASS = "mocaplab-touchup-flight"
+RESET_CLASSES = ("mocaplab-reset", "mocaplab-touchup-reset")
 INPUT_COLOR = "#9a9a9a"
 CURRENT_COLOR = "#1f77b4"
 
@@ -67,6 +85,11 @@ class _Plot:
     def __init__(self, figure: Figure) -> None:
         self.figure = figure
         self.canvas, self.widget = _canvas(figure)
+        if self.widget is self.canvas:
+            # ipympl's toolbar floats over the canvas' left edge: lay the axes out to its right
+            free = min(TOOLBAR_PX / (figure.get_figwidth() * figure.dpi), 0.2)
+            figure.set_layout_engine(ConstrainedLayoutEngine(rect=(free, 0.0, 1.0 - free, 1.0)))
+            self.canvas.layout.flex = "0 0 auto"  # as wide as the figure
 
     def draw(self) -> None:
         if self.widget is self.canvas:
@@ -86,13 +109,29 @@ class _Row:
 
     def __init__(self, k: int, adj: Adjustment) -> None:
         self.k = k
-        self.s2 = W.Text(value=", ".join(adj.s2), description="S2", layout=W.Layout(width="230px"))
-        self.s3 = W.Text(value=", ".join(adj.s3), description="S3", layout=W.Layout(width="200px"))
+        # sent on Enter or leaving the box, not per keystroke (a half-typed name is no joint)
+        self.s2 = W.Text(
+            value=", ".join(adj.s2), description="S2", continuous_update=False, layout=W.Layout(width="230px")
+        )
+        self.s3 = W.Text(
+            value=", ".join(adj.s3), description="S3", continuous_update=False, layout=W.Layout(width="200px")
+        )
         self.sigma = W.BoundedFloatText(
-            value=round(adj.sigma, 4), min=0.0, max=10.0, step=1 / 30, description="sigma (s)", layout=W.Layout(width="170px")
+            value=round(adj.sigma, 4),
+            min=0.0,
+            max=10.0,
+            step=1 / 30,
+            description="sigma (s)",
+            layout=W.Layout(width="170px"),
         )
         self.rho = W.FloatSlider(
-            value=adj.rho, min=0.05, max=1.0, step=0.05, description="rho", continuous_update=False, layout=W.Layout(width="250px")
+            value=adj.rho,
+            min=0.05,
+            max=1.0,
+            step=0.05,
+            description="rho",
+            continuous_update=False,
+            layout=W.Layout(width="250px"),
         )
         self.stage = W.Dropdown(options=["ground", "flight"], value=adj.stage, layout=W.Layout(width="90px"))
         self.box = W.HBox([W.Label(f"{k + 1}."), self.s2, self.s3, self.sigma, self.rho, self.stage])
@@ -139,7 +178,9 @@ def plot_zmp_distance(curves: dict[str, Any], *, fps: float, ax: Any = None) -> 
     for k, (label, d) in enumerate(curves.items()):
         d = np.asarray(d, dtype=float)
         color = INPUT_COLOR if k == 0 else f"C{k - 1}"
-        ax.plot(np.arange(len(d)) / fps, 1000 * d, color=color, lw=1.2, label=f"{label}: mean {1000 * np.nanmean(d):.1f} mm")
+        ax.plot(
+            np.arange(len(d)) / fps, 1000 * d, color=color, lw=1.2, label=f"{label}: mean {1000 * np.nanmean(d):.1f} mm"
+        )
     ax.set_xlabel("time (s)")
     ax.set_ylabel("ZMP distance (mm)")
     ax.set_title("Distance of the ZMP from the support polygon (Shin et al., Fig. 8)")
@@ -221,9 +262,13 @@ class TouchUpStepper:
     ----------
     session : TouchUpSession
         The core stepper every control forwards to.
-    step_button, back_button : ipywidgets.Button
+    step_button, back_button, reset_button : ipywidgets.Button
     mean_label : ipywidgets.HTML
-        "mean ZMP distance ... mm" of the current step.
+        "ground: mean ZMP distance ... mm" of the current step (ground frames only).
+    flight_label : ipywidgets.HTML
+        Fitted gravity and angular-momentum spread of each flight (hidden without flights).
+    export : ExportControl
+        Writes the motion of the step shown as BVH.
     rows : list
         One set of schedule controls per adjustment (``.s2``, ``.s3``,
         ``.sigma``, ``.rho``, ``.stage`` widgets).
@@ -253,21 +298,36 @@ class TouchUpStepper:
 
         self.back_button = W.Button(description="back", icon="step-backward", layout=W.Layout(width="90px"))
         self.back_button.add_class(BACK_CLASS)
-        self.step_button = W.Button(description="step", icon="step-forward", button_style="primary", layout=W.Layout(width="90px"))
+        self.step_button = W.Button(
+            description="step", icon="step-forward", button_style="primary", layout=W.Layout(width="90px")
+        )
         self.step_button.add_class(STEP_CLASS)
         self.iteration_button = W.Button(description="+1 iteration", layout=W.Layout(width="110px"))
+        self.reset_button = W.Button(
+            description="reset",
+            icon="refresh",
+            tooltip="Back to the input and the first schedule",
+            layout=W.Layout(width="90px"),
+        )
+        for name in RESET_CLASSES:
+            self.reset_button.add_class(name)
+        self._initial_schedule = self.session.input.schedule
         self.mean_label = W.HTML()
         self.mean_label.add_class(MEAN_CLASS)
+        self.flight_label = W.HTML()
+        self.flight_label.add_class(FLIGHT_CLASS)
         self.step_label = W.HTML()
         self.status = W.HTML()
         self.back_button.on_click(lambda _: self._guard(self.back))
         self.step_button.on_click(lambda _: self._guard(self.forward))
         self.iteration_button.on_click(lambda _: self._guard(self.forward_iteration))
+        self.reset_button.on_click(lambda _: self._guard(self.reset))
+        self.export = ExportControl(lambda: self.session.current.motion, default="touched_up.bvh", guard=self._guard)
 
         self.rows = [_Row(k, adj) for k, adj in enumerate(self.session.schedule)]
         for row in self.rows:
             for ctl in (row.s2, row.s3, row.sigma, row.rho, row.stage):
-                ctl.observe(lambda change, r=row: self._guard(lambda: self._edit(r)), names="value")
+                ctl.observe(lambda change, r=row: self._on_row(r), names="value")
         self._syncing = False
 
         self.figure8, self._ax8 = self._figure(4.6, 2.6)
@@ -278,10 +338,26 @@ class TouchUpStepper:
 
         self.viewer: Any = self._make_viewer() if viewer else None
         self._viewer_box = W.Box([self.viewer.widget] if self.viewer is not None else [])
-        controls = W.HBox([self.back_button, self.step_button, self.iteration_button, self.mean_label])
-        schedule = W.VBox([W.HTML("<b>schedule</b> (S1 = the other joints; an edit applies from the current step on)")] + [r.box for r in self.rows])
+        controls = W.HBox(
+            [self.back_button, self.step_button, self.iteration_button, self.reset_button, self.mean_label]
+        )
+        schedule = W.VBox(
+            [W.HTML("<b>schedule</b> (S1 = the other joints; an edit applies from the current step on)")]
+            + [r.box for r in self.rows]
+        )
         plots = W.HBox([self._plot8.widget, self._plot9.widget])
-        self.widget = W.VBox([controls, self.step_label, schedule, plots, self._viewer_box, self.status])
+        self.widget = W.VBox(
+            [
+                controls,
+                self.flight_label,
+                self.step_label,
+                schedule,
+                plots,
+                self._viewer_box,
+                self.status,
+                self.export.box,
+            ]
+        )
         self.widget.add_class("mocaplab-touchup")
         self._refresh(viewer=False)
 
@@ -301,9 +377,22 @@ class TouchUpStepper:
         self.session.finish_pass()
         self._refresh()
 
+    def reset(self) -> None:
+        """Back to the input: step 0 with the schedule the stepper started with (what the reset button does).
+
+        The steps already computed are kept when the schedule is unchanged.
+        """
+        while self.session.index > 0:
+            self.session.back()
+        if self.session.schedule != self._initial_schedule:
+            self.session.set_schedule(self._initial_schedule)
+        self._refresh()
+
+    def _on_row(self, row: _Row) -> None:
+        if not self._syncing:  # a value the stepper set itself is no edit
+            self._guard(lambda: self._edit(row))
+
     def _edit(self, row: _Row) -> None:
-        if self._syncing:
-            return
         changes = row.changes(self.session.schedule[row.k])
         if changes:
             self.session.set_adjustment(row.k, **changes)
@@ -314,7 +403,34 @@ class TouchUpStepper:
             action()
             self.status.value = ""
         except Exception as err:  # shown in the widget, not lost in the log
-            self.status.value = f"<pre style='color:#b00'>{html.escape(f'{type(err).__name__}: {err}')}</pre>"
+            self.status.value = (
+                f"<pre style='color:#b00; white-space:pre-wrap'>{html.escape(f'{type(err).__name__}: {err}')}</pre>"
+            )
+            self._sync_controls()  # every control shows the session again (the edit that failed is undone)
+
+    def _sync_controls(self) -> None:
+        """Set the schedule rows and the buttons from the session (without echoing the values back)."""
+        s = self.session
+        self.back_button.disabled = s.index == 0
+        self.reset_button.disabled = s.index == 0 and s.schedule == self._initial_schedule
+        self._syncing = True
+        try:
+            for row, adj in zip(self.rows, s.current.schedule, strict=False):
+                row.set(adj)
+        finally:
+            self._syncing = False
+
+    def _flight_text(self) -> str:
+        """One line per flight: fitted gravity and angular-momentum spread, now and in the input."""
+        lines = []
+        for k, (f, f0) in enumerate(zip(self.session.current.flights, self.session.input.flights, strict=True)):
+            fps = self.session.input.motion.fps
+            lines.append(
+                f"flight {k + 1} ({f.start / fps:.2f}-{f.stop / fps:.2f} s): fitted gravity <b>{f.gravity:.2f}</b> "
+                f"m/s² (input {f0.gravity:.2f}, ballistic 9.81) &nbsp;|&nbsp; angular momentum spread "
+                f"<b>{f.momentum_spread:.3f}</b> kg m²/s (input {f0.momentum_spread:.3f}, ballistic 0)"
+            )
+        return "<br>".join(lines)
 
     # ------------------------------------------------------------ drawing
     @staticmethod
@@ -350,21 +466,17 @@ class TouchUpStepper:
         best = history.best
         dropped = f"; {cur.dropped} ground frames without a ZMP left out" if cur.dropped else ""
         self.mean_label.value = (
-            f"mean ZMP distance <b>{mm:.2f}</b> mm (input {mm0:.2f} mm{dropped}) &nbsp;|&nbsp; "
+            f"ground: mean ZMP distance <b>{mm:.2f}</b> mm (input {mm0:.2f} mm{dropped}) &nbsp;|&nbsp; "
             f"best so far: step {best}, error {1000.0 * history.states[best].error:.2f} mm"
         )
+        self.flight_label.value = self._flight_text()
+        self.flight_label.layout.display = None if cur.flights else "none"
         nxt = cur.next_adjustment
         self.step_label.value = (
-            f"step {cur.index} (pass {cur.iteration + 1}): <i>{cur.label}</i> &nbsp;|&nbsp; next: {nxt.label}, "
-            f"sigma {nxt.sigma:.3g} s, rho {nxt.rho:.2g}"
+            f"step {cur.index} (pass {cur.iteration + 1}): <i>{html.escape(cur.label)}</i> &nbsp;|&nbsp; "
+            f"next: {html.escape(nxt.label)}, sigma {nxt.sigma:.3g} s, rho {nxt.rho:.2g}"
         )
-        self.back_button.disabled = s.index == 0
-        self._syncing = True
-        try:
-            for row, adj in zip(self.rows, cur.schedule, strict=False):
-                row.set(adj)
-        finally:
-            self._syncing = False
+        self._sync_controls()
         self._line_now.set_ydata(1000 * cur.zmp_distance)
         top = np.nanmax(np.concatenate([1000 * s.input.zmp_distance, 1000 * cur.zmp_distance, [1.0]]))
         self._ax8.set_ylim(0, 1.08 * top)
@@ -389,7 +501,10 @@ class TouchUpStepper:
         middle = s.input.motion.n_frames // 2 if frame is None else frame
         options: dict[str, Any] = {"window_size": (640, 360), "frame": middle} | self.viewer_options
         viewer = MotionViewer(
-            [s.input.motion, s.current.motion], colors=[INPUT_COLOR, CURRENT_COLOR], labels=["input", "touched up"], **options
+            [s.input.motion, s.current.motion],
+            colors=[INPUT_COLOR, CURRENT_COLOR],
+            labels=["input", "touched up"],
+            **options,
         )
         self._add_overlays(viewer)
         return viewer

@@ -12,6 +12,8 @@
 :func:`start`, :func:`step`    the same, one adjustment at a time
 :class:`TouchUpSession`        stateful stepper behind the widget
 :class:`TouchUpWarning`        suspicious input (long flights, sliding feet)
+:func:`flight_measures`        per flight: fitted gravity, angular-momentum
+                               spread (:class:`FlightMeasure`)
 =============================  ===============================================
 """
 
@@ -35,12 +37,14 @@ from .touchup import (
     FLIGHT_SCHEDULE,
     GROUND_SCHEDULE,
     Adjustment,
+    FlightMeasure,
     LinkSets,
     TouchUpHistory,
     TouchUpSession,
     TouchUpState,
     TouchUpWarning,
     default_schedule,
+    flight_measures,
     flight_stages,
     link_sets,
     preset_mask,
@@ -65,6 +69,7 @@ __all__ = [
     "MassFit",
     "fit_masses",
     "Adjustment",
+    "FlightMeasure",
     "FLIGHT_SCHEDULE",
     "GROUND_SCHEDULE",
     "LinkSets",
@@ -73,6 +78,7 @@ __all__ = [
     "TouchUpState",
     "TouchUpWarning",
     "default_schedule",
+    "flight_measures",
     "flight_stages",
     "link_sets",
     "preset_mask",

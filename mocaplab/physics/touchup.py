@@ -190,7 +190,7 @@ from functools import cached_property, lru_cache
 from typing import TYPE_CHECKING, Any, Literal, NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import gaussian_filter1d
 
 from .. import quat
@@ -199,7 +199,7 @@ from ..displacement import blend_ramp
 from ..motion import Motion, Skeleton, _owned, readonly
 from ..refinement import Goal, _solve_goals, blend_weights, foot_goals, refine
 from ..roles import Roles, RolesError, resolve_roles
-from .body import GRAVITY, Body, link_positions, paper_width, smoothed_derivatives
+from .body import GRAVITY, Body, angular_momentum, center_of_mass, link_positions, paper_width, smoothed_derivatives
 from .zmp import Balance, _check_contacts, _rebalance, balance, default_contacts
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -215,6 +215,8 @@ __all__ = [
     "link_sets",
     "preset_mask",
     "flight_stages",
+    "FlightMeasure",
+    "flight_measures",
     "TouchUpState",
     "TouchUpHistory",
     "start",
@@ -572,6 +574,65 @@ def flight_stages(contacts: Contacts, *, min_frames: int = 2, at_ends: bool = Fa
         for a, b in zip(starts, stops, strict=True)
         if b - a >= min_frames and (at_ends or (a > 0 and b < n))
     ]
+
+
+class FlightMeasure(NamedTuple):
+    """How well one flight ``[start, stop)`` obeys the two laws of section 3.4 (:func:`flight_measures`)."""
+
+    #: First frame of the flight.
+    start: int
+    #: One past its last frame.
+    stop: int
+    #: Gravity fitted to the centre of mass's height, m/s^2 (9.81 when it flies a parabola; equation 1).
+    gravity: float
+    #: Mean distance of ``h_CM`` from its mean over the flight, kg m^2/s (0 when constant; equation 2).
+    momentum_spread: float
+
+
+def flight_measures(
+    motion: Motion, body: Body, contacts: Contacts, *, com: ArrayLike | None = None
+) -> tuple[FlightMeasure, ...]:
+    """The flight measures of every flight of ``motion`` (:func:`flight_stages` of ``contacts``).
+
+    In the air only gravity acts, so the centre of mass flies a parabola
+    (equation 1) and the angular momentum about it is constant (equation
+    2).  For each flight, ``gravity`` is minus twice the leading coefficient
+    of the least-squares parabola through the centre of mass's height over
+    the flight's frames (NaN for a flight shorter than 3 frames), and
+    ``momentum_spread`` is the mean over those frames of the distance of
+    :func:`~mocaplab.physics.angular_momentum` (about the centre of mass,
+    kg m^2/s) from its mean over the flight.
+
+    Parameters
+    ----------
+    motion : Motion
+    body : Body
+    contacts : Contacts
+        Contact labels of ``motion`` (a touch-up's, fixed for all its steps).
+    com : array_like, shape (F, 3), optional
+        The centre of mass of ``motion`` if already computed
+        (:func:`~mocaplab.physics.center_of_mass`).
+
+    Returns
+    -------
+    tuple of FlightMeasure
+        Empty when the clip has no flight.
+    """
+    stages = flight_stages(contacts)
+    if not stages:
+        return ()
+    c = center_of_mass(motion, body) if com is None else np.asarray(com, dtype=float)
+    if c.shape != (motion.n_frames, 3):
+        raise ValueError(f"Expected `com` of shape ({motion.n_frames}, 3), got {c.shape}")
+    h = angular_momentum(motion, body)
+    out = []
+    for a, b in stages:
+        t = np.arange(b - a) / motion.fps
+        g = -2.0 * float(np.polyfit(t, c[a:b, 1], 2)[0]) if b - a >= 3 else float("nan")
+        hf = h[a:b]
+        spread = float(np.linalg.norm(hf - hf.mean(axis=0), axis=1).mean())
+        out.append(FlightMeasure(a, b, g, spread))
+    return tuple(out)
 
 
 def _flight_windows(n: int, stages: list[tuple[int, int]], window: int) -> list[tuple[int, int, int, int]]:
@@ -1284,6 +1345,16 @@ class TouchUpState:
         v = self.violation
         ok = np.isfinite(v)
         return float(v[ok].mean()) if ok.any() else float("inf")
+
+    @cached_property
+    def flights(self) -> tuple[FlightMeasure, ...]:
+        """:func:`flight_measures` of :attr:`motion` over the input's flights (empty without flights).
+
+        The ground frames' measure is :attr:`mean_zmp_distance` (flight
+        frames have no ZMP): a flight step can raise it, since the ground
+        frames next to a flight take the flight's change of velocity.
+        """
+        return flight_measures(self.motion, self.body, self.contacts, com=self.balance.com)
 
     def with_schedule(self, schedule: Sequence[Adjustment]) -> TouchUpState:
         """The same state with another schedule (applied from the next step on; link sets checked)."""

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from .edit import (
     ConstraintLayer,
+    EditorParams,
     StaggeredEditor,
     UnreachableTargetWarning,
     apply_knot_deltas,
@@ -71,6 +72,7 @@ __all__ = [
     "ConstraintLayer",
     "UnreachableTargetWarning",
     "StaggeredEditor",
+    "EditorParams",
     "analyze",
     "extract",
     "fit_representation",

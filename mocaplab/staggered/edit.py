@@ -109,6 +109,7 @@ __all__ = [
     "UnreachableTargetWarning",
     "constraint_joints",
     "default_joint",
+    "EditorParams",
     "StaggeredEditor",
 ]
 
@@ -1324,22 +1325,61 @@ class ConstraintLayer:
             return motion.replace(rotations=rot)
         root = np.array(motion.root_positions, copy=True)
         root[frames] = solved.root_positions
-        return motion.replace(rotations=rot, root_positions=root)
+        if tr is None:
+            return motion.replace(rotations=rot, root_positions=root)
+        # the root lowering may sit on the pelvis's translation (below a static reference root)
+        trans = np.array(tr, copy=True)
+        trans[frames] = solved.translations
+        return motion.replace(rotations=rot, root_positions=root, translations=trans)
 
 
 # ------------------------------------------------------------ the editor
+@dataclasses.dataclass(frozen=True)
+class EditorParams:
+    """Everything a :class:`StaggeredEditor` edit sets: one immutable record per undo state.
+
+    :attr:`StaggeredEditor.current` is a function of this record (and the
+    clip): the base representation culled to ``max_poses`` poses, then
+    ``exaggerate(w_r, joints=exaggerate_joints)``,
+    ``succession(s, l, joint=joint)`` and
+    ``randomize(tau, seed=seed, by=random_by)``, each skipped when neutral;
+    ``staggered`` chooses the playback and ``selected`` the pose overlaid.
+    """
+
+    max_poses: int | None
+    s: float = 0.0
+    l: float = 1.0
+    joint: str = ""
+    tau: float = 0.0
+    seed: int = 0
+    random_by: Literal["variable", "limb"] = "variable"
+    w_r: float = 0.0
+    exaggerate_joints: tuple[str, ...] | None = None
+    staggered: bool = True
+    selected: int = 0
+
+
 class StaggeredEditor:
     """Stateful core of the staggered-pose explorer (the widget forwards to it).
 
     Holds a clip, its :class:`~mocaplab.staggered.features.PoseAnalysis`
     (computed once), the culled base representation and the current
-    timing and geometric edit parameters.  Every setter recomputes
-    :attr:`current` from :attr:`base`, so edits never accumulate drift:
-    ``base.exaggerate(w_r, joints=...)`` (against the average pose), then
-    ``.succession(s, l, joint=...)``, then ``.randomize(tau, seed=...)``,
-    each skipped when neutral.  A rejected edit keeps the previous
-    :attr:`current` and explains why in :attr:`message`, as do timing
-    warnings.
+    timing and geometric edit parameters (an :class:`EditorParams`
+    record).  Every setter recomputes :attr:`current` from :attr:`base`, so
+    edits never accumulate drift: ``base.exaggerate(w_r, joints=...)``
+    (against the average pose), then ``.succession(s, l, joint=...)``, then
+    ``.randomize(tau, seed=...)``, each skipped when neutral.  A rejected
+    edit changes nothing (parameters, :attr:`current`, history) and
+    explains why in :attr:`message`, as do timing warnings.
+
+    History: every accepted change of the record is pushed on a
+    :class:`mocaplab.undo.UndoStack`; :meth:`undo`, :meth:`redo` and
+    :meth:`reset` (undoable) restore a record, and :attr:`current` is
+    recomputed from the same base, so it is restored exactly (the base of a
+    pose count is fitted once and kept).  Consecutive changes of one
+    parameter (a slider dragged) merge into one undo step until
+    :meth:`checkpoint`; a change that leaves the record as it was pushes
+    nothing.
 
     Parameters
     ----------
@@ -1355,13 +1395,24 @@ class StaggeredEditor:
         One random offset per variable (default) or per limb
         (:func:`randomize`).
     curve_joint : str, optional
-        Variable whose curves :meth:`curves` returns (default the pelvis).
+        Variable whose curves :meth:`curves` returns (default the pelvis;
+        a view setting, not part of the history).
     roles : mapping, optional
         Joint-role overrides (:func:`mocaplab.roles.resolve_roles`) for the
         defaults: the pelvis, the contact joints, the constraint layer.
     **extract_options
         Passed to :func:`~mocaplab.staggered.extract`.
+
+    Examples
+    --------
+    >>> ed = StaggeredEditor(walk, max_poses=8)          # doctest: +SKIP
+    >>> ed.set_succession(s=0.02); ed.set_succession(s=0.04); ed.checkpoint()  # doctest: +SKIP
+    >>> ed.undo(); ed.s                                  # doctest: +SKIP
+    0.0
     """
+
+    #: Bases (one per pose count) kept for undo without refitting.
+    BASE_CACHE = 8
 
     def __init__(
         self,
@@ -1375,6 +1426,7 @@ class StaggeredEditor:
         roles: Mapping[str, Any] | None = None,
         **extract_options: Any,
     ) -> None:
+        from ..undo import UndoStack
         from .features import analyze
         from .fit import extract
 
@@ -1388,25 +1440,158 @@ class StaggeredEditor:
         self._options = dict(extract_options)
         contacts = self._options.pop("contacts", "auto")
         self.analysis = analyze(motion, contacts=contacts)
-        self.max_poses = None if max_poses is None else int(max_poses)
-        self.joint = joint or default_joint(motion.skeleton)
         self.random_joints = None if random_joints is None else tuple(random_joints)
         if random_by not in ("variable", "limb"):
             raise ValueError(f"Expected `random_by` in ('variable', 'limb'), got {random_by!r}")
-        self.random_by: Literal["variable", "limb"] = random_by
+        joint = joint or default_joint(motion.skeleton)
+        motion.skeleton.index(joint)
         self.curve_joint = curve_joint or default_joint(motion.skeleton)
-        self.s = 0.0
-        self.l = 1.0
-        self.tau = 0.0
-        self.seed = 0
-        self.w_r = 0.0
-        self.exaggerate_joints: tuple[str, ...] | None = None
-        self.staggered = True
-        self.selected = 0
+        self._bases: dict[int | None, StaggeredMotion] = {}
         self.message = ""
-        self.base = self._extract(motion, max_poses=self.max_poses, analysis=self.analysis, **self._options)
-        self.current = self.base
-        self._update()
+        params = EditorParams(max_poses=None if max_poses is None else int(max_poses), joint=joint, random_by=random_by)
+        self._params = params
+        if not self._apply(params):
+            raise ValueError(f"Expected a clip the editor can represent: {self.message}")
+        self._history: UndoStack[EditorParams] = UndoStack(self._params)
+
+    # ------------------------------------------------------------ the record
+    @property
+    def params(self) -> EditorParams:
+        """The current edit parameters (an immutable record; the undo state)."""
+        return self._params
+
+    @property
+    def max_poses(self) -> int | None:
+        """Pose count (None: every candidate)."""
+        return self._params.max_poses
+
+    @property
+    def s(self) -> float:
+        """Succession offset per level of depth, seconds."""
+        return self._params.s
+
+    @property
+    def l(self) -> float:  # noqa: E743 (the paper's name)
+        """Succession exponent."""
+        return self._params.l
+
+    @property
+    def joint(self) -> str:
+        """Joint the succession depth is measured from."""
+        return self._params.joint
+
+    @property
+    def tau(self) -> float:
+        """Bound of the random timing offsets, seconds."""
+        return self._params.tau
+
+    @property
+    def seed(self) -> int:
+        """Seed of the random timing."""
+        return self._params.seed
+
+    @property
+    def random_by(self) -> Literal["variable", "limb"]:
+        """Random offsets per 'variable' or per 'limb'."""
+        return self._params.random_by
+
+    @property
+    def w_r(self) -> float:
+        """Relative exaggeration against the average pose."""
+        return self._params.w_r
+
+    @property
+    def exaggerate_joints(self) -> tuple[str, ...] | None:
+        """Joints exaggerated (None: all)."""
+        return self._params.exaggerate_joints
+
+    @property
+    def staggered(self) -> bool:
+        """Staggered (True) or non-staggered playback."""
+        return self._params.staggered
+
+    @property
+    def selected(self) -> int:
+        """The pose overlaid in 3D."""
+        return self._params.selected
+
+    def _base(self, max_poses: int | None) -> StaggeredMotion:
+        """The representation culled to ``max_poses`` poses, fitted once per count."""
+        base = self._bases.get(max_poses)
+        if base is None:
+            base = self._extract(self.motion, max_poses=max_poses, analysis=self.analysis, **self._options)
+            if len(self._bases) >= self.BASE_CACHE:
+                self._bases.pop(next(k for k in self._bases if k != self._params.max_poses))
+            self._bases[max_poses] = base
+        return base
+
+    def _apply(self, params: EditorParams) -> bool:
+        """Make ``params`` current (recomputing from its base); False, with :attr:`message`, if rejected."""
+        import warnings
+
+        from .representation import StaggeredTimingWarning
+
+        base = self._base(params.max_poses)
+        params = dataclasses.replace(params, selected=min(params.selected, base.n_poses - 1))
+        sm = base
+        message = ""
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", StaggeredTimingWarning)
+                if params.w_r != 0.0:
+                    sm = sm.exaggerate(params.w_r, joints=params.exaggerate_joints)
+                if params.s != 0.0:
+                    sm = sm.succession(params.s, params.l, joint=params.joint)
+                if params.tau > 0.0:
+                    sm = sm.randomize(params.tau, joints=self.random_joints, seed=params.seed, by=params.random_by)
+            if caught:
+                message = str(caught[-1].message)
+        except ValueError as exc:
+            self.message = f"edit rejected: {exc}"
+            return False
+        self._params, self.base, self.current, self.message = params, base, sm, message
+        return True
+
+    def _edit(self, merge: str, **changes: Any) -> None:
+        """Apply a change of the record and push it (merged with the last push of the same ``merge`` key)."""
+        new = dataclasses.replace(self._params, **changes)
+        if new == self._params:
+            return
+        if self._apply(new):
+            self._history.push(self._params, merge=merge)
+
+    def _restore(self, params: EditorParams) -> None:
+        if not self._apply(params):  # pragma: no cover - every state in the history was accepted once
+            raise RuntimeError(f"Could not restore an earlier edit: {self.message}")
+
+    # ------------------------------------------------------------- history
+    @property
+    def can_undo(self) -> bool:
+        return self._history.can_undo
+
+    @property
+    def can_redo(self) -> bool:
+        return self._history.can_redo
+
+    def checkpoint(self) -> None:
+        """End a gesture: the next change starts a new undo step even for the same parameter."""
+        self._history.checkpoint()
+
+    def undo(self) -> EditorParams:
+        """Go back to the previous parameters (:class:`IndexError` when there is nothing to undo)."""
+        self._restore(self._history.undo())
+        return self._params
+
+    def redo(self) -> EditorParams:
+        """Redo the edit undone last (:class:`IndexError` when there is none)."""
+        self._restore(self._history.redo())
+        return self._params
+
+    def reset(self) -> EditorParams:
+        """Back to the parameters the editor started with (an undoable edit; nothing when already there)."""
+        if self._params != self._history.initial:
+            self._restore(self._history.reset())
+        return self._params
 
     # ------------------------------------------------------------- setters
     @property
@@ -1414,79 +1599,57 @@ class StaggeredEditor:
         return int(self.analysis.candidates.size)
 
     def set_pose_count(self, n: int | None) -> None:
-        """Cull to ``n`` poses (re-fits the representation)."""
-        self.max_poses = None if n is None else int(n)
-        self.base = self._extract(self.motion, max_poses=self.max_poses, analysis=self.analysis, **self._options)
-        self.selected = min(self.selected, self.base.n_poses - 1)
-        self._update()
+        """Cull to ``n`` poses (fits the representation once per count)."""
+        if n is not None and (isinstance(n, bool) or not isinstance(n, (int, np.integer))):
+            raise TypeError(f"Expected `n` to be an int or None, got {type(n).__name__}")
+        self._edit("max_poses", max_poses=None if n is None else int(n))
 
     def set_succession(self, s: float | None = None, l: float | None = None, joint: str | None = None) -> None:
         """Set the succession offset ``s`` (seconds), exponent ``l`` and/or the depth joint."""
+        changes: dict[str, Any] = {}
         if s is not None:
-            self.s = float(s)
+            changes["s"] = float(s)
         if l is not None:
-            self.l = float(l)
+            changes["l"] = float(l)
         if joint is not None:
             self.motion.skeleton.index(joint)
-            self.joint = joint
-        self._update()
+            changes["joint"] = joint
+        self._edit("succession:" + ",".join(sorted(changes)), **changes)
 
     def set_random(
         self, tau: float | None = None, seed: int | None = None, by: Literal["variable", "limb"] | None = None
     ) -> None:
         """Set the random timing bound ``tau`` (seconds), the seed and/or per variable or per limb."""
+        changes: dict[str, Any] = {}
         if tau is not None:
-            self.tau = float(tau)
+            changes["tau"] = float(tau)
         if seed is not None:
-            self.seed = int(seed)
+            changes["seed"] = int(seed)
         if by is not None:
             if by not in ("variable", "limb"):
                 raise ValueError(f"Expected `by` in ('variable', 'limb'), got {by!r}")
-            self.random_by = by
-        self._update()
+            changes["random_by"] = by
+        self._edit("random:" + ",".join(sorted(changes)), **changes)
 
     def set_exaggeration(self, w_r: float, joints: Sequence[str] | None = None) -> None:
         """Relative exaggeration of every pose against the average pose."""
-        self.w_r = float(w_r)
+        changes: dict[str, Any] = {"w_r": float(w_r)}
         if joints is not None:
-            self.exaggerate_joints = tuple(joints)
-        self._update()
+            changes["exaggerate_joints"] = tuple(joints)
+        self._edit("exaggeration:" + ",".join(sorted(changes)), **changes)
 
     def set_staggered(self, on: bool) -> None:
         """Staggered (True) or non-staggered (refinements zeroed) playback."""
-        self.staggered = bool(on)
-        self._update()
+        self._edit("staggered", staggered=bool(on))
 
     def select(self, k: int) -> None:
-        """Select pose ``k`` (for the 3D overlay)."""
-        self.selected = self.current._pose_index(int(k))
+        """Select pose ``k`` (for the 3D overlay); successive selections are one undo step."""
+        self._edit("select", selected=self.current._pose_index(int(k)))
 
     def set_curve_joint(self, name: str) -> None:
+        """Choose the variable :meth:`curves` returns (a view setting: not recorded in the history)."""
         self.current.variable_index(name)
         self.curve_joint = name
-
-    def _update(self) -> None:
-        import warnings
-
-        from .representation import StaggeredTimingWarning
-
-        sm = self.base
-        self.message = ""
-        try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always", StaggeredTimingWarning)
-                if self.w_r != 0.0:
-                    sm = sm.exaggerate(self.w_r, joints=self.exaggerate_joints)
-                if self.s != 0.0:
-                    sm = sm.succession(self.s, self.l, joint=self.joint)
-                if self.tau > 0.0:
-                    sm = sm.randomize(self.tau, joints=self.random_joints, seed=self.seed, by=self.random_by)
-            if caught:
-                self.message = str(caught[-1].message)
-        except ValueError as exc:
-            self.message = f"edit rejected: {exc}"
-            return
-        self.current = sm
 
     # ------------------------------------------------------------- outputs
     @property

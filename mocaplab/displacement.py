@@ -235,7 +235,9 @@ def displacement_between(before: Motion, after: Motion) -> tuple[Array, Array]:
     Returns
     -------
     root : ndarray, shape (F, 3)
-        ``after.root_positions - before.root_positions``.
+        ``after.root_positions - before.root_positions``: the world
+        displacement of the joint that carries the body (joint 0, or the
+        pelvis below a static reference root, :attr:`Motion.carrier_joint`).
     rotations : ndarray, shape (F, J, 3)
         ``log(q_before^-1 q_after)`` per joint (the post-multiplied
         convention of :class:`DisplacementMap`).
@@ -247,8 +249,13 @@ def displacement_between(before: Motion, after: Motion) -> tuple[Array, Array]:
         raise ValueError(
             f"Expected motions of equal shape, got before {before.rotations.shape} and after {after.rotations.shape}"
         )
-    root = after.root_positions - before.root_positions
-    return root, rotation_displacement(before.rotations, after.rotations)
+    return _carried(after) - _carried(before), rotation_displacement(before.rotations, after.rotations)
+
+
+def _carried(m: Motion) -> Array:
+    """World positions of the joint that carries the body (:attr:`Motion.carrier_joint`), shape (F, 3)."""
+    j = m.carrier_joint
+    return np.asarray(m.root_positions) if j == 0 else np.asarray(m.global_positions()[:, j])
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -388,4 +395,5 @@ class DisplacementMap:
         if self.joints:
             js = list(self.joints)
             new_rot[:, js] = displace(motion.rotations[:, js], scale * rot[:, js])
-        return motion.replace(rotations=new_rot, root_positions=motion.root_positions + scale * root)
+        # the translation moves the whole body in the world (at the pelvis below a static root)
+        return motion.replace(rotations=new_rot).transformed(translation=scale * root)

@@ -602,8 +602,10 @@ class Motion:
 
         ``yaw`` may be one angle or one per frame, shape (F,); ``translation``
         shape (3,) or (F, 3): a per-frame rigid motion of the whole body over
-        the ground, applied at joint 0 so that every joint (a travelling
-        pelvis below a static root too) moves with it.
+        the ground, applied at joint 0 so that every joint moves with it;
+        when joint 0 is a static reference above a travelling pelvis (the
+        path joint, with animated translations), it is applied at the pelvis
+        instead and the reference stays where it is.
         """
         yaw = np.asarray(yaw, dtype=float)
         if yaw.shape not in ((), (self.n_frames,)):
@@ -612,8 +614,65 @@ class Motion:
         if t.shape not in ((3,), (self.n_frames, 3)):
             raise ValueError(f"Expected `translation` of shape (3,) or ({self.n_frames}, 3), got {t.shape}")
         q = quat.from_yaw(yaw)
+        top = self.carrier_joint
+        if top != 0:
+            return self._transformed_at(top, q, t)
         root = quat.rotate(q, self.root_positions) + t
         return self.with_root(root_positions=root, root_rotations=quat.mul(q, self.rotations[:, 0]))
+
+    @property
+    def carrier_joint(self) -> int:
+        """The joint that carries the whole body over the ground: 0, or the pelvis below a static root.
+
+        The path joint when every joint above it is static and it carries
+        animated translations, else joint 0.  :meth:`transformed` (so every
+        edit that moves a clip over the ground) and displacement maps
+        translate the body at this joint.
+
+        A static reference root above a travelling pelvis (a common export
+        layout) stays static when the clip is moved over the ground: the
+        rigid motion goes onto the pelvis, so a moved clip has the same
+        animated channels as the original, like the same clip with the pelvis
+        at joint 0 (staggered poses and other per-channel methods then see
+        the same variables).
+        """
+        if self.translations is None:
+            return 0
+        j = self.path_joint
+        if j == 0:
+            return 0
+        above = [0]
+        a = int(self.skeleton.parents[j])
+        while a > 0:
+            above.append(a)
+            a = int(self.skeleton.parents[a])
+        tol = 1e-9
+        if np.ptp(self.root_positions, axis=0).max() > tol:
+            return 0
+        if np.ptp(self.rotations[:, above], axis=0).max() > tol or np.ptp(self.translations[:, above[1:]], axis=0).max(
+            initial=0.0
+        ) > tol:
+            return 0
+        return j
+
+    def _transformed_at(self, j: int, q: NDArray[np.float64], t: NDArray[np.float64]) -> Motion:
+        """:meth:`transformed` applied at joint ``j`` below a static chain (world ``G * W_parent * L_j``)."""
+        from .kinematics import fk
+
+        sk = self.skeleton
+        tr = self.translations
+        assert tr is not None  # carrier_joint is 0 without translations
+        p = int(sk.parents[j])
+        grot, gpos = fk(self.rotations[:1], self.root_positions[:1], sk.offsets, sk.parents, translations=tr[:1])
+        ra, oa = grot[0, p], gpos[0, p]
+        ra_inv = quat.inv(ra)
+        world = oa + quat.rotate(ra, tr[:, j])
+        moved = quat.rotate(q, world) + t
+        rotations = np.array(self.rotations)
+        translations = np.array(tr)
+        rotations[:, j] = quat.normalize(quat.mul(ra_inv, quat.mul(q, quat.mul(ra, self.rotations[:, j]))))
+        translations[:, j] = quat.rotate(ra_inv, moved - oa)
+        return self.replace(rotations=rotations, translations=translations)
 
 
 def concatenate(motions: Sequence[Motion]) -> Motion:

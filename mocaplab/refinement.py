@@ -772,7 +772,8 @@ def _solve_goals(
     if not root_moved:
         new_motion = motion.replace(rotations=_owned(rot))
     else:
-        new_motion = motion.replace(rotations=_owned(rot), root_positions=_owned(root))
+        # the drop as a ground-frame translation: onto the pelvis below a static reference root
+        new_motion = motion.replace(rotations=_owned(rot)).transformed(translation=root - motion.root_positions)
     return new_motion, (grot, gpos)
 
 

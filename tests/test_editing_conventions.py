@@ -170,6 +170,23 @@ def test_edit_gives_the_same_motion(walk, other):
     np.testing.assert_allclose(res.edited_motions[0].pelvis_positions[:, [0, 2]], res.paths[0], atol=1e-9)
 
 
+def test_a_static_root_stays_static_through_edits(walk):
+    """The edit moves the travelling pelvis, not the static reference above it: the same animated channels."""
+    other = static_root(walk)
+    for res in (edit([other], pins(other)), edit([other], pins(other), refine=True)):
+        for out in (res.edited_motions[0], res.motions[0]):
+            assert np.ptp(out.root_positions, axis=0).max() < 1e-12
+            assert np.ptp(out.rotations[:, 0], axis=0).max() < 1e-12
+            np.testing.assert_allclose(out.translations[:, 1], out.pelvis_positions, atol=1e-12)
+    ref = edit([walk], pins(walk))
+    np.testing.assert_allclose(res.edited_motions[0].rotations[:, 1], ref.edited_motions[0].rotations[:, 0], atol=1e-12)
+    # moved far over the ground, still static, still the same body
+    far = other.transformed(yaw=np.linspace(0.0, 1.0, other.n_frames), translation=(80.0, 0.0, -30.0))
+    assert np.ptp(far.root_positions, axis=0).max() < 1e-12
+    here = walk.transformed(yaw=np.linspace(0.0, 1.0, walk.n_frames), translation=(80.0, 0.0, -30.0))
+    assert np.abs(body(far) - body(here)).max() < 1e-9
+
+
 @pytest.mark.parametrize("away", [0.0, 50.0])
 def test_time_warp_keeps_the_translations(walk, away):
     """Slowed down and bent, here and 50 m from the origin (where a static joint 0 is a 50 m lever)."""

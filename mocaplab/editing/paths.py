@@ -420,9 +420,10 @@ def apply_path(motion: Motion, positions: ArrayLike, heading_change: ArrayLike) 
 
     Frame ``i`` turns by ``heading_change[i]`` about the vertical axis and
     translates by ``t_i = positions[i] - R(heading_change[i]) p_i`` (``p_i``
-    the path joint's ground position, ``y`` unchanged), applied at joint 0
-    (:meth:`~mocaplab.motion.Motion.transformed`): the path joint lands on
-    ``positions[i]`` and every joint moves with it, whatever the layout.
+    the path joint's ground position, ``y`` unchanged), through
+    :meth:`~mocaplab.motion.Motion.transformed` (at joint 0, or at the pelvis
+    below a static reference root, which stays static): the path joint lands
+    on ``positions[i]`` and every joint moves with it, whatever the layout.
 
     Parameters
     ----------

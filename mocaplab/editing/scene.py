@@ -842,10 +842,10 @@ class EditResult:
             # sample() interpolates joint 0's per-frame ground motion and the path joint's own
             # translation separately, which bends the path joint's course between frames by the
             # lever arm of that translation (metres: the travel from the static joint 0); move the
-            # whole body, at joint 0, so that the path joint is where interpolating its positions
+            # whole body (Motion.transformed) so that the path joint is where interpolating its positions
             # puts it, as it is when the path joint is joint 0
             want = _lerp(motion.pelvis_positions, u)
-            out = out.replace(root_positions=out.root_positions + (want - out.pelvis_positions))
+            out = out.transformed(translation=want - out.pelvis_positions)
         return out.replace(name=motion.name)
 
     def _motion(self, k: int) -> Motion:

@@ -355,7 +355,6 @@ def _assemble(
     if not (n >= 1 and len(starts)):
         return placed
     rot = np.array(placed.rotations)
-    root = np.array(placed.root_positions)
     tr = None if placed.translations is None else np.array(placed.translations)
     pj, body = gd.path_joint, gd.body
     w = _blend_weights(n)
@@ -390,10 +389,12 @@ def _assemble(
             dt[after[oka]] += ca[:, None, None] * d_t
     touched = np.flatnonzero(np.any(dr != 0, axis=(1, 2)) | (dy != 0))
     rot[touched] = displace(rot[touched], dr[touched])
-    root[:, 1] += dy  # at joint 0: the whole body, path joint included, rises
     if tr is not None and dt is not None:
         tr += dt
-    return placed.replace(rotations=rot, root_positions=root, translations=tr)
+    # the whole body, path joint included, rises (at the pelvis below a static reference root)
+    rise = np.zeros((F, 3))
+    rise[:, 1] = dy
+    return placed.replace(rotations=rot, translations=tr).transformed(translation=rise)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

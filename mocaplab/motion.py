@@ -596,16 +596,24 @@ class Motion:
         root = self.root_positions if root_positions is None else root_positions
         return self.replace(rotations=rot, root_positions=root)
 
-    def transformed(self, *, yaw: ArrayLike = 0.0, translation: ArrayLike = (0.0, 0.0, 0.0)) -> Motion:
+    def transformed(
+        self,
+        *,
+        yaw: ArrayLike = 0.0,
+        translation: ArrayLike = (0.0, 0.0, 0.0),
+        rotation: ArrayLike | None = None,
+    ) -> Motion:
         """Rigidly turn the clip by ``yaw`` radians about the vertical axis
         through the origin, then translate it.
 
         ``yaw`` may be one angle or one per frame, shape (F,); ``translation``
-        shape (3,) or (F, 3): a per-frame rigid motion of the whole body over
-        the ground, applied at joint 0 so that every joint moves with it;
-        when joint 0 is a static reference above a travelling pelvis (the
-        path joint, with animated translations), it is applied at the pelvis
-        instead and the reference stays where it is.
+        shape (3,) or (F, 3): a per-frame rigid motion of the whole body
+        (``x -> R x + t``), applied at joint 0 so that every joint moves with
+        it; when joint 0 is a static reference above a travelling pelvis (the
+        path joint, with animated translations: :attr:`carrier_joint`), it is
+        applied at the pelvis instead and the reference stays where it is.
+        ``rotation``, a unit quaternion of shape (4,) or (F, 4), turns about
+        the origin instead of ``yaw`` (give one of them).
         """
         yaw = np.asarray(yaw, dtype=float)
         if yaw.shape not in ((), (self.n_frames,)):
@@ -613,7 +621,15 @@ class Motion:
         t = np.asarray(translation, dtype=float)
         if t.shape not in ((3,), (self.n_frames, 3)):
             raise ValueError(f"Expected `translation` of shape (3,) or ({self.n_frames}, 3), got {t.shape}")
-        q = quat.from_yaw(yaw)
+        if rotation is None:
+            q = quat.from_yaw(yaw)
+        else:
+            if np.any(yaw != 0):
+                raise ValueError("Expected `yaw` or `rotation`, got both")
+            q = np.asarray(rotation, dtype=float)
+            if q.shape not in ((4,), (self.n_frames, 4)) or not np.all(np.isfinite(q)):
+                raise ValueError(f"Expected a finite `rotation` of shape (4,) or ({self.n_frames}, 4), got {q.shape}")
+            q = quat.normalize(q)
         top = self.carrier_joint
         if top != 0:
             return self._transformed_at(top, q, t)

@@ -310,8 +310,12 @@ def test_touch_up_does_not_depend_on_names_or_a_static_root(cmu, layout):
         for m0, m1 in zip(h0.motions[1:], h1.motions[1:], strict=True):
             g0, g1 = m0.global_positions(), m1.global_positions()[:, shift:]
             assert np.abs(g1 - g0).max() < 1e-3, (clip, m1)
-        if layout == "static_root":  # the translation channels are carried through every step
-            assert all(m.translations is not None and np.array_equal(m.translations, other.translations) for m in h1.motions)
+        if layout == "static_root":  # the translation channels are carried through every step, only the pelvis moves
+            assert all(
+                m.translations is not None
+                and np.array_equal(np.delete(m.translations, 1, axis=1), np.delete(other.translations, 1, axis=1))
+                for m in h1.motions
+            )
         assert np.abs(h0.final.global_positions() - motion.global_positions()).max() > 0.01  # it did something
 
 

@@ -1116,7 +1116,7 @@ def _flight_step(
     for a, b in stages:
         error[a:b] = _ballistic(com[a], com[b - 1], b - a, dt) - com[a:b]
     delta = _smooth(_carry_into_windows(error, stages, window, fps) * adj.rho, width)
-    moved = out.motion.replace(root_positions=_owned(out.motion.root_positions + delta))
+    moved = out.motion.transformed(translation=delta)  # at the pelvis below a static reference root
     out = _Posed(moved, out.grot, out.gpos + delta[:, None, :])
     if np.all(sets.roles == 2):
         return out

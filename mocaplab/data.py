@@ -52,6 +52,20 @@ load is checked again.
   wrong.  Mirror files are never removed: a mismatch there is a
   :class:`DataError` naming the file.
 
+A classroom mirror
+------------------
+``python -m mocaplab.data fetch --lessons DEST`` (:func:`fetch_mirror`)
+downloads every clip the lessons use (:func:`lesson_clips`) into ``DEST``,
+laid out for ``MOCAPLAB_DATA_DIR``, with a progress bar; each file is
+verified by its registry sha256 before it is put in place, and files already
+there and verified are skipped, so an interrupted run is resumed by running
+it again.  The files come from ``--url`` (or ``MOCAPLAB_MIRROR_URL``), a web
+folder holding such a mirror (a course server); without one, the ASF/AMC
+files come from the CMU layout at ``MOCAPLAB_CMU_URL`` and the BVH files,
+which the CMU site does not have, are reported missing.
+``python -m mocaplab.data check DEST`` (:func:`check_mirror`) verifies a
+mirror: it lists missing and bad files and exits with 1, or 0 when complete.
+
 The data was obtained from mocap.cs.cmu.edu; the database was created with
 funding from NSF EIA-0196217 (see :data:`ACKNOWLEDGMENT`).
 """
@@ -62,6 +76,7 @@ import hashlib
 import importlib.util
 import os
 import re
+import sys
 import warnings
 from pathlib import Path
 from typing import Literal
@@ -83,11 +98,17 @@ __all__ = [
     "CACHE_ENV_VAR",
     "URL_ENV_VAR",
     "DEFAULT_CMU_URL",
+    "MIRROR_URL_ENV_VAR",
+    "lesson_clips",
+    "fetch_mirror",
+    "check_mirror",
+    "mirror_url",
 ]
 
 ENV_VAR = "MOCAPLAB_DATA_DIR"
 CACHE_ENV_VAR = "MOCAPLAB_CACHE_DIR"
 URL_ENV_VAR = "MOCAPLAB_CMU_URL"
+MIRROR_URL_ENV_VAR = "MOCAPLAB_MIRROR_URL"
 #: Where the CMU site serves ``<SS>/<SS>.asf`` and ``<SS>/<SS_TT>.amc``.
 DEFAULT_CMU_URL = CMU_URL
 #: The frame rate of the CMU captures, used for trials outside the registry.
@@ -366,9 +387,7 @@ def _mirror_acclaim(root: Path, subject: str, trial: str, entry: dict[str, objec
             _verify(paths[k], raws[k], digest, normalise_newlines=True)
     fps = CMU_FPS if entry is None else float(entry["fps"])  # type: ignore[arg-type]
     try:
-        motion = load_asf_amc_bytes(
-            raws["asf"], str(paths["asf"]), raws["amc"], str(paths["amc"]), name=trial, fps=fps
-        )
+        motion = load_asf_amc_bytes(raws["asf"], str(paths["asf"]), raws["amc"], str(paths["amc"]), name=trial, fps=fps)
     except MocapFormatError as err:
         raise DataError(f"{err.path}: trial {trial} in the mirror does not parse ({err})") from err
     unverified = [rel[k] for k, digest in expected.items() if digest is None]
@@ -394,7 +413,9 @@ def _retrieve(url: str, folder: Path, trial: str) -> Path:
     try:
         fname = pooch.retrieve(url, known_hash=None, path=folder, progressbar=_progressbar())
     except Exception as exc:
-        known = "" if trial in CLIPS else f" Is {trial} a CMU trial? The trials of a subject are listed on the CMU site."
+        known = (
+            "" if trial in CLIPS else f" Is {trial} a CMU trial? The trials of a subject are listed on the CMU site."
+        )
         raise DataError(
             f"Could not download {url} ({exc}).{known} Without a network, set {ENV_VAR} to a local "
             f"mirror of the clips (see the README, 'Data'); to use another server, set {URL_ENV_VAR}."
@@ -461,3 +482,237 @@ def _download_acclaim(subject: str, trial: str, entry: dict[str, object] | None)
                 f"holds a damaged or different file: check {URL_ENV_VAR} (now {base!r}) or try again later."
             )
         fetched_again.add(k)
+
+
+# ----------------------------------------------------------- a classroom mirror
+
+
+def lesson_clips() -> list[str]:
+    """The trials the lessons use: the registry (:func:`clips`), the one list of them.
+
+    ``tests/test_data.py`` scans the lesson notebooks for trial ids and
+    checks that every one is in the registry.
+    """
+    return clips()
+
+
+def _mirror_files(trials: list[str]) -> list[tuple[str, str, str | None, bool]]:
+    """The files of ``trials`` in a mirror: ``(trial, rel, sha256, newlines_normalised)``, each file once.
+
+    A registry clip has its BVH and (CMU clips) its ASF/AMC pair, all with
+    the registry's sha256; another trial its ASF/AMC pair, the ASF with the
+    registry's hash when its subject has a registry clip, else None (checked
+    by parsing).
+    """
+    files: dict[str, tuple[str, str, str | None, bool]] = {}
+    for trial in trials:
+        subject, trial = parse_trial(trial)
+        entry = CLIPS.get(trial)
+        if entry is not None:
+            files.setdefault(str(entry["bvh"]), (trial, str(entry["bvh"]), str(entry["bvh_sha256"]), False))
+        if entry is None or "asf" in entry:
+            expected = _acclaim_hashes(subject, entry)
+            for k, rel in (("asf", f"asfamc/{subject}/{subject}.asf"), ("amc", f"asfamc/{subject}/{trial}.amc")):
+                files.setdefault(rel, (trial, rel, expected[k], True))
+    return list(files.values())
+
+
+def _file_problem(root: Path, trial: str, rel: str, digest: str | None, lf: bool) -> str | None:
+    """What is wrong with ``root/rel`` (None when it is there and verified)."""
+    path = root / rel
+    if not path.is_file():
+        return "missing"
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        return f"cannot be read ({exc.strerror or exc})"
+    if digest is not None:
+        got = _sha256(raw, normalise_newlines=lf)
+        return None if got == digest else f"sha256 {got} is not the registry's {digest}"
+    if rel.endswith(".asf"):
+        return None  # checked with each of its trials' AMC below
+    subject = rel.split("/")[1]
+    asf = root / f"asfamc/{subject}/{subject}.asf"
+    if not asf.is_file():
+        return f"cannot be checked: asfamc/{subject}/{subject}.asf is missing"
+    from .io import MocapFormatError
+    from .io.asfamc import load_asf_amc_bytes
+
+    try:
+        load_asf_amc_bytes(asf.read_bytes(), str(asf), raw, str(path), name=trial, fps=CMU_FPS)
+    except (MocapFormatError, OSError) as err:
+        return f"does not parse ({err})"
+    return None
+
+
+def check_mirror(dest: str | os.PathLike[str], trials: list[str] | None = None) -> dict[str, str]:
+    """Verify a mirror folder: the files of ``trials`` (default :func:`lesson_clips`) that are missing or bad.
+
+    Parameters
+    ----------
+    dest : path
+        A folder laid out for ``MOCAPLAB_DATA_DIR``.
+    trials : list of str, optional
+        Trial ids (registry clips are checked by sha256, other trials by
+        parsing their ASF/AMC pair).
+
+    Returns
+    -------
+    dict of str to str
+        Each missing or bad file (relative to ``dest``) and what is wrong;
+        empty for a good mirror.
+    """
+    root = Path(dest)
+    problems = {}
+    for trial, rel, digest, lf in _mirror_files(lesson_clips() if trials is None else list(trials)):
+        problem = _file_problem(root, trial, rel, digest, lf)
+        if problem is not None:
+            problems[rel] = problem
+    return problems
+
+
+def mirror_url() -> str | None:
+    """A web folder holding a whole mirror (``MOCAPLAB_MIRROR_URL``), or None (no trailing ``/``)."""
+    value = os.environ.get(MIRROR_URL_ENV_VAR, "").strip()
+    return value.rstrip("/") or None
+
+
+def _source_url(rel: str, base: str | None) -> str | None:
+    """Where a mirror file is fetched from: ``base/rel``; without ``base``, an Acclaim file from the CMU layout."""
+    if base is not None:
+        return f"{base}/{rel}"
+    if rel.startswith("asfamc/"):
+        _, subject, name = rel.split("/")
+        return f"{download_base()}/{subject}/{name}"
+    return None  # BVH files are not on the CMU site
+
+
+def fetch_mirror(
+    dest: str | os.PathLike[str],
+    trials: list[str] | None = None,
+    *,
+    url: str | None = None,
+    progress: bool = True,
+) -> dict[str, str]:
+    """Download the files of ``trials`` (default :func:`lesson_clips`) into a mirror folder ``dest``.
+
+    The folder is laid out for ``MOCAPLAB_DATA_DIR`` (``bvh/<SS_TT>.bvh``,
+    ``asfamc/<SS>/<SS>.asf``, ``asfamc/<SS>/<SS_TT>.amc``,
+    ``pair_salsa_daz/<SS_TT>.bvh``).  Resumable: a file already there and
+    verified is not downloaded again.  Each file is downloaded (with pooch)
+    to ``<name>.part``, verified like :func:`check_mirror` does, and only then
+    renamed into place, so an interrupted or damaged download never counts.
+
+    Parameters
+    ----------
+    dest : path
+        The mirror folder (created if needed).
+    trials : list of str, optional
+        Trial ids; default the lessons' clips.
+    url : str, optional
+        A web folder holding a mirror of the same layout (a course server);
+        default ``MOCAPLAB_MIRROR_URL``.  Without one, the ASF/AMC files come
+        from ``MOCAPLAB_CMU_URL`` (default the CMU site), which has no BVH
+        files: those are then reported as not fetched.
+    progress : bool
+        Show a progress bar (tqdm, on stderr) over the files.
+
+    Returns
+    -------
+    dict of str to str
+        Each file that could not be fetched or verified and why; empty when
+        the mirror is complete.
+    """
+    import pooch
+    from tqdm.auto import tqdm
+
+    root = Path(dest)
+    base = (url.rstrip("/") or None) if url is not None else mirror_url()
+    files = _mirror_files(lesson_clips() if trials is None else list(trials))
+    problems: dict[str, str] = {}
+    bar = tqdm(total=len(files), unit="file", desc="mocaplab data", disable=not progress)
+    try:
+        for trial, rel, digest, lf in files:
+            bar.set_postfix_str(rel, refresh=False)
+            if _file_problem(root, trial, rel, digest, lf) is None:
+                bar.update(1)
+                continue
+            source = _source_url(rel, base)
+            if source is None:
+                problems[rel] = f"not on the CMU site; give a course server holding a mirror ({MIRROR_URL_ENV_VAR})"
+                bar.update(1)
+                continue
+            target = root / rel
+            part = target.with_name(target.name + ".part")
+            target.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                pooch.HTTPDownloader(progressbar=False, timeout=60)(source, str(part), None)
+            except Exception as exc:  # noqa: BLE001 - reported per file
+                part.unlink(missing_ok=True)
+                problems[rel] = f"could not download {source} ({exc})"
+                bar.update(1)
+                continue
+            old = target.with_name(target.name + ".old")
+            had_old = target.exists()
+            if had_old:
+                target.replace(old)
+            part.replace(target)
+            problem = _file_problem(root, trial, rel, digest, lf)
+            if problem is None:
+                old.unlink(missing_ok=True)
+            else:
+                target.unlink(missing_ok=True)
+                if had_old:
+                    old.replace(target)  # leave the folder as it was
+                problems[rel] = f"downloaded from {source}, but it {problem}"
+            bar.update(1)
+    finally:
+        bar.close()
+    return problems
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m mocaplab.data fetch|check``: build or verify a classroom mirror (exit code 0 when complete)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(
+        prog="python -m mocaplab.data",
+        description="Download the CMU clips the lessons use into a folder for MOCAPLAB_DATA_DIR, or verify one.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    for name, text in (("fetch", "download into DEST (resumable)"), ("check", "verify the files in DEST")):
+        p = sub.add_parser(name, help=text, description=text)
+        p.add_argument("dest", metavar="DEST", help="the mirror folder")
+        p.add_argument("trials", nargs="*", metavar="TRIAL", help="CMU trial ids such as 16_15 (default: --lessons)")
+        p.add_argument("--lessons", action="store_true", help="every clip the lessons use (the default)")
+        if name == "fetch":
+            p.add_argument(
+                "--url",
+                help=f"a web folder holding a mirror of the same layout (default ${MIRROR_URL_ENV_VAR}; without one, "
+                f"ASF/AMC files from ${URL_ENV_VAR} or the CMU site)",
+            )
+            p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    args = parser.parse_args(argv)
+    trials = list(args.trials)
+    if args.lessons or not trials:
+        trials = [*lesson_clips(), *(t for t in trials if t not in CLIPS)]
+    try:
+        if args.command == "fetch":
+            problems = fetch_mirror(args.dest, trials, url=args.url, progress=not args.no_progress)
+        else:
+            problems = check_mirror(args.dest, trials)
+    except (ValueError, DataError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    n = len(_mirror_files(trials))
+    if problems:
+        for rel, why in problems.items():
+            print(f"{'missing' if why == 'missing' else 'bad'}: {rel}: {why}")
+        print(f"{len(problems)} of {n} files missing or bad in {args.dest}")
+        return 1
+    print(f"ok: {n} files of {len(trials)} trials verified in {args.dest}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -6,6 +6,7 @@ import functools
 import hashlib
 import importlib.machinery
 import os
+import re
 import shutil
 import sys
 import threading
@@ -176,7 +177,12 @@ def test_downloaded_files_are_checked_and_read(mocap_dir, monkeypatch, tmp_path)
 
 @pytest.mark.parametrize(
     ("trial", "expected"),
-    [("02_01", ("02", "02_01")), ("16_15", ("16", "16_15")), ("127_04", ("127", "127_04")), ("144_01", ("144", "144_01"))],
+    [
+        ("02_01", ("02", "02_01")),
+        ("16_15", ("16", "16_15")),
+        ("127_04", ("127", "127_04")),
+        ("144_01", ("144", "144_01")),
+    ],
 )
 def test_trial_ids(trial, expected):
     assert data.parse_trial(trial) == expected
@@ -449,7 +455,8 @@ def test_an_unparsable_download_is_a_data_error(mocap_dir, server):
     server.put(mocap_dir, "asfamc/16/16.asf", as_name="35.asf")
     (server.root / "35" / "35_01.amc").write_text("<html><body>Moved</body></html>\n")
     with pytest.raises(
-        data.DataError, match=r"35_01.amc downloaded from .* failed its check: it does not parse \(.*35_01.amc, line 1: expected"
+        data.DataError,
+        match=r"35_01.amc downloaded from .* failed its check: it does not parse \(.*35_01.amc, line 1: expected",
     ):
         data.cmu("35_01")
     assert server.requests("35_01.amc") == 2
@@ -503,7 +510,10 @@ def test_mirror_serves_an_unregistered_acclaim_trial(mocap_dir, tmp_path, monkey
     copy_into(mocap_dir, tmp_path, "asfamc/16/16.asf")
     shutil.copyfile(mocap_dir / "asfamc/16/16_35.amc", tmp_path / "asfamc/16/16_02.amc")
     monkeypatch.setenv(data.ENV_VAR, str(tmp_path))
-    with pytest.warns(data.UnverifiedDataWarning, match="CMU trial 16_02 is not in mocaplab's registry: asfamc/16/16_02.amc was checked"):
+    with pytest.warns(
+        data.UnverifiedDataWarning,
+        match="CMU trial 16_02 is not in mocaplab's registry: asfamc/16/16_02.amc was checked",
+    ):
         m = data.cmu("16_02")
     assert m.name == "16_02" and m.fps == 120.0 and m.skeleton.names[0] == "root"
     assert m.n_frames == data.describe("16_35")["frames"]
@@ -537,7 +547,158 @@ def test_mirror_trial_that_does_not_parse(mocap_dir, tmp_path, monkeypatch):
     (tmp_path / "asfamc/16/16_02.amc").write_text("1\nroot 0 0 0\n")
     monkeypatch.setenv(data.ENV_VAR, str(tmp_path))
     with pytest.raises(
-        data.DataError, match=r"16_02.amc: trial 16_02 in the mirror does not parse \(.*expected 6 value\(s\) for bone 'root', got 3"
+        data.DataError,
+        match=r"16_02.amc: trial 16_02 in the mirror does not parse \(.*expected 6 value\(s\) for bone 'root', got 3",
     ):
         data.cmu("16_02")
     assert (tmp_path / "asfamc/16/16_02.amc").exists()  # the mirror is never changed
+
+
+# --------------------------------------------- a classroom mirror (issue 18)
+
+LESSONS = Path(__file__).resolve().parents[1] / "lessons"
+_TRIAL_LITERAL = re.compile(r"""["']([0-9]{1,3}_[0-9]{2})["']""")
+
+
+def lesson_trial_ids() -> dict[str, set[str]]:
+    """Every quoted CMU trial id in the code cells of ``lessons/*.ipynb``, by lesson (read at test time)."""
+    import nbformat
+
+    found: dict[str, set[str]] = {}
+    for path in sorted(LESSONS.glob("*.ipynb")):
+        nb = nbformat.read(path, as_version=4)
+        ids = {m.group(1) for c in nb.cells if c.cell_type == "code" for m in _TRIAL_LITERAL.finditer(c.source)}
+        found[path.name] = ids
+    return found
+
+
+def test_the_registry_covers_every_clip_the_lessons_name():
+    """``fetch --lessons`` fetches the registry: every trial id a lesson names must be in it."""
+    found = lesson_trial_ids()
+    assert found and any(found.values()), f"no trial ids found in {LESSONS}"
+    missing = {name: sorted(ids - set(data.lesson_clips())) for name, ids in found.items() if ids - set(data.clips())}
+    assert not missing, f"lessons name clips that are not in the registry (mocaplab/_registry.py): {missing}"
+    assert data.lesson_clips() == data.clips()
+
+
+@pytest.fixture
+def course(mocap_dir, server, tmp_path):
+    """The server fixture also serving a whole mirror copied from the local one at ``<url>/mirror``."""
+    www = server.root.parent / "mirror"
+    for rel in (r for _, r, _, _ in data._mirror_files(data.lesson_clips())):
+        copy_into(mocap_dir, www, rel)
+    server.mirror = www
+    server.mirror_url = server.url.rsplit("/", 1)[0] + "/mirror"
+    return server
+
+
+def fetch(*args: str) -> int:
+    return data.main(["fetch", *args])
+
+
+def test_fetch_lessons_builds_a_verified_mirror(course, tmp_path, monkeypatch, capsys, mocap_dir):
+    dest = tmp_path / "classroom"
+    assert fetch("--lessons", str(dest), "--url", course.mirror_url) == 0
+    out, err = capsys.readouterr()
+    n = len(data._mirror_files(data.lesson_clips()))
+    assert f"ok: {n} files of {len(data.lesson_clips())} trials" in out
+    assert f"{n}/{n}" in err and "mocaplab data" in err  # the progress bar
+    assert len([p for p in course.log if p.startswith("/mirror/")]) == n
+    files = sorted(str(p.relative_to(dest)) for p in dest.rglob("*") if p.is_file())
+    assert files == sorted(r for _, r, _, _ in data._mirror_files(data.lesson_clips()))  # no .part left
+    assert data.check_mirror(dest) == {}
+    monkeypatch.setenv(data.ENV_VAR, str(dest))
+    assert np.array_equal(
+        data.cmu("16_15").root_positions, load_bvh(mocap_dir / "bvh/16_15.bvh", scale=1.0).root_positions * CMU_UNIT
+    )
+    assert data.cmu("60_10").fps == 60.0
+
+
+def test_fetch_resumes(course, tmp_path, capsys):
+    dest = tmp_path / "classroom"
+    assert fetch(str(dest), "16_15", "02_01", "--url", course.mirror_url, "--no-progress") == 0
+    assert len(course.log) == 6  # a BVH, an AMC and an ASF each
+    course.log.clear()
+    assert fetch(str(dest), "16_15", "02_01", "--url", course.mirror_url) == 0
+    assert course.log == []  # everything there and verified: nothing downloaded
+    # an interrupted download: a partial file beside a missing one, a truncated file in place
+    (dest / "bvh/16_15.bvh").rename(dest / "bvh/16_15.bvh.part")
+    amc = dest / "asfamc/02/02_01.amc"
+    amc.write_bytes(amc.read_bytes()[:1000])
+    assert data.check_mirror(dest, ["16_15", "02_01"]) == {
+        "bvh/16_15.bvh": "missing",
+        "asfamc/02/02_01.amc": data.check_mirror(dest, ["02_01"])["asfamc/02/02_01.amc"],
+    }
+    assert fetch(str(dest), "16_15", "02_01", "--url", course.mirror_url) == 0
+    assert sorted(course.log) == ["/mirror/asfamc/02/02_01.amc", "/mirror/bvh/16_15.bvh"]
+    assert data.check_mirror(dest, ["16_15", "02_01"]) == {}
+    assert not list(dest.rglob("*.part")) and not list(dest.rglob("*.old"))
+
+
+def test_fetch_rejects_a_damaged_file_and_keeps_the_rest(course, tmp_path, capsys):
+    dest = tmp_path / "classroom"
+    bvh = course.mirror / "bvh/16_15.bvh"
+    bvh.write_bytes(bvh.read_bytes().replace(b"Hips", b"Hipz", 1))
+    assert fetch(str(dest), "16_15", "--url", course.mirror_url, "--no-progress") == 1
+    out, _ = capsys.readouterr()
+    assert f"bad: bvh/16_15.bvh: downloaded from {course.mirror_url}/bvh/16_15.bvh, but it sha256 " in out
+    assert "is not the registry's ad2832511ff79d1f" in out and "1 of 3 files missing or bad" in out
+    assert not (dest / "bvh/16_15.bvh").exists() and not list(dest.rglob("*.part"))
+    assert data.check_mirror(dest, ["16_15"]) == {"bvh/16_15.bvh": "missing"}
+
+
+def test_fetch_without_a_mirror_server_gets_the_acclaim_files_from_the_cmu_layout(course, mocap_dir, tmp_path, capsys):
+    course.put(mocap_dir, "asfamc/16/16.asf", transform=crlf)  # the CMU layout at MOCAPLAB_CMU_URL, CRLF as CMU
+    course.put(mocap_dir, "asfamc/16/16_15.amc", transform=crlf)
+    dest = tmp_path / "classroom"
+    assert fetch(str(dest), "16_15", "--no-progress") == 1
+    out, _ = capsys.readouterr()
+    assert "bad: bvh/16_15.bvh: not on the CMU site; give a course server holding a mirror (MOCAPLAB_MIRROR_URL)" in out
+    assert sorted(course.log) == ["/subjects/16/16.asf", "/subjects/16/16_15.amc"]
+    assert data.check_mirror(dest, ["16_15"]) == {"bvh/16_15.bvh": "missing"}
+
+
+def test_fetch_an_unregistered_trial_checks_it_by_parsing(course, mocap_dir, tmp_path, monkeypatch):
+    course.put(mocap_dir, "asfamc/16/16.asf", as_name="35.asf")
+    course.put(mocap_dir, "asfamc/16/16_35.amc", as_name="35_01.amc")
+    course.put(mocap_dir, "asfamc/16/16.asf", as_name="35_02.amc")  # not an AMC file
+    dest = tmp_path / "classroom"
+    assert data.fetch_mirror(dest, ["35_01"], progress=False) == {}
+    problems = data.fetch_mirror(dest, ["35_02"], progress=False)
+    assert list(problems) == ["asfamc/35/35_02.amc"] and "does not parse" in problems["asfamc/35/35_02.amc"]
+    monkeypatch.setenv(data.ENV_VAR, str(dest))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", data.UnverifiedDataWarning)
+        assert data.cmu("35_01").n_frames == data.describe("16_35")["frames"]
+
+
+def test_check_lists_missing_and_bad_files(mocap_dir, tmp_path, capsys):
+    dest = tmp_path / "mirror"
+    for _, rel, _, _ in data._mirror_files(data.lesson_clips()):
+        copy_into(mocap_dir, dest, rel)
+    assert data.main(["check", str(dest)]) == 0
+    assert "ok: 38 files of 17 trials verified" in capsys.readouterr().out
+    (dest / "pair_salsa_daz/61_10.bvh").unlink()
+    copy_into(mocap_dir, dest, "asfamc/16/16.asf", transform=damage)
+    copy_into(mocap_dir, dest, "asfamc/02/02.asf", transform=crlf)  # line endings alone do not matter
+    assert data.main(["check", "--lessons", str(dest)]) == 1
+    out = capsys.readouterr().out
+    assert "missing: pair_salsa_daz/61_10.bvh: missing" in out
+    assert "bad: asfamc/16/16.asf: sha256 " in out and "02.asf" not in out
+    assert "2 of 38 files missing or bad" in out
+
+
+def test_data_command_line_errors(capsys, tmp_path):
+    assert data.main(["check", str(tmp_path), "16_5"]) == 2
+    assert "did you mean '16_05'?" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        data.main(["unpack", str(tmp_path)])
+
+
+def test_data_module_runs_as_a_command(tmp_path):
+    import subprocess
+
+    done = subprocess.run(
+        [sys.executable, "-m", "mocaplab.data", "check", str(tmp_path), "16_15"], capture_output=True, text=True
+    )
+    assert done.returncode == 1 and "3 of 3 files missing or bad" in done.stdout

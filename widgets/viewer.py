@@ -89,6 +89,18 @@ The iframe is told the address of the trame server's websocket
 ``.../paraview/`` (a ``POST`` that the trame server answers with 405, logged
 as an error in the browser console), then falls back to that websocket.
 
+Behind a proxy
+--------------
+The trame server listens on a port of the kernel's machine.  Under JupyterHub
+(``JUPYTERHUB_SERVICE_PREFIX`` set), or when the Jupyter server has a base URL
+other than ``/`` (``--ServerApp.base_url=/course/lab/``), the iframe's address
+goes through ``jupyter-server-proxy`` (``<prefix>proxy/<port>/index.html``),
+which the browser reaches wherever it runs, and the page's websocket is given
+as ``ws://USE_HOST<prefix>proxy/<port>/ws``, which the trame page completes
+with its own host; otherwise the address is ``http://localhost:<port>/``.
+``MOCAPLAB_TRAME_PROXY`` sets the prefix for other proxies, or ``off`` (see
+:func:`trame_proxy_prefix`).
+
 Threads
 -------
 VTK renders only in the thread that owns its (EGL off-screen) render window:
@@ -142,7 +154,16 @@ from numpy.typing import ArrayLike, NDArray
 from mocaplab.editing.paths import with_roles
 from mocaplab.motion import Motion
 
-__all__ = ["MotionViewer", "PlayClock", "BACKENDS", "TOOLBAR_WIDTH", "default_backend", "fit_view"]
+__all__ = [
+    "MotionViewer",
+    "PlayClock",
+    "BACKENDS",
+    "TOOLBAR_WIDTH",
+    "PROXY_ENV_VAR",
+    "default_backend",
+    "fit_view",
+    "trame_proxy_prefix",
+]
 
 BACKENDS = ("trame", "server", "client", "static", "none")
 ENV_VAR = "MOCAPLAB_JUPYTER_BACKEND"
@@ -161,6 +182,9 @@ SLIDER_RATE = 8.0
 _TOOLBAR_BOTTOM = 64
 # pyvista's trame modes behind the viewer's backends.
 _TRAME_MODES = {"trame": "server", "server": "server", "client": "client"}
+# The explicit proxy setting (see trame_proxy_prefix) and the values that turn the proxy off.
+PROXY_ENV_VAR = "MOCAPLAB_TRAME_PROXY"
+_PROXY_OFF = ("off", "direct", "none", "0", "false", "no")
 # Share of the picture's area the characters' box may fill (the rest is margin).
 _FILL = 0.9
 
@@ -218,17 +242,107 @@ def _without_vtklocal() -> Iterator[None]:
             del sys.modules[name]
 
 
+def _server_base_url(environ: Mapping[str, str]) -> str | None:
+    """The base URL of the Jupyter server that started this kernel, from its runtime file.
+
+    A Jupyter server writes ``jpserver-<pid>.json`` (with ``base_url``) into
+    the Jupyter runtime folder, and the kernels it starts get its process id
+    in ``JPY_PARENT_PID``.  None when there is no such file (a script, a
+    kernel started by something else) or it cannot be read.
+    """
+    import json
+
+    pid = environ.get("JPY_PARENT_PID", "").strip() or str(os.getppid())
+    if not pid.isdigit():
+        return None
+    runtime = environ.get("JUPYTER_RUNTIME_DIR")
+    if not runtime:
+        try:
+            from jupyter_core.paths import jupyter_runtime_dir
+        except ImportError:  # pragma: no cover - jupyter_core comes with ipykernel
+            return None
+        runtime = jupyter_runtime_dir()
+    try:
+        with open(os.path.join(runtime, f"jpserver-{pid}.json"), encoding="utf-8") as f:
+            info = json.load(f)
+    except (OSError, ValueError):
+        return None
+    base = info.get("base_url") if isinstance(info, dict) else None
+    return base if isinstance(base, str) and base else None
+
+
+def trame_proxy_prefix(environ: Mapping[str, str] | None = None) -> str | None:
+    """The address prefix through which the browser reaches the trame server, or None for direct.
+
+    The 3D view is a trame server on a port of the kernel's machine.  A
+    browser on another machine (JupyterHub, Binder, a server behind a
+    reverse proxy) cannot reach that port, so the iframe's address goes
+    through ``jupyter-server-proxy`` instead: ``<prefix><port>/index.html``.
+    In order:
+
+    1. ``MOCAPLAB_TRAME_PROXY`` (see :data:`PROXY_ENV_VAR`): ``"off"``
+       (also ``"direct"``, ``"none"``, ``"0"``) reaches the port directly;
+       ``"auto"`` or empty uses the rules below; anything else is the prefix
+       itself, a path (``"/user/ann/proxy/"``) or a full address
+       (``"https://lab.example.org/proxy/"``), for other proxies.
+    2. pyvista's ``PYVISTA_TRAME_SERVER_PROXY_PREFIX``, when set: a full
+       address as it is, a path joined to the hub's or server's prefix (as
+       pyvista does under JupyterHub).
+    3. Under JupyterHub (``JUPYTERHUB_SERVICE_PREFIX``, e.g. ``/user/ann/``):
+       ``/user/ann/proxy/``.
+    4. A Jupyter server with a base URL other than ``/`` (read from its
+       runtime file, see :func:`_server_base_url`): ``<base_url>proxy/``.
+    5. Otherwise None: ``http://localhost:<port>/``, browser and kernel on
+       one machine.
+
+    Parameters
+    ----------
+    environ : Mapping[str, str], optional
+        The environment to read (default ``os.environ``).
+
+    Returns
+    -------
+    str or None
+        The prefix, ending in ``/``.
+    """
+    env = os.environ if environ is None else environ
+    value = env.get(PROXY_ENV_VAR, "").strip()
+    if value.lower() in _PROXY_OFF:
+        return None
+    if value and value.lower() != "auto":
+        return value.rstrip("/") + "/"
+    pyvista_prefix = env.get("PYVISTA_TRAME_SERVER_PROXY_PREFIX", "").strip()
+    service = env.get("JUPYTERHUB_SERVICE_PREFIX", "").strip()
+    if pyvista_prefix.startswith("http"):
+        return pyvista_prefix.rstrip("/") + "/"
+    if service:
+        base = service
+    else:
+        base = _server_base_url(env) or "/"
+        if base.strip("/") == "" and not pyvista_prefix:
+            return None
+    tail = (pyvista_prefix or "proxy/").strip("/")
+    return "/" + "/".join(p for p in (base.strip("/"), tail) if p) + "/"
+
+
 def _session_url(src: str) -> str | None:
     """The websocket address of the trame server behind the iframe address ``src``.
 
     ``http://localhost:PORT/index.html?ui=...`` serves its websocket at
-    ``ws://localhost:PORT/ws``.  None for a relative address (behind
-    jupyter-server-proxy), where the page finds its websocket by itself.
+    ``ws://localhost:PORT/ws``.  A path (behind jupyter-server-proxy:
+    ``/user/ann/proxy/PORT/index.html``) gives ``ws://USE_HOST/user/ann/proxy/PORT/ws``:
+    the trame page puts the browser's own host and ``ws``/``wss`` (as the page
+    is ``http``/``https``) in place of ``USE_HOST``.  The page lower-cases
+    such an address first, so a path with capitals gets None: the page then
+    finds its websocket by itself, after a request to a launcher that the
+    trame server answers with 405.
     """
     parts = urllib.parse.urlsplit(src)
+    path = parts.path.rsplit("/", 1)[0]
+    if not parts.scheme and not parts.netloc and path.startswith("/"):
+        return f"ws://USE_HOST{path}/ws" if path == path.lower() else None
     if parts.scheme not in ("http", "https") or not parts.netloc:
         return None
-    path = parts.path.rsplit("/", 1)[0]
     scheme = "wss" if parts.scheme == "https" else "ws"
     return f"{scheme}://{parts.netloc}{path}/ws"
 
@@ -1497,6 +1611,13 @@ class MotionViewer:
             "collapse_menu": width < TOOLBAR_WIDTH,
             "handler": _iframe_widget,
         }
+        prefix = trame_proxy_prefix()
+        if prefix is not None:
+            options["server_proxy_enabled"] = True
+            options["server_proxy_prefix"] = prefix
+        elif os.environ.get(PROXY_ENV_VAR, "").strip().lower() in _PROXY_OFF:
+            options["server_proxy_enabled"] = False
+        # else pyvista's theme decides (off unless set with pv.global_theme.trame.server_proxy_enabled)
         with _without_vtklocal():
             return self.plotter.show(
                 jupyter_backend=_TRAME_MODES[self.backend],

@@ -1,6 +1,6 @@
 """Synchronized multi-character path editing and time warping (Kim et al. 2009).
 
-Sections 3, 4.1, 4.2 and 4.4 of Kim, Hwang, Lee and Lee 2009,
+Sections 3, 4.1, 4.2 and 4.4 of Kim, Hyun, Kim and Lee 2009,
 "Synchronized multi-character motion editing": every character's root path is
 deformed by Laplacian (as-rigid-as-possible) curve editing and its timing by a
 1D Laplacian time warp, all characters in ONE sparse system, under soft

@@ -156,6 +156,13 @@ def no_discrete_transformations(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(editor, "enumerate_transformations", lambda track, **kw: [])
 
 
+def prune_keeps_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``discrete.prune`` as the lesson calls it keeps no candidate (the editor's own pruning still runs)."""
+    from mocaplab.editing import discrete
+
+    monkeypatch.setattr(discrete, "prune", lambda candidates, **kw: [])
+
+
 CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
     (L01, wrong_rotation_order, "forward kinematics by hand"),
     (L01, no_contacts, "the feet alternate"),
@@ -171,4 +178,5 @@ CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
     (L06, no_ik, "IK on targets from FK"),
     (L06, no_goal_solver, "skate per planted frame"),
     (L07, no_discrete_transformations, "steps are added"),
+    (L07, prune_keeps_nothing, "chosen among the pruned candidates"),
 ]

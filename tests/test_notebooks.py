@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import builtins
 import re
 from pathlib import Path
 
@@ -155,3 +156,68 @@ def test_has_an_exercise(notebook):
     graded = [k for k, (_, g) in enumerate(kinds) if g]
     assert solutions and graded, f"{path.name}: no exercise (an nbgrader solution cell and a graded test cell)"
     assert graded[-1] > solutions[0], f"{path.name}: the graded cells come before the solutions they check"
+
+
+def _code(source: str) -> ast.Module:
+    """A code cell's Python, IPython magics and shell escapes dropped."""
+    return ast.parse("\n".join(ln for ln in source.splitlines() if not ln.lstrip().startswith(("%", "!"))))
+
+
+def _bound(tree: ast.AST) -> set[str]:
+    """Every name a piece of code binds anywhere (over-approximated: locals of functions too)."""
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name) and not isinstance(node.ctx, ast.Load):
+            names.add(node.id)
+        elif isinstance(node, ast.arg):
+            names.add(node.arg)
+        elif isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            names.add(node.name)
+        elif isinstance(node, ast.Import | ast.ImportFrom):
+            assert not any(a.name == "*" for a in node.names), "a star import hides which names a cell defines"
+            names |= {a.asname or a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ExceptHandler) and node.name:
+            names.add(node.name)
+    return names
+
+
+def _loaded(tree: ast.AST) -> set[str]:
+    return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and isinstance(n.ctx, ast.Load)}
+
+
+_BUILTINS = set(dir(builtins)) | {"display", "get_ipython"}  # IPython adds these two
+
+
+def test_student_versions_reach_their_checks(notebook):
+    """With the solutions removed (as nbgrader's student version), every graded cell still runs up to its check.
+
+    A solution cell of the student version runs only what comes before its
+    first ``### BEGIN SOLUTION`` (nbgrader puts ``raise NotImplementedError``
+    there), so the answer's name must be bound by a placeholder line
+    (``name = ...``) above the markers: a graded cell then says "no answer
+    yet" instead of failing with a NameError.  Static, nothing is executed.
+    """
+    path, nb = notebook
+    bound = set(_BUILTINS)
+    placeholders: set[str] = set()
+    for k, cell in enumerate(nb.cells):
+        if cell.cell_type != "code":
+            continue
+        meta = _nbgrader(cell)
+        if meta.get("solution"):
+            before = cell.source.split("### BEGIN SOLUTION")[0]
+            tree = _code(before)
+            for node in tree.body:
+                if isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant) and node.value.value is ...:
+                    placeholders |= {t.id for t in node.targets if isinstance(t, ast.Name)}
+            bound |= _bound(tree)
+            continue
+        visible = re.sub(r"(?s)### BEGIN HIDDEN TESTS.*?### END HIDDEN TESTS", "", cell.source)
+        tree = _code(visible)
+        if meta.get("grade"):
+            where = f"{path.name} cell {k} ({meta.get('grade_id')})"
+            unbound = sorted(_loaded(tree) - bound - _bound(tree))
+            assert not unbound, f"{where}: the student version has no {unbound} (a NameError before the check)"
+            answers = _loaded(tree) & placeholders
+            assert answers, f"{where}: checks no answer bound by a placeholder `name = ...` above BEGIN SOLUTION"
+        bound |= _bound(_code(cell.source))

@@ -208,3 +208,18 @@ def test_end_effectors_recorded_and_refined(pair):
     n = res._tick(0, 40)
     got = out[0].global_positions()[n, a.skeleton.index("RightHand")]
     np.testing.assert_allclose(got, hand, atol=0.03)
+
+
+def test_time_range_failures_are_not_called_step_bound_conflicts(pair):
+    """A hard time out of numeric range fails as such in every monotonicity round; a real conflict with the
+    time-step bounds keeps saying so."""
+    from mocaplab.editing import ConstraintError
+
+    a = pair[0]
+    ed = SceneEditor([a], [AbsoluteTime(0, a.n_frames - 1, 1.0, hard=True)])
+    for far in (1e15, 1e20, 1e100):
+        with pytest.raises(ConstraintError, match="out of numeric range") as info:
+            ed.drag(0, far)
+        assert "cannot be met with time steps" not in str(info.value), far
+    with pytest.raises(ConstraintError, match=r"cannot be met with time steps within \[min_step, max_step\]"):
+        edit([a], [AbsoluteTime(0, 40, 2.0, hard=True), AbsoluteTime(0, 60, 2.1, hard=True)])

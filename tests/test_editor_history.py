@@ -9,6 +9,9 @@ result (so paths, times and motions are bitwise those shown before).
 
 from __future__ import annotations
 
+import gc
+import weakref
+
 import numpy as np
 import pytest
 
@@ -153,6 +156,44 @@ def test_add_then_drags_are_one_step_and_checkpoint_ends_a_gesture(walk):
     assert ed.undo() is before and len(ed.constraints) == 1, "one undo removes the pin pressed and dragged"
 
 
+def _alive(refs):
+    gc.collect()
+    return [all(r() is not None for r in per) for per in refs]
+
+
+def test_old_undo_states_release_their_motions_and_rebuild_them_bitwise(trio):
+    """The history holds few built motions (memory), and an undo far back rebuilds them bitwise."""
+    cons = trio_constraints(trio)
+    ed = SceneEditor(trio, cons)
+    end_a = ground(trio[0])[-1]
+    results, copies, refs = [ed.result], [frozen(ed.result)], []
+    refs.append([weakref.ref(m) for m in ed.result.motions] + [weakref.ref(m) for m in ed.result.edited_motions])
+    for g in range(8):
+        for s in np.linspace(0.1, 1.0, 5):  # one gesture: five drags (the merged ones take no place)
+            r = ed.drag(1, end_a + (0.1 * g + s) * np.array([0.4, -0.2]))
+        for m in r.motions:
+            m.global_positions()
+        ed.checkpoint()
+        results.append(r)
+        copies.append(frozen(r))
+        refs.append([weakref.ref(m) for m in r.motions] + [weakref.ref(m) for m in r.edited_motions])
+    assert len(ed.undo_stack) == 9
+    alive = _alive(refs)
+    assert alive[-4:] == [True] * 4, "the few most recent states keep their motions (undo stays fast)"
+    assert sum(alive) <= 4, f"older states release their built motions, got {alive}"
+
+    assert ed.undo() is results[-2]
+    assert ed.result.motions[0] is refs[-2][0](), "a recent undo reuses the very same built motions"
+    while ed.can_undo:
+        ed.undo()
+    assert ed.result is results[0]
+    assert_bitwise(ed.result, copies[0])
+    for i in range(1, 9):
+        assert ed.redo() is results[i]
+        assert_bitwise(results[i], copies[i])
+    assert sum(_alive(refs)) <= 4
+
+
 def test_failed_edits_record_nothing_and_change_nothing(walk):
     P = ground(walk)
     F = walk.n_frames
@@ -246,6 +287,31 @@ def test_discrete_editor_keeps_working_after_undo(walk, stretched_once):
     np.testing.assert_allclose(res.paths[0], ref.paths[0], atol=1e-8)
     ed.undo()
     assert ed.result is first
+
+
+def test_discrete_reset_returns_to_the_untransformed_input(walk):
+    """The constructor's greedy steps (max_initial) are one undo step: reset and undo reach the input clips."""
+    cons = stretched(walk, 1.5)
+    ed = DiscreteEditor([walk], cons)
+    built = ed.result
+    assert ed.applied and built.characters[0].n_frames != walk.n_frames, "the first update inserted steps"
+    assert ed.can_undo and len(ed.undo_stack) == 2
+    P = ground(walk)
+    ed.drag(1, P[0] + 1.4 * (P[-1] - P[0]))
+    ed.checkpoint()
+    back = ed.reset()
+    assert (
+        back.transformations == () and ed.applied == () and ed.history == () and ed.tracks[0].n_frames == walk.n_frames
+    )
+    assert back.characters[0].n_frames == walk.n_frames and ed.constraints == tuple(cons)
+    ref = edit([walk], cons)
+    np.testing.assert_allclose(back.paths[0], ref.paths[0], atol=1e-9)
+    np.testing.assert_allclose(back.times[0], ref.times[0], atol=1e-9)
+    ed.undo()
+    ed.undo()
+    assert ed.result is built and ed.applied == built.transformations, "undo goes back to the greedy steps"
+    assert ed.undo() is back and not ed.can_undo
+    assert edit([walk], cons, discrete=True).transformations == built.transformations, "edit() keeps the steps"
 
 
 def test_discrete_failed_edit_records_nothing(walk):

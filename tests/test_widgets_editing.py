@@ -626,9 +626,10 @@ def test_export_writes_the_edited_motions_as_bvh(walks, tmp_path):
     assert [f.name for f in files] == ["scene_1.bvh", "scene_2.bvh"], "one file per character"
     for k, f in enumerate(files):
         back = load_bvh(f, scale=0.01)
+        on = np.asarray(pe.result.active[k])  # the character's own span on the shared clock
         edited = pe.result.motions[k]
-        assert back.n_frames == edited.n_frames
-        np.testing.assert_allclose(back.pelvis_positions[:, [0, 2]], edited.pelvis_positions[:, [0, 2]], atol=1e-5)
+        assert back.n_frames == int(on.sum())
+        np.testing.assert_allclose(back.pelvis_positions[:, [0, 2]], edited.pelvis_positions[on][:, [0, 2]], atol=1e-5)
     back = load_bvh(files[0], scale=0.01)
     moved = np.linalg.norm(back.pelvis_positions[:, [0, 2]] - walks[0].root_positions[: back.n_frames, [0, 2]], axis=1)
     assert moved.max() > 0.3, "the file holds the edited path, not the input"
@@ -640,6 +641,69 @@ def test_export_error_is_shown_and_the_view_stays_in_sync(walks, tmp_path):
     pe.export_control.path.value = str(tmp_path / "missing-folder" / "x.bvh")
     pe.export_control.button.click()
     assert pe.last_error is not None and "mocaplab-error" in _status(pe)
+
+
+def test_export_writes_each_characters_own_span_not_the_padded_clock(walks, tmp_path):
+    """A character starting 3 s late is written as its own retimed motion, without the held first pose."""
+    from mocaplab.io import load_bvh
+
+    cons = [AbsoluteTime(0, 0, 0.0, hard=True), AbsoluteTime(1, 0, 3.0, hard=True)]
+    tt = TimeTrackEditor(walks, cons)
+    result = tt.result
+    assert result.motions[1].n_frames > walks[1].n_frames, "on the shared clock the late character is padded"
+    files = tt.export(tmp_path / "late.bvh")
+    for k, f in enumerate(files):
+        back = load_bvh(f, scale=0.01)
+        on = np.asarray(result.active[k])
+        assert back.n_frames == int(on.sum()) == walks[k].n_frames, "exactly the character's own frames"
+        np.testing.assert_allclose(back.pelvis_positions, result.motions[k].pelvis_positions[on], atol=1e-5)
+    late = load_bvh(files[1], scale=0.01)
+    np.testing.assert_allclose(late.pelvis_positions, walks[1].pelvis_positions, atol=1e-5)
+
+
+def test_export_failure_says_which_files_were_written(walks, tmp_path):
+    from mocaplab.widgets._controls import ExportControl
+
+    folder = tmp_path / "<b>folder"
+    folder.mkdir()
+    (folder / "scene_2.bvh").mkdir()  # the second file cannot be written: a directory has its name
+    control = ExportControl(lambda: walks)
+    with pytest.raises(OSError):
+        control.export(folder / "scene.bvh")
+    assert control.written == [folder / "scene_1.bvh"], "written holds the file written before the failure"
+    label = control.label.value
+    assert "mocaplab-error" in label and "scene_1.bvh" in label and "scene_2.bvh not written" in label
+    assert "&lt;b&gt;folder" in label and "<b>" not in label
+    with pytest.raises(OSError):
+        control.export(tmp_path / "missing-folder" / "x.bvh")
+    assert control.written == [] and "scene_1" not in control.label.value, "nothing of the earlier export is kept"
+    assert "wrote no file" in control.label.value
+
+
+def test_a_failing_listener_does_not_keep_the_others_on_the_old_state(walks):
+    P = walks[0].root_positions[:, [0, 2]]
+    F = walks[0].n_frames
+    pe = PathEditor(
+        [walks[0]], [PinPosition(0, 0, P[0], hard=True), PinPosition(0, F - 1, P[-1])], viewer=ViewerStub([])
+    )
+    pe.figure.canvas.draw()
+    seen = []
+
+    def broken(result):
+        raise RuntimeError("listener <i>broke</i>")
+
+    pe.on_edit(broken)
+    pe.on_edit(seen.append)
+    _drag(pe, P[-1], P[-1] + np.array([1.0, 0.5]))
+    assert seen and seen[-1] is pe.editor.result, "the second listener ran although the first raised"
+    dragged = pe.editor.result
+    pe.history_buttons.undo.click()
+    assert "RuntimeError" in _status(pe) and "&lt;i&gt;broke&lt;/i&gt;" in _status(pe)
+    restored = pe.editor.result
+    assert restored is not dragged and pe.result is restored
+    assert seen[-1] is restored, "the later listener shows the undone state"
+    assert pe.viewer.motions[0] is restored.motions[0], "the 3D view shows the undone state"
+    assert np.array_equal(pe._lines[0].get_xydata(), restored.paths[0])
 
 
 class FailingEditor(Spy):

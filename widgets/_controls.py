@@ -118,13 +118,28 @@ class ExportControl:
         self.box = W.HBox([self.path, self.button, self.label])
 
     def export(self, path: str | os.PathLike[str] | None = None) -> list[Path]:
-        """Write the current motions (to ``path`` or the box's name); returns the files written."""
+        """Write the current motions (to ``path`` or the box's name); returns the files written.
+
+        :attr:`written` lists the files written by this call; when a write
+        fails it holds those written before the failure, the label says so,
+        and the error is raised (the widget shows it).
+        """
+        self.written = []
+        self.label.value = ""
         motions = self._motions()
         ms = [motions] if isinstance(motions, Motion) else list(motions)
         files = export_paths(self.path.value if path is None else path, len(ms))
         for m, f in zip(ms, files, strict=True):
-            save_bvh(m, f)
-        self.written = files
+            try:
+                save_bvh(m, f)
+            except Exception:
+                done = ", ".join(html.escape(str(w)) for w in self.written) or "no file"
+                self.label.value = (
+                    "<span class='mocaplab-error' style='color:#b00020; overflow-wrap:anywhere'>"
+                    f"wrote {done} before the failure; {html.escape(str(f))} not written</span>"
+                )
+                raise
+            self.written.append(f)
         names = ", ".join(html.escape(str(f)) for f in files)
         self.label.value = f"<span class='mocaplab-ok' style='overflow-wrap:anywhere'>wrote {names}</span>"
-        return files
+        return list(files)

@@ -35,7 +35,8 @@ editor (:meth:`DragView.resync`), so what it shows is what the editor holds
 History and export: every view shows Undo / Redo / Reset buttons
 (:class:`~mocaplab.widgets._controls.HistoryButtons` over the editor's own
 ``undo``/``redo``/``reset``) and an "Export BVH" control writing the current
-edited motions (``result.motions``, one file per character).  The release
+edited motions (one file per character: ``result.motions[k]`` cut to the
+character's own span ``result.active[k]``, see :func:`own_spans`).  The release
 of the mouse ends a gesture: the view calls ``editor.checkpoint()``, so one
 drag is one undo step.
 """
@@ -295,9 +296,19 @@ class DragView:
         self._settle(grow_only=self._refresh_grows_view)
 
     def resync(self) -> None:
-        """Make every control and drawing show the editor's state (after an error; the status is kept)."""
+        """Make every control and drawing show the editor's state (after an error; the status is kept).
+
+        The listeners (:meth:`on_edit`) and the subclass hook (the 3D view,
+        the time slider) are brought up to date too, each on its own: one
+        that raises does not keep the others on the old state.
+        """
         self.result = current_result(self.editor)
         self.history_buttons.sync()
+        self._notify(self.result)
+        try:
+            self._edited()
+        except Exception:  # noqa: BLE001 - resync runs after an error, which is the one shown
+            pass
         self._redraw(final=True)
 
     def export(self, path: Any = None) -> list[Any]:
@@ -345,15 +356,27 @@ class DragView:
 
     # -- editing
     def _apply(self, result: Any) -> None:
+        """Show ``result``: every listener is called (each on its own); then the first listener error is raised."""
         self.result = result
         self.last_error = None
         self.history_buttons.sync()
+        error = self._notify(result)
+        if error is not None:
+            raise error
+
+    def _notify(self, result: Any) -> BaseException | None:
+        """Call every listener with ``result``, each under its own guard; returns the first error (or None)."""
+        first: BaseException | None = None
         for callback in self._listeners:
-            callback(result)
+            try:
+                callback(result)
+            except Exception as exc:  # noqa: BLE001 - the others still run; the caller shows it
+                first = first or exc
+        return first
 
     def _export_motions(self) -> list[Any]:
-        """The motions the Export button writes: the edited motions of every character."""
-        return list(current_result(self.editor).motions)
+        """The motions the Export button writes: each character's own retimed span (:func:`own_spans`)."""
+        return own_spans(current_result(self.editor))
 
     def _after_history(self) -> None:
         """After Undo, Redo or Reset: redraw everything (handles, paths, 3D view) from the editor."""
@@ -577,6 +600,28 @@ def _export_name(editor: Any) -> str:
     name = str(getattr(characters[0], "name", "") or "") if len(characters) else ""
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "motion"
     return f"{stem}_edited.bvh"
+
+
+def own_spans(result: Any) -> list[Any]:
+    """Each character's motion on the shared clock cut to its own time span (``result.active[k]``).
+
+    ``result.motions`` hold the first / last pose outside each character's
+    span so that all play on one clock; a file gets only the character's
+    retimed motion (a character starting 3 s late is not written with 3 s
+    of frozen first pose).
+    """
+    motions = list(result.motions)
+    active = getattr(result, "active", None)
+    if active is None:
+        return motions
+    out = []
+    for m, on in zip(motions, active, strict=True):
+        ticks = np.flatnonzero(np.asarray(on))
+        if ticks.size == 0 or ticks.size == m.n_frames:
+            out.append(m)
+        else:
+            out.append(m[int(ticks[0]) : int(ticks[-1]) + 1])
+    return out
 
 
 def current_result(editor: Any, returned: Any = None) -> Any:

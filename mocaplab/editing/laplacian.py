@@ -892,7 +892,7 @@ class HardRows:
         instead of handing back a silently violated "hard" constraint.  The
         left-out redundant rows must agree with the kept ones.
         """
-        self._check_range(x, h, scale)
+        self.check_range(x, h, scale)
         for r in self.redundant:
             miss = float(np.max(np.abs(self.H[r.rows] @ x - h[r.rows])))
             if miss > _CONSISTENCY_TOL * max(1.0, float(np.max(np.abs(h), initial=0.0))):
@@ -907,7 +907,8 @@ class HardRows:
                     [lab[0] for lab in labels if isinstance(lab, tuple)],
                 )
 
-    def _check_range(self, x: Array, h: Array, scale: float) -> None:
+    def check_range(self, x: Array, h: Array, scale: float) -> None:
+        """Raise :class:`ConstraintError` ("out of numeric range") if a kept row misses by more than round-off."""
         kept = self.kept_rows
         if not kept.size:
             return

@@ -122,6 +122,33 @@ _OPTIONS: Mapping[str, Any] = MappingProxyType(
 )
 
 _UNDO_LIMIT = 200  # undo steps kept (each holds a result)
+_WARM_RESULTS = 4  # results of the most recently current undo states that keep their built motions
+
+
+class WarmResults:
+    """The few most recently current results keep their lazily built motions; older ones release them.
+
+    An undo state holds its :class:`EditResult`; the full-body motions it
+    built on demand (and their cached global positions) are megabytes per
+    step for a crowd.  An editor calls :meth:`touch` with its current result
+    after every recorded edit, undo, redo and reset; the result that falls
+    out of the ``size`` most recent ones drops those caches
+    (:meth:`EditResult.release`), so the history holds paths, times and
+    solver state only and rebuilds the motions, bitwise the same, when the
+    state is current again.
+    """
+
+    def __init__(self, size: int = _WARM_RESULTS) -> None:
+        self._size = int(size)
+        self._results: list[EditResult] = []
+
+    def touch(self, result: EditResult, *, replaces: bool = False) -> None:
+        """``result`` is current; ``replaces``: its state took the place of the newest one (a merged drag)."""
+        rest = self._results[1:] if replaces else self._results
+        self._results = [result] + [r for r in rest if r is not result]
+        for old in self._results[self._size :]:
+            old.release()
+        del self._results[self._size :]
 
 
 def _effectors(constraints: Sequence[Any], K: int) -> tuple[tuple[EndEffector, ...], ...]:
@@ -278,7 +305,10 @@ class SceneEditor:
     released).  :meth:`undo` and :meth:`redo` restore a recorded state
     exactly (the same constraints and the very same :class:`EditResult`);
     :meth:`reset` returns to the constraints the editor was created with,
-    as one more (undoable) step.
+    as one more (undoable) step.  Memory: only the results of the few most
+    recently current states keep the full-body motions they built
+    (:class:`WarmResults`); older states rebuild them, bitwise the same, on
+    first access after an undo.
 
     Examples
     --------
@@ -350,6 +380,9 @@ class SceneEditor:
         self._result: EditResult | None = None
         self._set(tuple(constraints), changed=None)
         self.undo_stack: UndoStack[tuple[Any, ...]] = UndoStack(self.snapshot(), limit=_UNDO_LIMIT)
+        self._warm = WarmResults()
+        self._warm.touch(self.result)
+        self._merging: Any = None  # merge key of the last recorded edit, until a checkpoint
 
     # ------------------------------------------------------------ set-up
     def _stationary(self, spec: Any) -> list[list[tuple[int, int]]]:
@@ -556,8 +589,18 @@ class SceneEditor:
 
     # ----------------------------------------------------------- history
     def _record(self, result: EditResult, merge: Any = None) -> EditResult:
+        replaces = merge is not None and merge == self._merging  # the stack merges this push into the newest
         self.undo_stack.push(self.snapshot(), merge=merge)
+        self._merging = merge
+        self._warm.touch(result, replaces=replaces)
         return result
+
+    def _go(self, state: tuple[Any, ...]) -> EditResult:
+        """Make an undo state current (undo, redo, reset)."""
+        self.restore(state)
+        self._merging = None
+        self._warm.touch(self.result)
+        return self.result
 
     @property
     def can_undo(self) -> bool:
@@ -572,22 +615,33 @@ class SceneEditor:
     def checkpoint(self) -> None:
         """End a gesture: the next edit starts a new undo step."""
         self.undo_stack.checkpoint()
+        self._merging = None
 
     def undo(self) -> EditResult:
         """Go back one undo step (see the class notes); :class:`IndexError` when there is none."""
-        self.restore(self.undo_stack.undo())
-        return self.result
+        return self._go(self.undo_stack.undo())
 
     def redo(self) -> EditResult:
         """Redo the step undone last; :class:`IndexError` when there is none."""
-        self.restore(self.undo_stack.redo())
-        return self.result
+        return self._go(self.undo_stack.redo())
 
     def reset(self) -> EditResult:
         """Back to the constraints the editor was created with (an undoable step; none if already there)."""
         if self.undo_stack.current is not self.undo_stack.initial:
-            self.restore(self.undo_stack.reset())
+            return self._go(self.undo_stack.reset())
         return self.result
+
+    def trim(self) -> None:
+        """Drop the factorisations cached for other constraint structures than the one in use.
+
+        Also the time solver's systems for monotonicity active sets.  They
+        are rebuilt when needed; the discrete editor calls this on the
+        continuous editor of a scene it leaves (kept for undo).
+        """
+        for dom in (self._sd, self._td):
+            for key in [k for k in dom.cache if k != dom.key]:
+                del dom.cache[key]
+        self._td.factors.cache.clear()
 
     @property
     def tangent_rows(self) -> Any:
@@ -652,6 +706,10 @@ class _Lazy(Sequence):
 
     def __iter__(self) -> Iterator[Any]:
         return (self[k] for k in range(self._n))
+
+    def clear(self) -> None:
+        """Forget the items computed so far (they are computed again on access)."""
+        self._items.clear()
 
     def __repr__(self) -> str:
         return f"<{self._n} lazily computed items>"
@@ -723,7 +781,24 @@ class EditResult:
         """A copy listing these discrete transformations (the edit itself is shared)."""
         out = copy.copy(self)
         object.__setattr__(out, "transformations", tuple(transformations))
+        object.__setattr__(out, "_origin", self)
         return out
+
+    _origin: EditResult | None = None
+
+    def release(self) -> None:
+        """Drop the motions built on demand (edited, time-warped, refined; headings); they rebuild on access.
+
+        The result stays the same edit: paths, times and residuals are kept,
+        and motions built again are bitwise those built before (the same
+        deterministic computation on the same arrays).  The editors call this
+        on the results of older undo states to bound the history's memory.
+        """
+        for lazy in (self._headings, self.edited_motions, self._plain, self._refined):
+            lazy.clear()
+        self.__dict__.pop("_refined_list", None)
+        if self._origin is not None:
+            self._origin.release()
 
     def spatial_rhs(self) -> dict[int, Array]:
         """Right-hand sides (unweighted) each spatial constraint's rows were solved for, by index.

@@ -225,6 +225,9 @@ class TimeSolver:
             kkt, hard = self._kkt(f, key)
             full = np.concatenate([h, [active[s] for s in key]]) if key else h
             t = kkt.solve(r, np.concatenate([full[hard.keep], f.g]))
+            # targets out of numeric range fail as such, whatever the round; only a conflict with the
+            # step-bound rows of a later round is about [min_step, max_step]
+            hard.check_range(t, full, self.extent)
             try:
                 hard.check(t, full, scale=self.extent)
             except ConstraintError as exc:

@@ -18,7 +18,8 @@ equation 10 on subsampled paths, all in one batch
 candidate is applied if it lowers ``E`` by more than ``min_gain``; at most one
 transformation per update (section 5.2).  The first solve (and so
 ``edit(..., discrete=True)``) repeats the greedy step up to ``max_initial``
-times (a jump from no constraints to the given ones is like a long drag).
+times (a jump from no constraints to the given ones is like a long drag);
+those steps are one undo step, so reset returns to the untransformed clips.
 Our addition (``DiscreteOptions.verify``): the few best candidates are
 re-scored on paths subsampled 1 in 5, and the chosen one is kept only if the
 full solve confirms the gain, because the 1/25 subsampling sometimes
@@ -52,7 +53,7 @@ from ..constraints import ConstraintError
 from ..energy import deformation_energy
 from ..graph import MotionGraph, SimilarityWeights, build_graph
 from ..paths import stationary_segments
-from ..scene import EditResult, SceneEditor
+from ..scene import EditResult, SceneEditor, WarmResults
 from .evaluation import SubsampledScene
 from .pruning import Locality, protected_by_character, prune
 from .transformations import (
@@ -258,7 +259,12 @@ class DiscreteEditor:
     state: the constraints, the tracks (the current transformed motions),
     the transformations applied (:attr:`applied`, :attr:`history`), the
     continuous editor of the transformed scene and its own state, and the
-    result; so undoing a drag that inserted steps removes them.
+    result; so undoing a drag that inserted steps removes them.  The
+    initial state is the input (the untransformed clips under the given
+    constraints): the greedy steps of the first update (``max_initial``)
+    are the first undo step.  As in the scene editor, only the few most
+    recently current results keep their built motions
+    (:class:`~mocaplab.editing.scene.WarmResults`).
     :attr:`timings`, :attr:`updates` and :attr:`factorizations` count the
     work done and are not undone.
 
@@ -307,9 +313,20 @@ class DiscreteEditor:
         self._scene = scene
         self._retired_factorizations = 0
         self._constraints: tuple[Any, ...] = ()
-        self._result: EditResult | None = None
-        self._set(scene.constraints)
+        # the initial undo state is the input: the untransformed clips under the given constraints;
+        # the first update's greedy steps (up to max_initial) are the first undoable step
+        self._constraints = scene.constraints
+        self._result = scene.result.with_transformations(())
         self.undo_stack: UndoStack[tuple[Any, ...]] = UndoStack(self.snapshot(), limit=_UNDO_LIMIT)
+        self._warm = WarmResults()
+        self._merging: Any = None  # merge key of the last recorded edit, until a checkpoint
+        result = self._set(scene.constraints)
+        if self.applied:
+            self._warm.touch(self.undo_stack.initial[-1])
+            self._record(result)
+        else:  # nothing applied: the input is the current state
+            self.undo_stack = UndoStack(self.snapshot(), limit=_UNDO_LIMIT)
+            self._warm.touch(result)
 
     # ------------------------------------------------------------ public
     @property
@@ -394,8 +411,21 @@ class DiscreteEditor:
         self._scene, self._result = scene, result
 
     def _record(self, result: EditResult, merge: Any = None) -> EditResult:
+        replaces = merge is not None and merge == self._merging  # the stack merges this push into the newest
         self.undo_stack.push(self.snapshot(), merge=merge)
+        self._merging = merge
+        self._warm.touch(result, replaces=replaces)
         return result
+
+    def _go(self, state: tuple[Any, ...]) -> EditResult:
+        """Make an undo state current (undo, redo, reset)."""
+        left = self._scene
+        self.restore(state)
+        if self._scene is not left:
+            left.trim()
+        self._merging = None
+        self._warm.touch(self.result)
+        return self.result
 
     @property
     def can_undo(self) -> bool:
@@ -410,21 +440,24 @@ class DiscreteEditor:
     def checkpoint(self) -> None:
         """End a gesture: the next edit starts a new undo step."""
         self.undo_stack.checkpoint()
+        self._merging = None
 
     def undo(self) -> EditResult:
         """Go back one undo step (transformations applied in it are removed); :class:`IndexError` if none."""
-        self.restore(self.undo_stack.undo())
-        return self.result
+        return self._go(self.undo_stack.undo())
 
     def redo(self) -> EditResult:
         """Redo the step undone last; :class:`IndexError` when there is none."""
-        self.restore(self.undo_stack.redo())
-        return self.result
+        return self._go(self.undo_stack.redo())
 
     def reset(self) -> EditResult:
-        """Back to the input constraints and the untransformed clips (an undoable step; none if already there)."""
+        """Back to the input constraints and the untransformed clips (an undoable step; none if already there).
+
+        The input is the state before the constructor's greedy steps
+        (``max_initial``), which are an undo step of their own.
+        """
         if self.undo_stack.current is not self.undo_stack.initial:
-            self.restore(self.undo_stack.reset())
+            return self._go(self.undo_stack.reset())
         return self.result
 
     def _check_index(self, index: Any) -> int:
@@ -617,6 +650,8 @@ class DiscreteEditor:
             self._scene.restore(snapshot)
             raise
         self._retired_factorizations += retired
+        if scene is not self._scene:
+            self._scene.trim()  # the scene left is kept for undo only
         self.tracks = tuple(tracks)
         self.applied = tuple(applied)
         self.history += tuple(history)

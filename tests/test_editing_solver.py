@@ -493,3 +493,24 @@ def test_hard_times_far_away_raise(walk):
     for far in (1e15, 1e20, 1e100):
         with pytest.raises(ConstraintError, match="missed by"):
             ed.drag(0, far)
+
+
+def test_range_errors_name_the_dragged_target(walk):
+    """A drag that keeps the structure reuses the factorisation; the error still names the constraint as dragged."""
+    import warnings
+
+    from mocaplab.editing import ConstraintError
+
+    F = walk.n_frames
+    ed = SceneEditor([walk], [PinPosition(0, 0, (0.0, 0.0), hard=True), PinPosition(0, F - 1, (3.0, 1.0), hard=True)])
+    ed.drag(1, (3.5, 1.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        with pytest.raises(ConstraintError, match="out of numeric range") as err:
+            ed.drag(1, (1e150, 1.0))
+    text = str(err.value)
+    assert 1 in err.value.indices
+    assert "position=(1e+150, 1.0)" in text and "position=(3.0, 1.0)" not in text, text
+    k = [c for c in err.value.constraints if not isinstance(c, str)][list(err.value.indices).index(1)]
+    assert k.position == (1e150, 1.0)
+    assert ed.constraints[1].position == (3.5, 1.0)  # the editor kept its last good edit

@@ -479,6 +479,12 @@ class SceneEditor:
         saved = self.snapshot()
         try:
             return self._install(constraints, changed)
+        except ConstraintError as exc:
+            self.restore(saved)
+            current = _naming_current(exc, constraints)
+            if current is exc:
+                raise
+            raise current from None
         except Exception:
             self.restore(saved)
             raise
@@ -657,6 +663,33 @@ class SceneEditor:
         if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or not -n <= index < n:
             raise IndexError(f"Expected a constraint index in 0..{n - 1}, got {index!r}")
         return int(index) % n
+
+
+def _naming_current(exc: ConstraintError, constraints: tuple[Any, ...]) -> ConstraintError:
+    """``exc`` naming the constraints as they are now.
+
+    A drag that keeps a constraint's structure reuses the factorisation,
+    whose row labels hold the constraint as it was when it was factorised
+    (its first target): name the dragged one instead.
+    """
+    if not exc.indices:
+        return exc
+    named = list(exc.constraints)
+    message = str(exc)
+    user = iter(exc.indices)
+    for k, c in enumerate(named):
+        if isinstance(c, str):
+            continue  # automatic rows (rigid segments, step bounds) carry no index
+        i = next(user, None)
+        if i is None or not 0 <= i < len(constraints):
+            break
+        now = constraints[i]
+        if now is not c:
+            message = message.replace(f"#{i} {c!r}", f"#{i} {now!r}")
+            named[k] = now
+    if message == str(exc) and named == list(exc.constraints):
+        return exc
+    return ConstraintError(message, named, exc.indices)
 
 
 def edit(characters: Any, constraints: Sequence[Any] = (), **options: Any) -> EditResult:

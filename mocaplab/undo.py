@@ -28,11 +28,11 @@ Example
 from __future__ import annotations
 
 from collections.abc import Hashable
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 T = TypeVar("T")
 
-__all__ = ["UndoStack"]
+__all__ = ["UndoStack", "Undoable"]
 
 
 class UndoStack(Generic[T]):
@@ -119,3 +119,57 @@ class UndoStack(Generic[T]):
 
     def __repr__(self) -> str:
         return f"<UndoStack: state {self._index} of {len(self._states)}>"
+
+
+class Undoable:
+    """The undo API every stateful editor offers, over its :attr:`undo_stack`.
+
+    A class sets ``self.undo_stack`` (an :class:`UndoStack` of its states) and
+    implements :meth:`_go` (make a state current, return what the editor
+    returns after an edit) and :meth:`_here` (that value now); it may
+    override :meth:`_at_start` and :meth:`_gesture_ended`.
+    """
+
+    undo_stack: UndoStack[Any]
+
+    def _go(self, state: Any) -> Any:  # pragma: no cover - each editor implements it
+        raise NotImplementedError
+
+    def _here(self) -> Any:  # pragma: no cover - each editor implements it
+        raise NotImplementedError
+
+    def _at_start(self) -> bool:
+        """Whether the editor is in its initial state (reset then records nothing)."""
+        return self.undo_stack.current is self.undo_stack.initial
+
+    def _gesture_ended(self) -> None:
+        """Called by :meth:`checkpoint` after the stack's own (editor bookkeeping)."""
+
+    @property
+    def can_undo(self) -> bool:
+        """Whether :meth:`undo` has a step to undo."""
+        return self.undo_stack.can_undo
+
+    @property
+    def can_redo(self) -> bool:
+        """Whether :meth:`redo` has an undone step to redo."""
+        return self.undo_stack.can_redo
+
+    def checkpoint(self) -> None:
+        """End a gesture: the next edit starts a new undo step."""
+        self.undo_stack.checkpoint()
+        self._gesture_ended()
+
+    def undo(self) -> Any:
+        """Go back one undo step; :class:`IndexError` when there is none."""
+        return self._go(self.undo_stack.undo())
+
+    def redo(self) -> Any:
+        """Redo the step undone last; :class:`IndexError` when there is none."""
+        return self._go(self.undo_stack.redo())
+
+    def reset(self) -> Any:
+        """Back to the initial state (an undoable step; none when already there)."""
+        if not self._at_start():
+            return self._go(self.undo_stack.reset())
+        return self._here()

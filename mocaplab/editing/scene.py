@@ -88,7 +88,7 @@ from numpy.typing import NDArray
 
 from ..motion import Motion
 from ..refinement import EndEffector
-from ..undo import UndoStack
+from ..undo import Undoable, UndoStack
 from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint, Relative, effector_frames
 from .energy import Energies
 from .laplacian import Rows, SpatialFactors, SpatialSolution, SpatialSolver, heading_changes, spatial_rows
@@ -273,7 +273,7 @@ class _Domain:
         self.bw, self.h = bw, h
 
 
-class SceneEditor:
+class SceneEditor(Undoable):
     """An interactive editing session over a scene of characters.
 
     Parameters
@@ -608,34 +608,11 @@ class SceneEditor:
         self._warm.touch(self.result)
         return self.result
 
-    @property
-    def can_undo(self) -> bool:
-        """Whether :meth:`undo` has a step to undo."""
-        return self.undo_stack.can_undo
-
-    @property
-    def can_redo(self) -> bool:
-        """Whether :meth:`redo` has an undone step to redo."""
-        return self.undo_stack.can_redo
-
-    def checkpoint(self) -> None:
-        """End a gesture: the next edit starts a new undo step."""
-        self.undo_stack.checkpoint()
-        self._merging = None
-
-    def undo(self) -> EditResult:
-        """Go back one undo step (see the class notes); :class:`IndexError` when there is none."""
-        return self._go(self.undo_stack.undo())
-
-    def redo(self) -> EditResult:
-        """Redo the step undone last; :class:`IndexError` when there is none."""
-        return self._go(self.undo_stack.redo())
-
-    def reset(self) -> EditResult:
-        """Back to the constraints the editor was created with (an undoable step; none if already there)."""
-        if self.undo_stack.current is not self.undo_stack.initial:
-            return self._go(self.undo_stack.reset())
+    def _here(self) -> EditResult:
         return self.result
+
+    def _gesture_ended(self) -> None:
+        self._merging = None
 
     def trim(self) -> None:
         """Drop the factorisations cached for other constraint structures than the one in use.

@@ -78,6 +78,7 @@ from .. import kinematics, quat
 from ..displacement import blend_ramp
 from ..motion import Motion, Skeleton
 from ..roles import RolesError, resolve_roles
+from ..undo import Undoable, UndoStack
 from .representation import (
     StaggeredMotion,
     bezier,
@@ -1359,7 +1360,7 @@ class EditorParams:
     selected: int = 0
 
 
-class StaggeredEditor:
+class StaggeredEditor(Undoable):
     """Stateful core of the staggered-pose explorer (the widget forwards to it).
 
     Holds a clip, its :class:`~mocaplab.staggered.features.PoseAnalysis`
@@ -1426,7 +1427,6 @@ class StaggeredEditor:
         roles: Mapping[str, Any] | None = None,
         **extract_options: Any,
     ) -> None:
-        from ..undo import UndoStack
         from .features import analyze
         from .fit import extract
 
@@ -1452,7 +1452,7 @@ class StaggeredEditor:
         self._params = params
         if not self._apply(params):
             raise ValueError(f"Expected a clip the editor can represent: {self.message}")
-        self._history: UndoStack[EditorParams] = UndoStack(self._params)
+        self.undo_stack: UndoStack[EditorParams] = UndoStack(self._params)
 
     # ------------------------------------------------------------ the record
     @property
@@ -1558,40 +1558,22 @@ class StaggeredEditor:
         if new == self._params:
             return
         if self._apply(new):
-            self._history.push(self._params, merge=merge)
+            self.undo_stack.push(self._params, merge=merge)
 
     def _restore(self, params: EditorParams) -> None:
         if not self._apply(params):  # pragma: no cover - every state in the history was accepted once
             raise RuntimeError(f"Could not restore an earlier edit: {self.message}")
 
     # ------------------------------------------------------------- history
-    @property
-    def can_undo(self) -> bool:
-        return self._history.can_undo
-
-    @property
-    def can_redo(self) -> bool:
-        return self._history.can_redo
-
-    def checkpoint(self) -> None:
-        """End a gesture: the next change starts a new undo step even for the same parameter."""
-        self._history.checkpoint()
-
-    def undo(self) -> EditorParams:
-        """Go back to the previous parameters (:class:`IndexError` when there is nothing to undo)."""
-        self._restore(self._history.undo())
+    def _go(self, params: EditorParams) -> EditorParams:
+        self._restore(params)
         return self._params
 
-    def redo(self) -> EditorParams:
-        """Redo the edit undone last (:class:`IndexError` when there is none)."""
-        self._restore(self._history.redo())
+    def _here(self) -> EditorParams:
         return self._params
 
-    def reset(self) -> EditorParams:
-        """Back to the parameters the editor started with (an undoable edit; nothing when already there)."""
-        if self._params != self._history.initial:
-            self._restore(self._history.reset())
-        return self._params
+    def _at_start(self) -> bool:
+        return self._params == self.undo_stack.initial
 
     # ------------------------------------------------------------- setters
     @property

@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ...undo import UndoStack
+from ...undo import Undoable, UndoStack
 from ..constraints import ConstraintError
 from ..energy import deformation_energy
 from ..graph import MotionGraph, SimilarityWeights, build_graph
@@ -219,7 +219,7 @@ def _options(discrete: Any) -> DiscreteOptions:
     raise TypeError(f"Expected `discrete` as True or a DiscreteOptions, got {type(discrete).__name__} {discrete!r}")
 
 
-class DiscreteEditor:
+class DiscreteEditor(Undoable):
     """Interactive editing with discrete transformations (section 5; see the module docstring).
 
     Parameters
@@ -247,7 +247,10 @@ class DiscreteEditor:
         Constraint updates so far.
     undo_stack : mocaplab.undo.UndoStack
         The edit history (not to be confused with :attr:`history`, the
-        record of applied transformations).
+        record of applied transformations), behind ``undo``/``redo``/``reset``
+        (:class:`mocaplab.undo.Undoable`). Its initial state is the input
+        before the constructor's greedy steps (``max_initial``), which are an
+        undo step of their own: ``reset()`` returns to the untransformed clips.
 
     Notes
     -----
@@ -427,38 +430,11 @@ class DiscreteEditor:
         self._warm.touch(self.result)
         return self.result
 
-    @property
-    def can_undo(self) -> bool:
-        """Whether :meth:`undo` has a step to undo."""
-        return self.undo_stack.can_undo
-
-    @property
-    def can_redo(self) -> bool:
-        """Whether :meth:`redo` has an undone step to redo."""
-        return self.undo_stack.can_redo
-
-    def checkpoint(self) -> None:
-        """End a gesture: the next edit starts a new undo step."""
-        self.undo_stack.checkpoint()
-        self._merging = None
-
-    def undo(self) -> EditResult:
-        """Go back one undo step (transformations applied in it are removed); :class:`IndexError` if none."""
-        return self._go(self.undo_stack.undo())
-
-    def redo(self) -> EditResult:
-        """Redo the step undone last; :class:`IndexError` when there is none."""
-        return self._go(self.undo_stack.redo())
-
-    def reset(self) -> EditResult:
-        """Back to the input constraints and the untransformed clips (an undoable step; none if already there).
-
-        The input is the state before the constructor's greedy steps
-        (``max_initial``), which are an undo step of their own.
-        """
-        if self.undo_stack.current is not self.undo_stack.initial:
-            return self._go(self.undo_stack.reset())
+    def _here(self) -> EditResult:
         return self.result
+
+    def _gesture_ended(self) -> None:
+        self._merging = None
 
     def _check_index(self, index: Any) -> int:
         n = len(self._constraints)

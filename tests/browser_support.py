@@ -235,38 +235,57 @@ class JupyterLabServer:
     def stop(self) -> None:
         """Stop the server and everything it started, by process id. Safe to call twice."""
         proc, self.proc = self.proc, None
-        if proc is not None:
-            if proc.poll() is None:
-                self._descendants.update(_children_of(proc.pid))
-                self.shutdown_kernels()
-                self._descendants.update(_children_of(proc.pid))
-                try:
-                    os.killpg(proc.pid, signal.SIGTERM)
-                except ProcessLookupError:
-                    pass
-                try:
-                    proc.wait(timeout=15)
-                except subprocess.TimeoutExpired:
-                    try:
-                        os.killpg(proc.pid, signal.SIGKILL)
-                    except ProcessLookupError:
-                        pass
-                    proc.wait(timeout=10)
-            # the leader may be gone while group members linger
-            try:
-                os.killpg(proc.pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
-        for pid in sorted(self._descendants):
-            if _alive(pid):
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-        self._descendants.clear()
+        stop_process_tree(proc, self._descendants, before=self.shutdown_kernels, wait=15)
         if self._log is not None:
             self._log.close()
             self._log = None
+
+
+def stop_process_tree(
+    proc: subprocess.Popen[Any] | None,
+    descendants: set[int],
+    *,
+    before: Callable[[], None] | None = None,
+    wait: float = 15,
+) -> None:
+    """Stop ``proc`` (the leader of its own session), its process group and ``descendants``, by id.
+
+    ``before`` runs first while the leader still answers (a polite shutdown);
+    the children seen before and after it join ``descendants``.  SIGTERM to
+    the group, SIGKILL after ``wait`` seconds, SIGKILL again to members left
+    behind by a leader already gone, then every recorded descendant still
+    alive.  ``descendants`` is emptied.
+    """
+    if proc is not None:
+        if proc.poll() is None:
+            descendants.update(_children_of(proc.pid))
+            if before is not None:
+                before()
+                descendants.update(_children_of(proc.pid))
+            try:
+                os.killpg(proc.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+            try:
+                proc.wait(timeout=wait)
+            except subprocess.TimeoutExpired:
+                try:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                proc.wait(timeout=10)
+        # the leader may be gone while group members linger
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+    for pid in sorted(descendants):
+        if _alive(pid):
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+    descendants.clear()
 
 
 def server_env(data_dir: str | None) -> dict[str, str]:

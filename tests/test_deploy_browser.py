@@ -31,7 +31,6 @@ import json
 import os
 import secrets
 import shutil
-import signal
 import subprocess
 import sys
 import time
@@ -48,11 +47,11 @@ from browser_support import (
     CHROMIUM_ARGS,
     JupyterLabServer,
     LessonPage,
-    _alive,
     _children_of,
     copy_lessons,
     free_port,
     server_env,
+    stop_process_tree,
 )
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(420)]
@@ -269,6 +268,12 @@ class Hub:
         finally:
             page.close()
 
+    def _stop_student_server(self) -> None:
+        try:
+            self.hub_api("DELETE", f"/users/{self.user}/server", timeout=30)
+        except (urllib.error.URLError, ConnectionError, OSError, ValueError):
+            pass
+
     def log_tail(self, n: int = 60) -> str:
         try:
             return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-n:])
@@ -280,36 +285,12 @@ class Hub:
         proc, self.proc = self.proc, None
         if proc is not None:
             self._descendants.update(_children_of(proc.pid))
-            if proc.poll() is None:
-                try:
-                    self.hub_api("DELETE", f"/users/{self.user}/server", timeout=30)
-                except (urllib.error.URLError, ConnectionError, OSError, ValueError):
-                    pass
-                try:
-                    os.killpg(proc.pid, signal.SIGTERM)
-                except ProcessLookupError:
-                    pass
-                try:
-                    proc.wait(timeout=20)
-                except subprocess.TimeoutExpired:
-                    os.killpg(proc.pid, signal.SIGKILL)
-                    proc.wait(timeout=10)
-            try:
-                os.killpg(proc.pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
         for pid_file in ("proxy.pid", "jupyterhub.pid"):  # started in sessions of their own
             try:
                 self._descendants.add(int((self.state_dir / pid_file).read_text().strip()))
             except (OSError, ValueError):
                 pass
-        for pid in sorted(self._descendants):
-            if _alive(pid):
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-        self._descendants.clear()
+        stop_process_tree(proc, self._descendants, before=self._stop_student_server, wait=20)
         if self._log is not None:
             self._log.close()
             self._log = None

@@ -66,6 +66,7 @@ __all__ = [
     "limb_joints",
     "two_bone_deltas",
     "two_bone_ik",
+    "end_parent_rotations",
     "hinge_axes",
     "reach_residual",
     "aim_deltas",
@@ -562,11 +563,34 @@ def _two_bone_locals(
     q2 = np.concatenate([q_up, q_mid], axis=1)
     out[:, j2] = quat.normalize(quat.mul(quat.mul(quat.mul(quat.inv(g_p), q2), g_p), rot[:, j2]))
     if end_rotation is not None:
-        # the end's parent moved rigidly with the limb: new global = q_up q_mid G_pe
-        # (G_pe is below the middle joint)
-        g_pe_new = quat.mul(quat.mul(q_up, q_mid), grot[:, parents[je]])
+        g_pe_new = end_parent_rotations(grot, parents, je, q_up, q_mid)
         out[:, je] = quat.normalize(quat.mul(quat.inv(g_pe_new), end_rotation))
     return out
+
+
+def end_parent_rotations(grot: Array, parents: ArrayLike, end: ArrayLike, q_up: Array, q_mid: Array) -> Array:
+    """Global rotation of a limb end's *parent* after a two-bone solve, shape (F, 4) or (F, K, 4).
+
+    The end's parent is the middle joint itself (``hip -> knee -> ankle``)
+    or a helper joint below it (``LeftLeg -> LeftLegRoll -> LeftFoot``, a
+    twist bone); either way it is carried rigidly with the lower bone, so
+    its new global rotation is ``q_up q_mid G_parent(end)``.  This is the
+    one place that says which frame a limb end hangs from: use it wherever
+    an end joint's local rotation is rebuilt from a wanted global one,
+    never the middle joint's rotation in its place.
+
+    Parameters
+    ----------
+    grot : ndarray, shape (F, J, 4)
+        Global rotations before the solve.
+    parents : array_like of int, shape (J,)
+    end : int or array_like of int, shape (K,)
+        The end joint(s).
+    q_up, q_mid : ndarray, shape (F, 4) or (F, K, 4)
+        The world deltas of :func:`two_bone_deltas` for those limbs.
+    """
+    pe = np.asarray(parents, dtype=np.int64)[np.asarray(end, dtype=np.int64)]
+    return quat.mul(quat.mul(q_up, q_mid), grot[:, pe])
 
 
 # ---------------------------------------------------------- damped least squares

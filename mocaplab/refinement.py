@@ -63,7 +63,17 @@ from scipy.ndimage import minimum_filter1d
 from . import kinematics, quat
 from .contacts import Contacts, foot_contacts
 from .displacement import DisplacementMap, blend_ramp, displacement_between
-from .ik import _joint, _two_bone_locals, aim_deltas, dls_ik, hinge_axes, limb_joints, two_bone_deltas, two_bone_ik
+from .ik import (
+    _joint,
+    _two_bone_locals,
+    aim_deltas,
+    dls_ik,
+    end_parent_rotations,
+    hinge_axes,
+    limb_joints,
+    two_bone_deltas,
+    two_bone_ik,
+)
 from .motion import Motion, Skeleton, _owned, readonly
 
 __all__ = [
@@ -747,7 +757,8 @@ def _solve_goals(
                 col = np.array([foot_joints.index(int(j)) for j in ankles], dtype=np.int64)
                 ankle_pos = (a + quat.rotate(q_up, (b - a) + quat.rotate(q_mid, c - b)))[:, col]
                 toe_pos = ankle_pos + (gpos[:, tips] - gpos[:, ankles])
-                g_parent = quat.mul(quat.mul(q_up, q_mid), grot[:, jm])[:, col]
+                # the ankle hangs from its own parent (a twist joint below the knee, or the knee)
+                g_parent = end_parent_rotations(grot, sk.parents, je, q_up, q_mid)[:, col]
                 g_ankle = grot[:, ankles]
         else:
             for ankle, target in zip(foot_joints, targets, strict=True):

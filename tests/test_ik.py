@@ -321,3 +321,22 @@ def test_limb_joints_follow_the_roles_past_helper_joints():
     new = ik.two_bone_ik(rot, root, sk, "Foot_L", target)
     assert np.abs(_positions(new, root, sk)[:, 4] - target).max() < 1e-9
     assert np.allclose(new[:, 3], rot[:, 3])  # the twist joint is carried rigidly
+
+
+def test_end_rotation_is_kept_below_a_twist_joint(rng):
+    # hip -> knee -> twist (animated, zero length) -> ankle: the ankle's wanted global
+    # orientation is rebuilt in its real parent's frame, the twist joint's
+    sk = Skeleton(
+        ["Hips", "UpperLeg_L", "LowerLeg_L", "LowerLegTwist_L", "Foot_L", "UpperLeg_R", "LowerLeg_R", "Foot_R"],
+        [-1, 0, 1, 2, 3, 0, 5, 6],
+        [[0, 1, 0], [0.1, 0, 0], [0, -0.45, 0], [0, -0.2, 0], [0, -0.25, 0], [-0.1, 0, 0], [0, -0.45, 0], [0, -0.45, 0]],
+    )
+    rot = _random_quats(rng, (6, sk.n_joints), 0.3)
+    root = np.tile([0.0, 1.0, 0.0], (6, 1))
+    grot = fk(rot, root, sk.offsets, sk.parents)[0]
+    target = _positions(rot, root, sk)[:, 4] + [0.05, 0.08, -0.03]
+    new = ik.two_bone_ik(rot, root, sk, "Foot_L", target, end_rotation=grot[:, 4])
+    new_grot, new_pos = fk(new, root, sk.offsets, sk.parents)
+    assert np.abs(new_pos[:, 4] - target).max() < 1e-9
+    assert quat.angle(quat.mul(quat.inv(grot[:, 4]), new_grot[:, 4])).max() < 1e-9
+    np.testing.assert_array_equal(new[:, 3], rot[:, 3])

@@ -65,6 +65,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import quat
+from .._atomic import atomic_write
 from ..motion import FPS_RANGE as MOTION_FPS_RANGE
 from ..motion import VALID_CHANNELS, Motion, Skeleton, _owned
 from . import euler
@@ -773,8 +774,11 @@ def save_bvh(
       :data:`MAX_INDENT` tabs: deeper joints are indented like that depth, so
       a 20,000-joint chain writes lines of bounded width (the reader ignores
       indentation).
-    * Everything is checked and the whole text built before the file is
-      opened: an error leaves no partial file.
+    * Everything is checked and the whole text built before anything is
+      written, and the text goes to a temporary file beside ``path`` that
+      replaces it only once complete and synced to disk
+      (:func:`mocaplab._atomic.atomic_write`): a failure (a full disk, an
+      interruption) leaves an existing file unchanged and no partial file.
 
     Raises
     ------
@@ -922,5 +926,5 @@ def save_bvh(
     row = " ".join(length_num if length else num for length in is_length)
     out.extend(row % tuple(values) for values in data.tolist())
     text = "\n".join(out) + "\n"
-    with open(path, "w", encoding="utf-8", newline="\n") as fh:
+    with atomic_write(path, mode="w", encoding="utf-8", newline="\n") as fh:
         fh.write(text)

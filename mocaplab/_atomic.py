@@ -32,10 +32,45 @@ import stat
 from collections.abc import Iterator
 from typing import IO, Any, Literal
 
-__all__ = ["atomic_write", "TEMP_SUFFIX"]
+__all__ = ["atomic_write", "stale_temporaries", "TEMP_SUFFIX"]
 
 #: Ending of the temporary files :func:`atomic_write` creates beside the destination.
 TEMP_SUFFIX = ".tmp"
+_TOKEN_BYTES = 6  # random bytes in a temporary file's name (12 hex digits)
+
+
+def _prefix(name: str) -> str:
+    """Start of the names of ``name``'s temporary files (cut so the whole name fits any file system)."""
+    return f".{name[:200]}."
+
+
+def stale_temporaries(path: str | os.PathLike[str]) -> list[str]:
+    """Temporary files of ``path`` left by writers that were killed before they finished.
+
+    A command that is run again to resume (``python -m mocaplab.data
+    fetch``) removes them.  Two writers of the same file at the same time
+    must not: each would see the other's file as stale.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A destination of :func:`atomic_write`.
+
+    Returns
+    -------
+    list of str
+        Their paths (empty when the folder cannot be listed).
+    """
+    folder, name = os.path.split(os.path.realpath(os.fspath(path)))
+    prefix = _prefix(name)
+    try:
+        entries = os.listdir(folder)
+    except OSError:
+        return []
+    size = len(prefix) + 2 * _TOKEN_BYTES + len(TEMP_SUFFIX)
+    return sorted(
+        os.path.join(folder, e) for e in entries if len(e) == size and e.startswith(prefix) and e.endswith(TEMP_SUFFIX)
+    )
 
 
 def _sync_folder(folder: str) -> None:
@@ -57,7 +92,7 @@ def _temporary(folder: str, name: str, mode: int | None) -> tuple[str, int]:
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
     while True:
         # a name the caller cannot collide with (O_EXCL), short enough for any file system
-        tmp = os.path.join(folder, f".{name[:200]}.{secrets.token_hex(6)}{TEMP_SUFFIX}")
+        tmp = os.path.join(folder, f"{_prefix(name)}{secrets.token_hex(_TOKEN_BYTES)}{TEMP_SUFFIX}")
         try:
             fd = os.open(tmp, flags, 0o666)  # the umask applies, as for open(path, "w")
         except FileExistsError:

@@ -26,7 +26,11 @@ Where the files come from
    its Acclaim pair; ``source="asfamc"`` reads the Acclaim pair.
 2. **A web server**, when no mirror is set: the ASF/AMC pair is downloaded
    once with :mod:`pooch` into a user cache (``MOCAPLAB_CACHE_DIR`` or the
-   OS cache folder) and read from there.  The files are fetched from
+   OS cache folder) and read from there.  A download is written to a
+   temporary file beside its cache name and renamed into place only when
+   complete (:func:`mocaplab._atomic.atomic_write`), and one that grows past
+   :data:`MAX_DOWNLOAD_BYTES` is stopped (:class:`DataError`): an interrupted
+   or runaway download never leaves a cached file.  The files are fetched from
    ``{base}/{SS}/{SS}.asf`` and ``{base}/{SS}/{SS_TT}.amc``, the layout of
    the CMU site, where ``base`` is ``MOCAPLAB_CMU_URL`` (default
    :data:`DEFAULT_CMU_URL`, ``http://mocap.cs.cmu.edu/subjects``): a course
@@ -78,9 +82,11 @@ import os
 import re
 import sys
 import warnings
+from collections.abc import Callable
 from pathlib import Path
-from typing import Literal
+from typing import IO, Literal
 
+from ._atomic import atomic_write, stale_temporaries
 from ._registry import CLIPS, CMU_SUBJECTS, CMU_UNIT_M, CMU_URL
 from .motion import Motion
 
@@ -103,6 +109,7 @@ __all__ = [
     "fetch_mirror",
     "check_mirror",
     "mirror_url",
+    "MAX_DOWNLOAD_BYTES",
 ]
 
 ENV_VAR = "MOCAPLAB_DATA_DIR"
@@ -113,6 +120,10 @@ MIRROR_URL_ENV_VAR = "MOCAPLAB_MIRROR_URL"
 DEFAULT_CMU_URL = CMU_URL
 #: The frame rate of the CMU captures, used for trials outside the registry.
 CMU_FPS = 120.0
+#: Largest file a download may bring, in bytes (64 MiB; the largest CMU file is a few MB).  A server that
+#: sends more (a wrong address serving something else, a file that never ends) is cut off with a
+#: :class:`DataError` before the disk fills.
+MAX_DOWNLOAD_BYTES = 64 * 2**20
 ACKNOWLEDGMENT = (
     "The data used in this project was obtained from mocap.cs.cmu.edu. "
     "The database was created with funding from NSF EIA-0196217."
@@ -407,11 +418,58 @@ def _progressbar() -> bool:
     return importlib.util.find_spec("tqdm") is not None
 
 
-def _retrieve(url: str, folder: Path, trial: str) -> Path:
+class _Capped:
+    """The file object a download writes to: stops it past :data:`MAX_DOWNLOAD_BYTES`, keeps its bytes."""
+
+    def __init__(self, fh: IO[bytes], url: str) -> None:
+        self._fh = fh
+        self._url = url
+        self._size = 0
+        self.chunks: list[bytes] = []
+
+    def write(self, chunk: bytes) -> int:
+        self._size += len(chunk)
+        if self._size > MAX_DOWNLOAD_BYTES:
+            raise DataError(
+                f"{self._url} sent more than MAX_DOWNLOAD_BYTES = {MAX_DOWNLOAD_BYTES} bytes "
+                f"({MAX_DOWNLOAD_BYTES / 2**20:g} MiB), far more than a motion capture file: the download was "
+                "stopped and nothing was kept. Check the address (a server answering with something else), or "
+                "raise mocaplab.data.MAX_DOWNLOAD_BYTES for a genuinely larger file."
+            )
+        self.chunks.append(chunk)
+        return self._fh.write(chunk)
+
+    def flush(self) -> None:
+        self._fh.flush()
+
+
+def _download(url: str, target: Path, *, progressbar: bool = False, check: Callable[[bytes], None] | None = None) -> None:
+    """Download ``url`` to ``target``: whole or not at all, at most :data:`MAX_DOWNLOAD_BYTES`.
+
+    The bytes go to a temporary file beside ``target`` (:func:`atomic_write`);
+    ``check(raw)`` may raise to reject them, which leaves ``target`` as it was.
+    """
     import pooch
 
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_write(target) as fh:
+        out = _Capped(fh, url)
+        pooch.HTTPDownloader(progressbar=progressbar, timeout=60)(url, out, None)
+        if check is not None:
+            check(b"".join(out.chunks))
+
+
+def _retrieve(url: str, folder: Path, trial: str) -> Path:
+    """The cached copy of ``url`` in ``folder``, downloaded first if it is not there."""
+    from pooch.utils import unique_file_name
+
+    path = folder / unique_file_name(url)  # pooch's cache names: caches filled by pooch.retrieve stay valid
+    if path.is_file():
+        return path
     try:
-        fname = pooch.retrieve(url, known_hash=None, path=folder, progressbar=_progressbar())
+        _download(url, path, progressbar=_progressbar())
+    except DataError:
+        raise
     except Exception as exc:
         known = (
             "" if trial in CLIPS else f" Is {trial} a CMU trial? The trials of a subject are listed on the CMU site."
@@ -420,7 +478,7 @@ def _retrieve(url: str, folder: Path, trial: str) -> Path:
             f"Could not download {url} ({exc}).{known} Without a network, set {ENV_VAR} to a local "
             f"mirror of the clips (see the README, 'Data'); to use another server, set {URL_ENV_VAR}."
         ) from exc
-    return Path(fname)
+    return path
 
 
 def _remove(path: Path) -> str:
@@ -526,6 +584,12 @@ def _file_problem(root: Path, trial: str, rel: str, digest: str | None, lf: bool
         raw = path.read_bytes()
     except OSError as exc:
         return f"cannot be read ({exc.strerror or exc})"
+    return _bytes_problem(root, trial, rel, raw, digest, lf)
+
+
+def _bytes_problem(root: Path, trial: str, rel: str, raw: bytes, digest: str | None, lf: bool) -> str | None:
+    """What is wrong with ``raw`` as the mirror's ``rel`` (None when verified); an AMC is parsed with ``root``'s ASF."""
+    path = root / rel
     if digest is not None:
         got = _sha256(raw, normalise_newlines=lf)
         return None if got == digest else f"sha256 {got} is not the registry's {digest}"
@@ -587,6 +651,10 @@ def _source_url(rel: str, base: str | None) -> str | None:
     return None  # BVH files are not on the CMU site
 
 
+class _Rejected(Exception):
+    """A downloaded mirror file failed its check (the message says how); the download is discarded."""
+
+
 def fetch_mirror(
     dest: str | os.PathLike[str],
     trials: list[str] | None = None,
@@ -599,9 +667,13 @@ def fetch_mirror(
     The folder is laid out for ``MOCAPLAB_DATA_DIR`` (``bvh/<SS_TT>.bvh``,
     ``asfamc/<SS>/<SS>.asf``, ``asfamc/<SS>/<SS_TT>.amc``,
     ``pair_salsa_daz/<SS_TT>.bvh``).  Resumable: a file already there and
-    verified is not downloaded again.  Each file is downloaded (with pooch)
-    to ``<name>.part``, verified like :func:`check_mirror` does, and only then
-    renamed into place, so an interrupted or damaged download never counts.
+    verified is not downloaded again.  Each file is downloaded (with pooch,
+    at most :data:`MAX_DOWNLOAD_BYTES`) to a temporary file beside its name,
+    verified like :func:`check_mirror` does, synced to disk and only then
+    renamed into place (:func:`mocaplab._atomic.atomic_write`), so an
+    interrupted or damaged download never counts and a good file already
+    there is never lost.  Temporary files left by an interrupted run are
+    removed (do not run two fetches into one folder at once).
 
     Parameters
     ----------
@@ -623,7 +695,6 @@ def fetch_mirror(
         Each file that could not be fetched or verified and why; empty when
         the mirror is complete.
     """
-    import pooch
     from tqdm.auto import tqdm
 
     root = Path(dest)
@@ -643,28 +714,20 @@ def fetch_mirror(
                 bar.update(1)
                 continue
             target = root / rel
-            part = target.with_name(target.name + ".part")
-            target.parent.mkdir(parents=True, exist_ok=True)
+            for stale in [*stale_temporaries(target), str(target) + ".part"]:  # .part: left by earlier versions
+                Path(stale).unlink(missing_ok=True)
+
+            def check(raw: bytes, trial: str = trial, rel: str = rel, digest: str | None = digest, lf: bool = lf):
+                problem = _bytes_problem(root, trial, rel, raw, digest, lf)
+                if problem is not None:
+                    raise _Rejected(problem)
+
             try:
-                pooch.HTTPDownloader(progressbar=False, timeout=60)(source, str(part), None)
+                _download(source, target, check=check)
+            except _Rejected as rejected:
+                problems[rel] = f"downloaded from {source}, but it {rejected}"
             except Exception as exc:  # noqa: BLE001 - reported per file
-                part.unlink(missing_ok=True)
                 problems[rel] = f"could not download {source} ({exc})"
-                bar.update(1)
-                continue
-            old = target.with_name(target.name + ".old")
-            had_old = target.exists()
-            if had_old:
-                target.replace(old)
-            part.replace(target)
-            problem = _file_problem(root, trial, rel, digest, lf)
-            if problem is None:
-                old.unlink(missing_ok=True)
-            else:
-                target.unlink(missing_ok=True)
-                if had_old:
-                    old.replace(target)  # leave the folder as it was
-                problems[rel] = f"downloaded from {source}, but it {problem}"
             bar.update(1)
     finally:
         bar.close()

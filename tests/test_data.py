@@ -138,36 +138,31 @@ def test_no_mirror_bvh_says_how_to_get_the_data(monkeypatch):
 
 
 def test_no_mirror_and_no_network_says_how_to_get_the_data(monkeypatch, tmp_path):
-    pooch = pytest.importorskip("pooch")
-
     def offline(*args, **kwargs):
         raise OSError("network is unreachable")
 
     monkeypatch.delenv(data.ENV_VAR, raising=False)
     monkeypatch.delenv(data.URL_ENV_VAR, raising=False)
     monkeypatch.setenv(data.CACHE_ENV_VAR, str(tmp_path))
-    monkeypatch.setattr(pooch, "retrieve", offline)
+    monkeypatch.setattr(data, "_download", offline)
     with pytest.raises(data.DataError, match="Could not download http://mocap.cs.cmu.edu/subjects/16/16.asf") as info:
         data.cmu("16_15")
     assert "set MOCAPLAB_DATA_DIR to a local mirror" in str(info.value)
 
 
 def test_downloaded_files_are_checked_and_read(mocap_dir, monkeypatch, tmp_path):
-    """The download path (pooch stubbed with mirror copies, CRLF as CMU serves them)."""
-    pooch = pytest.importorskip("pooch")
+    """The download path (the network stubbed with mirror copies, CRLF as CMU serves them)."""
 
-    def fake_retrieve(url, known_hash, path, progressbar):
+    def fake_download(url, target, **kwargs):
         rel = "asfamc/" + "/".join(url.split("/")[-2:])
-        dst = Path(path) / url.split("/")[-1]
-        dst.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(mocap_dir / rel, dst)
-        dst.write_bytes(dst.read_bytes().replace(b"\r\n", b"\n").replace(b"\n", b"\r\n"))
-        return str(dst)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(mocap_dir / rel, target)
+        target.write_bytes(target.read_bytes().replace(b"\r\n", b"\n").replace(b"\n", b"\r\n"))
 
     monkeypatch.delenv(data.ENV_VAR, raising=False)
     monkeypatch.delenv(data.URL_ENV_VAR, raising=False)
     monkeypatch.setenv(data.CACHE_ENV_VAR, str(tmp_path))
-    monkeypatch.setattr(pooch, "retrieve", fake_retrieve)
+    monkeypatch.setattr(data, "_download", fake_download)
     m = data.cmu("16_35")  # auto: no mirror, so the Acclaim files are fetched
     assert m.skeleton.names[0] == "root" and m.n_frames == data.describe("16_35")["frames"]
 
@@ -482,16 +477,15 @@ def test_a_trial_the_server_does_not_have(server):
 
 
 def test_downloads_show_a_progress_bar_when_tqdm_is_installed(monkeypatch, tmp_path):
-    pooch = pytest.importorskip("pooch")
     calls = []
 
-    def fake_retrieve(url, known_hash, path, progressbar):
+    def fake_download(url, target, *, progressbar=False, check=None):
         calls.append(progressbar)
         raise OSError("offline")
 
     monkeypatch.delenv(data.ENV_VAR, raising=False)
     monkeypatch.setenv(data.CACHE_ENV_VAR, str(tmp_path))
-    monkeypatch.setattr(pooch, "retrieve", fake_retrieve)
+    monkeypatch.setattr(data, "_download", fake_download)
     monkeypatch.setitem(sys.modules, "tqdm", None)  # not importable
     with pytest.raises(data.DataError):
         data.cmu("16_15")
@@ -621,8 +615,8 @@ def test_fetch_resumes(course, tmp_path, capsys):
     course.log.clear()
     assert fetch(str(dest), "16_15", "02_01", "--url", course.mirror_url) == 0
     assert course.log == []  # everything there and verified: nothing downloaded
-    # an interrupted download: a partial file beside a missing one, a truncated file in place
-    (dest / "bvh/16_15.bvh").rename(dest / "bvh/16_15.bvh.part")
+    # an interrupted download: a killed run's temporary file beside a missing one, a truncated file in place
+    (dest / "bvh/16_15.bvh").rename(dest / "bvh/.16_15.bvh.0123456789ab.tmp")
     amc = dest / "asfamc/02/02_01.amc"
     amc.write_bytes(amc.read_bytes()[:1000])
     assert data.check_mirror(dest, ["16_15", "02_01"]) == {
@@ -632,7 +626,7 @@ def test_fetch_resumes(course, tmp_path, capsys):
     assert fetch(str(dest), "16_15", "02_01", "--url", course.mirror_url) == 0
     assert sorted(course.log) == ["/mirror/asfamc/02/02_01.amc", "/mirror/bvh/16_15.bvh"]
     assert data.check_mirror(dest, ["16_15", "02_01"]) == {}
-    assert not list(dest.rglob("*.part")) and not list(dest.rglob("*.old"))
+    assert not list(dest.rglob(".*.tmp")) and not list(dest.rglob("*.part")) and not list(dest.rglob("*.old"))
 
 
 def test_fetch_rejects_a_damaged_file_and_keeps_the_rest(course, tmp_path, capsys):
@@ -643,7 +637,7 @@ def test_fetch_rejects_a_damaged_file_and_keeps_the_rest(course, tmp_path, capsy
     out, _ = capsys.readouterr()
     assert f"bad: bvh/16_15.bvh: downloaded from {course.mirror_url}/bvh/16_15.bvh, but it sha256 " in out
     assert "is not the registry's ad2832511ff79d1f" in out and "1 of 3 files missing or bad" in out
-    assert not (dest / "bvh/16_15.bvh").exists() and not list(dest.rglob("*.part"))
+    assert not (dest / "bvh/16_15.bvh").exists() and not list(dest.rglob(".*.tmp"))
     assert data.check_mirror(dest, ["16_15"]) == {"bvh/16_15.bvh": "missing"}
 
 

@@ -16,7 +16,7 @@ from mocaplab.editing import (
     deformation_energy,
     edit,
 )
-from mocaplab.editing.laplacian import detect_tangent_flips
+from mocaplab.editing.laplacian import FLIP_RATE, detect_tangent_flips
 from mocaplab.editing.paths import central_tangents, ground_angle, laplacian_coordinates, wrap_angle
 
 
@@ -271,13 +271,93 @@ def test_detect_tangent_flips_leaves_real_turns_alone():
     assert not detect_tangent_flips(t0, turn, fps=30.0).any()
     with pytest.raises(ValueError, match="fps"):
         detect_tangent_flips(t0, t0, fps=0.0)
-    with pytest.raises(ValueError, match="threshold"):
-        detect_tangent_flips(t0, t0, fps=30.0, threshold=4.0)
+    with pytest.raises(ValueError, match=r"Expected `rate` > 0 degrees per second .* got -30"):
+        detect_tangent_flips(t0, t0, fps=30.0, rate=-30.0)
+
+
+@pytest.mark.parametrize("fps", [30.0, 60.0, 120.0])
+@pytest.mark.parametrize("end", ["start", "end"])
+def test_reversed_runs_reaching_an_end_are_flagged(fps, end):
+    # the first or last 0.3 s turned round (a fold whose return lies beyond the clip): the whole run, at any rate
+    F, n = int(4 * fps), int(0.3 * fps)
+    t0, t1, _ = _fold(0, F=F)
+    run = np.zeros(F, bool)
+    run[:n] = end == "start"
+    run[F - n :] = end == "end"
+    t1[run] *= -1
+    assert np.array_equal(detect_tangent_flips(t0, t1, fps=fps), run)
+    # with a shorter window the run is not one reversed stretch: only frames around the jump, not the run
+    far = detect_tangent_flips(t0, t1, fps=fps, window=0.2)
+    assert far.any() and not far[run].all()
+
+
+def test_flip_rate_is_per_second():
+    # a fold that turns the tangent round over 0.1 s: 3 frames of 60 degrees at 30 fps, 12 of 15 at 120 fps;
+    # a per-frame threshold of 30 degrees finds it at 30 fps only, the default rate at both
+    for fps in (30.0, 120.0):
+        F = int(2 * fps)
+        t0 = np.tile([0.0, 0.05], (F, 1))
+        turn = np.clip((np.arange(F) - fps) / (0.1 * fps), 0.0, 1.0) * np.pi  # 0 -> 180 degrees in 0.1 s
+        t1 = 0.05 * np.c_[np.sin(turn), np.cos(turn)]
+        t1[int(1.5 * fps) :] = t0[int(1.5 * fps) :]  # turned back 0.4 s later, at once
+        found = detect_tangent_flips(t0, t1, fps=fps)
+        assert found[int(1.1 * fps) : int(1.5 * fps)].all() and not found[: int(0.9 * fps)].any()
+        per_frame = detect_tangent_flips(t0, t1, fps=fps, rate=30.0 * fps)  # 30 degrees per frame
+        assert per_frame[int(1.05 * fps) : int(1.5 * fps)].all() == (fps == 30.0)
+    assert FLIP_RATE == 900.0
+
+
+@pytest.fixture(scope="module")
+def blender_walk(mocap_dir):
+    import warnings
+
+    from mocaplab import load_bvh
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # no unit in the file
+        return load_bvh(mocap_dir / "realworld/bvhtoolbox/walk01.bvh")  # Blender export, 24 fps, 5.5 m straight
+
+
+def _squeezed_headings(motion, fps, **options):
+    w = motion.resample(fps)
+    p = ground(w)
+    F = len(p)
+    cons = [PinPosition(0, 0, p[0], hard=True), PinPosition(0, F - 1, p[0] + 0.5 * (p[-1] - p[0]), hard=True)]
+    res = edit([w], cons, **options)
+    return np.arange(F) / fps, np.degrees(res.heading_change[0]), res.flips[0]
+
+
+def test_a_squeezed_walk_does_not_turn_round_at_its_start_at_any_frame_rate(blender_walk):
+    # squeezed to half its chord, the walk's first 0.3 s fold back: unrepaired, its heading starts 157 degrees
+    # round and turns 80-86 degrees in the first 0.25 s; repaired, the heading change is held there
+    grid = np.arange(0.0, 4.0, 1 / 30)
+    headings = {}
+    for fps in (30.0, 60.0, 120.0):
+        t, hc, flips = _squeezed_headings(blender_walk, fps)
+        assert flips[: int(0.25 * fps)].all()  # the reversed run that reaches the start
+        k = int(0.25 * fps)
+        assert abs(hc[k] - hc[0]) < 5 and abs(hc[-1] - hc[-1 - k]) < 10  # no turn over the ends
+        assert np.abs(hc).max() < 20
+        headings[fps] = np.interp(grid, t, hc)
+        t_off, off, _ = _squeezed_headings(blender_walk, fps, flip_rate=None)
+        assert abs(off[0] - off[-1]) > 150  # the unrepaired heading starts turned round
+    # the same repaired headings at 30, 60 and 120 fps, within a few degrees
+    assert np.abs(headings[60.0] - headings[30.0]).max() < 5
+    assert np.abs(headings[120.0] - headings[30.0]).max() < 5
+
+
+def test_flip_rate_option_is_checked_when_the_editor_is_made(walk):
+    p = ground(walk)
+    cons = [PinPosition(0, 0, p[0], hard=True)]
+    with pytest.raises(ValueError, match=r"Expected `flip_rate` > 0 degrees per second"):
+        edit([walk], cons, flip_rate=0.0)
+    with pytest.raises(TypeError, match="flip_threshold"):
+        edit([walk], cons, flip_threshold=0.5)  # radians per frame is gone: the option was renamed
 
 
 def test_squeezing_16_15_to_a_tenth_leaves_no_heading_jump(walk):
     # squeezing a walk to 10% of its length folds its path many times over; after the repair
-    # the heading turns by at most 30 degrees between frames (the default flip_threshold)
+    # the heading turns by at most 30 degrees between frames (the default flip_rate, 900 degrees/s, at 30 fps)
     p = ground(walk)
     F = len(p)
     cons = [PinPosition(0, 0, p[0], hard=True), PinPosition(0, F - 1, p[0] + 0.1 * (p[-1] - p[0]), hard=True)]
@@ -292,8 +372,8 @@ def test_squeezing_16_15_to_a_tenth_leaves_no_heading_jump(walk):
     yaw0 = np.unwrap(quat.yaw(walk.rotations[:, 0]))
     assert np.degrees(np.abs(np.diff(yaw))).max() <= 30 + np.degrees(np.abs(np.diff(yaw0))).max()
     # the old detector (31-frame circular mean, 90 degrees) let the heading jump by 86 degrees here;
-    # with the repair switched off (a threshold no jump exceeds) the heading spins
-    off = edit([walk], cons, flip_threshold=np.pi - 1e-6)
+    # with the repair switched off the heading spins
+    off = edit([walk], cons, flip_rate=None)
     assert np.degrees(np.abs(np.diff(off.heading_change[0]))).max() > 60
 
 

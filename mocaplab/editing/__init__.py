@@ -102,8 +102,8 @@ Editing (:mod:`mocaplab.editing.scene`)
     ``min_time_step_ratio``, ``.energies -> Energies(shape, scale, time)``,
     ``.notes``, ``.with_transformations(ts)``; immutable.
     Options: ``scale_compensation=True, stationary="auto", min_step=0.25,
-    max_step=4.0`` (ratios of the frame time), ``flip_threshold=pi/6`` (radians
-    per frame), ``flip_window=1.0`` (s), ``relative_tolerance=1e-3`` (m),
+    max_step=4.0`` (ratios of the frame time), ``flip_rate=900`` (degrees
+    per second), ``flip_window=1.0`` (s), ``relative_tolerance=1e-3`` (m),
     ``relative_iterations=20``, ``variational_step=10, clock_fps=None,
     start_times=None``, ``refine=False``,
     ``roles=None`` (role overrides), ``joints=None`` (contact joints for

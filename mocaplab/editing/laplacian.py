@@ -24,11 +24,14 @@ Stationary sub-paths (section 4.2)
     phase 1, so the matrices stay fixed.
 Tangent flips (section 4.2)
     detected after the solve from jumps of ``phi_i = angle(t_i, that_i)``
-    between successive frames (``flip_threshold``, 30 degrees per frame by
-    default); a jump and a later one that brings ``phi`` back within
-    ``flip_window`` seconds bound a whole reversed stretch; the heading is
-    repaired by linear interpolation over the flagged frames, which grow
-    until it turns at most the threshold per frame
+    between successive frames faster than ``flip_rate`` (degrees per second;
+    900 by default, the paper's 30 degrees per frame at 30 fps, so a clip
+    gives the same answer at any frame rate); a jump and a later one that
+    brings ``phi`` back within ``flip_window`` seconds bound a whole
+    reversed stretch, and a jump within ``flip_window`` of the clip's first
+    or last frame starts a reversed run reaching that end; the heading is
+    repaired by linear interpolation over the flagged frames (held at the
+    ends), which grow until it turns at most ``flip_rate``
     (:func:`detect_tangent_flips`).  The positions are not changed, so the
     matrix never depends on the flips.
 
@@ -106,6 +109,8 @@ __all__ = [
     "shape_matrix",
     "scale_matrix",
     "rigid_rows",
+    "FLIP_RATE",
+    "flip_step",
     "detect_tangent_flips",
     "heading_changes",
 ]
@@ -1358,12 +1363,34 @@ def _interpolated_angles(phi: Array, good: NDArray[np.bool_], F: int, where: NDA
     return np.interp(np.arange(F), idx, np.unwrap(phi[good]))
 
 
+#: Default flip rate, degrees per second: the paper's 30 degrees per frame at its 30 fps.
+FLIP_RATE = 900.0
+#: How close (radians) ``phi`` must come back to its value before a jump for a later jump to close a reversed run.
+_RETURN_TOLERANCE = np.pi / 6
+
+
+def flip_step(rate: float | None, fps: float, *, name: str = "rate") -> float:
+    """The per-frame jump (radians) that a flip rate in degrees per second allows at ``fps``.
+
+    ``rate / fps`` in radians, at most pi (no jump of a wrapped angle is
+    larger, so a rate beyond ``180 fps`` finds no flip); ``None`` switches
+    the repair off (pi).  ``name`` is the argument named in the error.
+    """
+    if not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"Expected `fps` > 0, got {fps!r}")
+    if rate is None:
+        return float(np.pi)
+    if not (isinstance(rate, (int, float, np.floating, np.integer)) and np.isfinite(rate) and rate > 0):
+        raise ValueError(f"Expected `{name}` > 0 degrees per second (default {FLIP_RATE}), or None, got {rate!r}")
+    return float(min(np.radians(float(rate)) / fps, np.pi))
+
+
 def detect_tangent_flips(
     tangents: Array,
     new_tangents: Array,
     *,
     fps: float,
-    threshold: float = np.pi / 6,
+    rate: float | None = FLIP_RATE,
     window: float = 1.0,
     valid: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.bool_]:
@@ -1374,11 +1401,15 @@ def detect_tangent_flips(
     tangents, new_tangents : ndarray, shape (F, 2)
         Undeformed and deformed tangents.
     fps : float
-        Frame rate (``window`` is in seconds).
-    threshold : float
-        Radians per frame: as in the paper, a flip is reported where
-        ``|phi_{i+1} - phi_i|`` exceeds it, ``phi_i`` the signed angle from
-        the undeformed tangent to the deformed one.
+        Frame rate (``rate`` and ``window`` are per second).
+    rate : float or None
+        Degrees per second (default :data:`FLIP_RATE`, 900: the paper's 30
+        degrees per frame at 30 fps): a flip is reported where
+        ``|phi_{i+1} - phi_i|`` exceeds ``rate / fps``, ``phi_i`` the signed
+        angle from the undeformed tangent to the deformed one.  In seconds,
+        so a clip finds the same flips at 30, 60 or 120 fps (a fold that
+        turns the tangent round over 4 frames at 30 fps takes 16 at 120 fps,
+        each step a quarter as large).  ``None``: no flip is detected.
     window : float
         Seconds: the longest reversed stretch repaired as one.
     valid : ndarray of bool, shape (F,), optional
@@ -1390,16 +1421,23 @@ def detect_tangent_flips(
     Which frames around the jumps are the flipped ones:
 
     1. *Reversed runs.*  A jump and a later one, at most ``window`` seconds
-       apart, that bring ``phi`` back to within ``threshold`` of its value
+       apart, that bring ``phi`` back to within 30 degrees of its value
        before the first (a stretch of tangents turned round and back,
        Figure 4) flag every frame between them, however many.
-    2. *Lone jumps* flag the two frames of the jump.
-    3. *Repair until smooth.*  The repair replaces the flagged frames' ``phi``
-       by linear interpolation over the unflagged ones (unwrapped); while the
-       repaired ``phi`` still turns by more than ``threshold`` between two
-       frames, the nearest unflagged frame on each side of that step is
-       flagged too.  So the repaired heading never turns faster than
-       ``threshold`` per frame more than the input did.
+    2. *Reversed ends.*  A jump with no such partner, at most ``window``
+       seconds from the first or the last examined frame, starts (or ends)
+       a reversed run that reaches the clip's end (or start): every frame
+       from the jump to that end is flagged (the shorter side when both are
+       that close).  The repair then holds the last good heading change up
+       to the end.
+    3. *Lone jumps* flag the two frames of the jump.
+    4. *Repair until smooth.*  The repair replaces the flagged frames' ``phi``
+       by linear interpolation over the unflagged ones (unwrapped, held
+       constant beyond the first and last of them); while the repaired
+       ``phi`` still turns by more than ``rate / fps`` between two frames,
+       the nearest unflagged frame on each side of that step is flagged too.
+       So the repaired heading never turns faster than ``rate`` more than
+       the input did.
 
     Deformed tangents of (almost) zero length count as flipped.
 
@@ -1408,6 +1446,9 @@ def detect_tangent_flips(
     >>> t0 = np.tile([0.0, 1.0], (60, 1)); t1 = t0.copy(); t1[20:35] *= -1   # a 15-frame fold
     >>> np.flatnonzero(detect_tangent_flips(t0, t1, fps=30.0)).tolist() == list(range(20, 35))
     True
+    >>> t1 = t0.copy(); t1[50:] *= -1   # the last 10 frames turned round
+    >>> np.flatnonzero(detect_tangent_flips(t0, t1, fps=30.0)).tolist() == list(range(50, 60))
+    True
     """
     tangents = np.asarray(tangents, dtype=float)
     new_tangents = np.asarray(new_tangents, dtype=float)
@@ -1415,10 +1456,7 @@ def detect_tangent_flips(
         raise ValueError(
             f"Expected `tangents` and `new_tangents` of one shape (F, 2), got {tangents.shape} and {new_tangents.shape}"
         )
-    if not fps > 0:
-        raise ValueError(f"Expected `fps` > 0, got {fps!r}")
-    if not (0 < threshold < np.pi):
-        raise ValueError(f"Expected `threshold` in (0, pi) radians per frame, got {threshold!r}")
+    threshold = flip_step(rate, fps)
     if not window >= 0:
         raise ValueError(f"Expected `window` >= 0 seconds, got {window!r}")
     F = len(tangents)
@@ -1428,7 +1466,7 @@ def detect_tangent_flips(
     tiny = ln < 1e-9 * max(1.0, float(np.max(np.linalg.norm(tangents, axis=1), initial=0.0)))
     out[valid & tiny] = True
     idx = np.flatnonzero(valid & ~tiny)
-    if len(idx) < 3:
+    if len(idx) < 3 or rate is None:
         return out
     phi = wrap_angle(ground_angle(new_tangents[idx]) - ground_angle(tangents[idx]))
     step = wrap_angle(np.diff(phi))
@@ -1444,16 +1482,31 @@ def detect_tangent_flips(
             m2 = jumps[r]
             if idx[m2] - idx[m] > span:
                 break
-            if abs(wrap_angle(phi[m2 + 1] - phi[m])) <= threshold:
+            if abs(wrap_angle(phi[m2 + 1] - phi[m])) <= _RETURN_TOLERANCE:
                 flag[m + 1 : m2 + 1] = True
                 used[q : r + 1] = True
                 break
-        else:
-            pass
-        if not used[q]:  # 2. a lone jump
+        if used[q]:
+            continue
+        used[q] = True
+        # 2. a reversed run reaching an end of the clip: from the jump to that end
+        head, tail = idx[m + 1] - idx[0], idx[-1] - idx[m]  # frames on each side, counted as in `span`
+        if min(head, tail) <= span:
+            # with the cusp's tail: the frames next to the jump still turning at over half the rate
+            settling = np.abs(step) > 0.5 * threshold
+            if tail <= head:
+                k = m
+                while k > 0 and settling[k - 1]:
+                    k -= 1
+                flag[k + 1 :] = True
+            else:
+                k = m
+                while k + 1 < len(step) and settling[k + 1]:
+                    k += 1
+                flag[: k + 1] = True
+        else:  # 3. a lone jump
             flag[m] = flag[m + 1] = True
-            used[q] = True
-    # 3. grow the flagged stretches until the interpolated phi is smooth
+    # 4. grow the flagged stretches until the interpolated phi is smooth
     for _ in range(len(idx)):
         good = ~flag
         if good.sum() < 2:
@@ -1483,7 +1536,7 @@ def heading_changes(
     new_positions: Array,
     *,
     segments: Sequence[tuple[int, int]] = (),
-    flip_threshold: float = np.pi / 6,
+    flip_rate: float | None = FLIP_RATE,
     flip_window: float = 1.0,
 ) -> tuple[Array, NDArray[np.bool_], Array]:
     """Turn of the tangent direction per frame after a deformation.
@@ -1496,8 +1549,8 @@ def heading_changes(
         The deformed positions.
     segments : sequence of (start, stop)
         Rigid stationary segments (half-open): they take their best-fit rotation.
-    flip_threshold : float
-        Radians per frame (:func:`detect_tangent_flips`).
+    flip_rate : float or None
+        Degrees per second (:func:`detect_tangent_flips`); ``None``: no repair.
     flip_window : float
         Seconds: the longest reversed stretch repaired as one.
 
@@ -1517,7 +1570,7 @@ def heading_changes(
     t0 = path.tangents
     t1 = central_tangents(new_positions)
     valid = ~path.degenerate
-    flipped = detect_tangent_flips(t0, t1, fps=path.fps, threshold=flip_threshold, window=flip_window, valid=valid)
+    flipped = detect_tangent_flips(t0, t1, fps=path.fps, rate=flip_rate, window=flip_window, valid=valid)
     good = valid & ~flipped
     F = path.n_frames
     if good.any():

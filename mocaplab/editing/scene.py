@@ -36,11 +36,14 @@ min_speed : float, default 0.1 (m/s)
     Tangent degeneracy threshold (:class:`~mocaplab.editing.paths.MotionPath`).
 min_step, max_step : float, default 0.25 and 4.0
     Time-step bounds as ratios of each clip's frame time (section 4.4).
-flip_threshold : float, default pi / 6
-    Tangent-flip detection threshold, radians per frame (section 4.2): a
-    jump of the deformed tangent's angle to the undeformed one larger than
-    this is a flip, and the repaired heading turns at most this much per
-    frame more than the input did (:func:`~mocaplab.editing.laplacian.detect_tangent_flips`).
+flip_rate : float or None, default 900.0 (degrees per second)
+    Tangent-flip detection rate (section 4.2; the paper's 30 degrees per
+    frame at 30 fps): a jump of the deformed tangent's angle to the
+    undeformed one between two frames larger than ``flip_rate / fps`` is a
+    flip, and the repaired heading turns at most this much faster than the
+    input did, at any frame rate
+    (:func:`~mocaplab.editing.laplacian.detect_tangent_flips`).  ``None``
+    switches the repair off.
 flip_window : float, default 1.0
     Seconds: the longest reversed stretch between two paired jumps that is
     repaired as one fold.
@@ -91,7 +94,15 @@ from ..refinement import EndEffector
 from ..undo import Undoable, UndoStack
 from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint, Relative, effector_frames
 from .energy import Energies
-from .laplacian import Rows, SpatialFactors, SpatialSolution, SpatialSolver, heading_changes, spatial_rows
+from .laplacian import (
+    Rows,
+    SpatialFactors,
+    SpatialSolution,
+    SpatialSolver,
+    flip_step,
+    heading_changes,
+    spatial_rows,
+)
 from .paths import MotionPath, apply_path, contact_joints, laplacian_coordinates, stationary_segments, with_roles
 from .timewarp import TimeFactors, TimeSolver, temporal_rows
 
@@ -108,7 +119,7 @@ _OPTIONS: Mapping[str, Any] = MappingProxyType(
         "min_speed": 0.1,
         "min_step": 0.25,
         "max_step": 4.0,
-        "flip_threshold": math.pi / 6,
+        "flip_rate": 900.0,
         "flip_window": 1.0,
         "relative_tolerance": 1e-3,
         "relative_iterations": 20,
@@ -331,6 +342,7 @@ class SceneEditor(Undoable):
             raise TypeError(f"Unknown option(s) {unknown}; valid options are {sorted(_OPTIONS)}")
         opts = dict(_OPTIONS)
         opts.update(options)
+        flip_step(opts["flip_rate"], 1.0, name="flip_rate")  # a bad rate fails here, not when a heading is first asked for
         self.options = opts
         chars = _characters(characters)
         K = len(chars)
@@ -876,7 +888,7 @@ class EditResult:
             self.original_paths[k],
             self.paths[k],
             segments=self.stationary[k],
-            flip_threshold=self._ed.options["flip_threshold"],
+            flip_rate=self._ed.options["flip_rate"],
             flip_window=self._ed.options["flip_window"],
         )
         return _ro(d), _ro(f), _ro(t)

@@ -52,6 +52,7 @@ Examples
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from typing import Any
 
@@ -63,6 +64,8 @@ from .displacement import blend_ramp
 from .motion import Motion, Skeleton
 
 __all__ = [
+    "UnreachableTargetWarning",
+    "unreachable_message",
     "limb_joints",
     "two_bone_deltas",
     "two_bone_ik",
@@ -90,6 +93,41 @@ _POLE_FADE = (0.05, 0.15)
 def _ramp(x: Array, edges: tuple[float, float]) -> Array:
     """From 0 (x <= edges[0]) to 1 (x >= edges[1]) by :func:`~mocaplab.displacement.blend_ramp`."""
     return blend_ramp((x - edges[0]) / (edges[1] - edges[0]))
+
+
+class UnreachableTargetWarning(UserWarning):
+    """An IK target lay beyond its limb's reach on some frames: the limb went straight and missed it."""
+
+
+def _frame_runs(frames: ArrayLike) -> str:
+    """Frame indices as runs, ``"3-7, 12, 20-24"``."""
+    f = np.unique(np.asarray(frames, dtype=np.int64))
+    if f.size == 0:
+        return "none"
+    cut = np.flatnonzero(np.diff(f) > 1) + 1
+    return ", ".join(f"{r[0]}" if r[0] == r[-1] else f"{r[0]}-{r[-1]}" for r in np.split(f, cut))
+
+
+#: Targets missed by less than this (metres) are not reported.
+UNREACHABLE_TOLERANCE = 1e-3
+
+
+def unreachable_message(joint: str, residual: ArrayLike, *, tolerance: float = UNREACHABLE_TOLERANCE) -> str | None:
+    """One line naming a joint, the frames where its target is out of reach and the largest miss, or None.
+
+    ``residual`` (F,) is how far the target lies beyond reach on each frame
+    (metres, :func:`reach_residual`); frames within ``tolerance`` count as
+    reached.
+    """
+    r = np.asarray(residual, dtype=float)
+    bad = np.flatnonzero(r > tolerance)
+    if bad.size == 0:
+        return None
+    worst = int(bad[np.argmax(r[bad])])
+    return (
+        f"target of {joint!r} out of reach on frames {_frame_runs(bad)} ({bad.size} frames): "
+        f"missed by up to {1000.0 * r[worst]:.0f} mm (frame {worst}); the limb is straightened toward it"
+    )
 
 
 # --------------------------------------------------------------------- helpers
@@ -432,6 +470,7 @@ def two_bone_ik(
     fk: tuple[Array, Array] | None = None,
     keep_bend: bool = True,
     return_residual: bool = False,
+    warn_unreachable: bool = True,
 ) -> Any:
     """Analytic limb IK on every frame: new local rotations.
 
@@ -474,6 +513,10 @@ def two_bone_ik(
     return_residual : bool
         Also return, per frame, how far the target is out of reach
         (:func:`reach_residual`, metres; 0 where it is reached).
+    warn_unreachable : bool
+        Warn (:class:`UnreachableTargetWarning`, once per call) naming the
+        end joint, the frames where the target is beyond reach by more than
+        1 mm and the largest miss.
 
     Returns
     -------
@@ -523,9 +566,23 @@ def two_bone_ik(
     )
     want = None if end_rotation is None else _per_frame(end_rotation, n_frames, 4, "end_rotation")
     out = _two_bone_locals(rot, grot, skeleton.parents, (ju, jm, je), q_up, q_mid, want)
-    if return_residual:
-        return out, reach_residual(gpos[:, ju], gpos[:, jm], gpos[:, je], tgt)
-    return out
+    if not (return_residual or warn_unreachable):
+        return out
+    residual = reach_residual(gpos[:, ju], gpos[:, jm], gpos[:, je], tgt)
+    message = unreachable_message(skeleton.names[je], residual) if warn_unreachable else None
+    if message is not None:
+        _warn(message, UnreachableTargetWarning)
+    return (out, residual) if return_residual else out
+
+
+def _warn(message: str, category: type[Warning]) -> None:
+    """Warn at the user's line (the first frame outside mocaplab)."""
+    import warnings
+
+    frame, level = sys._getframe(1), 2  # stacklevel 1 would be this function
+    while frame.f_back is not None and str(frame.f_globals.get("__name__", "")).startswith("mocaplab"):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level)
 
 
 def _two_bone_locals(

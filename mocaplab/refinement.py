@@ -64,8 +64,10 @@ from . import kinematics, quat
 from .contacts import Contacts, foot_contacts
 from .displacement import DisplacementMap, blend_ramp, displacement_between
 from .ik import (
+    UnreachableTargetWarning,
     _joint,
     _two_bone_locals,
+    _warn,
     aim_deltas,
     dls_ik,
     end_parent_rotations,
@@ -73,6 +75,7 @@ from .ik import (
     limb_joints,
     two_bone_deltas,
     two_bone_ik,
+    unreachable_message,
 )
 from .motion import Motion, Skeleton, _owned, readonly
 
@@ -729,7 +732,8 @@ def _solve_goals(
         fk = (grot, gpos)
         for j, g in limbs:
             rot = two_bone_ik(
-                rot, root, sk, j, _blend(gpos[:, j], g), end_rotation=grot[:, j], fk=fk, bend_axis=given.get(j)
+                rot, root, sk, j, _blend(gpos[:, j], g), end_rotation=grot[:, j], fk=fk, bend_axis=given.get(j),
+                warn_unreachable=False,  # refine() reports misses once, on the result
             )
         grot, gpos = _fk(rot, root, motion)
     if foot_joints:
@@ -764,7 +768,7 @@ def _solve_goals(
             for ankle, target in zip(foot_joints, targets, strict=True):
                 rot = two_bone_ik(
                     rot, root, sk, ankle, target, end_rotation=grot[:, ankle], fk=(grot, gpos),
-                    bend_axis=given.get(ankle),
+                    bend_axis=given.get(ankle), warn_unreachable=False,
                 )
             if toes:
                 grot2, gpos2 = _refresh(rot, (grot, gpos), motion, [leg[0] for leg in legs])
@@ -945,6 +949,37 @@ class EndEffector:
                 raise ValueError(f"Expected EndEffector `target` of shape (3,) or (F, 3), got {t.shape}")
             object.__setattr__(self, "target", readonly(t))
 
+    def check(self, motion: Motion, *, label: str | None = None) -> None:
+        """Raise ValueError, naming this constraint, if it cannot apply to ``motion``.
+
+        Checks that the joint (and any ``chain`` joint and :class:`RelativeTo`
+        joint of the same character) is in the skeleton, that the frames lie
+        within the clip and that a per-frame target has one row per frame.
+        ``label`` names the constraint in the message (default its joint and
+        frames).
+        """
+        what = label if label is not None else f"EndEffector({self.joint!r}, frames={self.frames!r})"
+        names = motion.skeleton.names
+        missing = [j for j in (self.joint, *(self.chain or ())) if j not in names]
+        if isinstance(self.target, RelativeTo) and self.target.character in (None, self.character):
+            missing += [self.target.joint] if self.target.joint not in names else []
+        if missing:
+            raise ValueError(
+                f"{what}: joint(s) {missing} not in the skeleton of {motion.n_frames} frames; "
+                f"expected one of {list(names)}"
+            )
+        try:
+            ivs = self.intervals(motion.n_frames)
+        except ValueError as err:
+            raise ValueError(f"{what}: {err} (the clip has frames 0..{motion.n_frames - 1})") from None
+        t = self.target
+        if isinstance(t, np.ndarray) and t.ndim == 2 and t.shape[0] != motion.n_frames:
+            raise ValueError(
+                f"{what}: expected a target of shape (3,) or ({motion.n_frames}, 3) (one row per frame), got {t.shape}"
+            )
+        if not ivs:
+            raise ValueError(f"{what}: no frame constrained")
+
     def intervals(self, n_frames: int) -> list[tuple[int, int]]:
         """The constrained frames as half-open intervals."""
         f = self.frames
@@ -1088,6 +1123,8 @@ def refine(
             raise TypeError(f"Expected EndEffector objects in `end_effectors`, got {type(ee).__name__}")
         if ee.character != 0 or (isinstance(ee.target, RelativeTo) and ee.target.character not in (None, 0)):
             raise ValueError("refine() takes one character; use refine_scene() for constraints between characters")
+    for k, ee in enumerate(end_effectors):
+        ee.check(motion, label=f"end_effectors[{k}] ({ee.joint!r}, frames={ee.frames!r})")
     targets = [_world_targets(ee, [motion], {}, k) for k, ee in enumerate(end_effectors)]
     return _refine_one(
         motion, end_effectors, targets, contacts=contacts, reference=reference, feet=feet, blend=blend,
@@ -1115,9 +1152,25 @@ def _refine_one(
         c = _contacts_for(motion, contacts, reference, roles)
         goals += foot_goals(motion, c, reference=reference, blend=blend)
     goals += effector_goals(motion, end_effectors, targets, blend=blend)
-    return enforce_goals(
+    out = enforce_goals(
         motion, goals, spacing=spacing, levels=levels, adjust_root=adjust_root, dls_options=dls_options
     )
+    _warn_missed(out, end_effectors, targets)
+    return out
+
+
+def _warn_missed(motion: Motion, end_effectors: Sequence[EndEffector], targets: Sequence[Array]) -> None:
+    """One warning per end effector that misses its target by more than 1 mm on constrained frames."""
+    if not end_effectors:
+        return
+    pos = motion.global_positions()
+    for ee, tgt in zip(end_effectors, targets, strict=True):
+        frames = np.concatenate([np.arange(a, b) for a, b in ee.intervals(motion.n_frames)])
+        miss = np.zeros(motion.n_frames)
+        miss[frames] = np.linalg.norm(pos[frames, motion.skeleton.index(ee.joint)] - np.asarray(tgt)[frames], axis=-1)
+        message = unreachable_message(ee.joint, miss)
+        if message is not None:
+            _warn(f"end effector {message}", UnreachableTargetWarning)
 
 
 def _mutual_pairs(end_effectors: Sequence[EndEffector]) -> list[tuple[int, int]]:
@@ -1183,11 +1236,12 @@ def refine_scene(
         if seq is not None and len(seq) != n_chars:
             raise ValueError(f"Expected `{name}` with one entry per character ({n_chars}), got {len(seq)}")
     ees = list(end_effectors)
-    for ee in ees:
+    for k, ee in enumerate(ees):
         if not isinstance(ee, EndEffector):
             raise TypeError(f"Expected EndEffector objects in `end_effectors`, got {type(ee).__name__}")
         if not 0 <= ee.character < n_chars:
             raise ValueError(f"Expected EndEffector character in [0, {n_chars}), got {ee.character}")
+        ee.check(motions[ee.character], label=f"end_effectors[{k}] ({ee.joint!r}, frames={ee.frames!r})")
         t = ee.target
         if isinstance(t, RelativeTo) and t.character is not None and not 0 <= t.character < n_chars:
             raise ValueError(f"Expected RelativeTo character in [0, {n_chars}), got {t.character}")

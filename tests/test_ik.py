@@ -340,3 +340,22 @@ def test_end_rotation_is_kept_below_a_twist_joint(rng):
     assert np.abs(new_pos[:, 4] - target).max() < 1e-9
     assert quat.angle(quat.mul(quat.inv(grot[:, 4]), new_grot[:, 4])).max() < 1e-9
     np.testing.assert_array_equal(new[:, 3], rot[:, 3])
+
+
+def test_two_bone_ik_warns_once_for_targets_beyond_reach():
+    sk = _chain_skeleton()
+    rot = quat.identity((5, sk.n_joints))
+    root = np.zeros((5, 3))
+    ankle = _positions(rot, root, sk)[:, 3]
+    target = np.array(ankle)
+    target[2:4] = ankle[2:4] + [0.0, -0.3, 0.0]  # frames 2-3: 0.3 m below a straight leg
+    expected = r"'ankle' out of reach on frames 2-3 \(2 frames\): missed by up to (299|300) mm"
+    with pytest.warns(ik.UnreachableTargetWarning, match=expected) as rec:
+        ik.two_bone_ik(rot, root, sk, "ankle", target, bend_axis=[1, 0, 0])
+    assert len(rec) == 1 and rec[0].filename == __file__
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ik.two_bone_ik(rot, root, sk, "ankle", ankle + [0.0, 0.05, 0.0], bend_axis=[1, 0, 0])
+        ik.two_bone_ik(rot, root, sk, "ankle", target, bend_axis=[1, 0, 0], warn_unreachable=False)

@@ -279,3 +279,48 @@ def test_feet_without_toe_joints(mocap_dir):
     sk = salsa.skeleton
     moved = {sk.names[j] for j in np.flatnonzero(np.any(np.abs(out.rotations - bent_salsa.rotations) > 1e-6, axis=(0, 2)))}
     assert moved <= {"hip", "lThigh", "lShin", "lFoot", "rThigh", "rShin", "rFoot"}
+
+
+# ------------------------------------------------ bad and unreachable constraints
+def test_end_effectors_that_cannot_apply_fail_before_refining(walk):
+    short = walk[:118]
+    with pytest.raises(ValueError, match=r"end_effectors\[0\] \('RightHand', frames=500\).*0\.\.117"):
+        refine(short, end_effectors=[EndEffector("RightHand", 500, [0.0, 1.0, 0.0])], feet=False)
+    with pytest.raises(ValueError, match=r"end_effectors\[1\] \('Tail'.*\['Tail'\] not in the skeleton"):
+        refine(
+            short,
+            end_effectors=[EndEffector("RightHand", 5, [0.0, 1.0, 0.0]), EndEffector("Tail", 5, [0.0, 1.0, 0.0])],
+            feet=False,
+        )
+    with pytest.raises(ValueError, match=r"one row per frame"):
+        refine(short, end_effectors=[EndEffector("RightHand", (0, 10), np.zeros((10, 3)))], feet=False)
+
+
+def test_scene_edit_rejects_a_bad_end_effector_at_once(walk):
+    from mocaplab.editing import EndEffectorConstraint, edit
+
+    short = walk[:118].resample(30)
+    with pytest.raises(ValueError, match=r"constraint #0 .*frame.*0\.\.29"):
+        edit([short], [EndEffectorConstraint(0, joint="RightHand", frame=500, target=(0.0, 1.0, 0.0))])
+    with pytest.raises(ValueError, match=r"constraint #0 .*\['RightPaw'\] not in the skeleton"):
+        edit([short], [EndEffectorConstraint(0, joint="RightPaw", frame=5, target=(0.0, 1.0, 0.0))])
+
+
+def test_an_unreachable_hand_target_warns_once_with_frames_and_distance(walk):
+    from mocaplab.ik import UnreachableTargetWarning
+
+    clip = walk[:120]
+    hand = clip.global_positions()[:, clip.skeleton.index("RightHand")]
+    far = hand[40] + [0.0, 0.0, 0.8]  # 0.8 m further than the hand is, the arm cannot reach it
+    with pytest.warns(UnreachableTargetWarning, match=r"'RightHand' out of reach on frames 40-49 \(10 frames\)") as rec:
+        out = refine(clip, end_effectors=[EndEffector("RightHand", (40, 50), far)], feet=False)
+    assert len(rec) == 1
+    missed = np.linalg.norm(out.global_positions()[40:50, clip.skeleton.index("RightHand")] - far, axis=-1)
+    assert f"missed by up to {1000 * missed.max():.0f} mm" in str(rec[0].message)
+    assert rec[0].filename == __file__  # at the user's line
+    # a reachable target: no warning
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UnreachableTargetWarning)
+        refine(clip, end_effectors=[EndEffector("RightHand", (40, 50), hand[40] + [0.0, 0.05, 0.05])], feet=False)

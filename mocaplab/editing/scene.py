@@ -56,9 +56,15 @@ relative_iterations : int, default 20
 variational_step : int, default 10
     Sampling step of variational constraints (frames).
 start_times : sequence of float, optional
-    Reference time of each character's frame 0 before editing (default 0).
+    Reference time of each character's frame 0 before editing (default 0),
+    within :func:`~mocaplab.editing.timewarp.time_reach` of 0 (10 times the
+    scene's duration), as are the time targets of the constraints (see
+    :mod:`~mocaplab.editing.timewarp`, "How far times may reach").
 clock_fps : float, optional
-    Rate of the shared clock of ``motions`` (default: character 0's fps).
+    Rate of the shared clock of ``motions`` (default: character 0's fps),
+    from 0.1 to :data:`MAX_CLOCK_FPS` (1000) frames per second.  The clock
+    may hold at most :data:`MAX_CLOCK_FRAMES` frames over all characters
+    (a ``ValueError`` when ``motions`` are built, before any allocation).
 refine : bool, default False
     ``motions`` are the full-body refined ones (:meth:`EditResult.refined`).
 roles : mapping of role name to joint name, or one per character, optional
@@ -89,7 +95,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..motion import Motion
+from ..motion import FPS_RANGE, Motion
 from ..refinement import EndEffector
 from ..undo import Undoable, UndoStack
 from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint, Relative, effector_frames
@@ -106,9 +112,15 @@ from .laplacian import (
 from .paths import MotionPath, apply_path, contact_joints, laplacian_coordinates, stationary_segments, with_roles
 from .timewarp import TimeFactors, TimeSolver, temporal_rows
 
-__all__ = ["edit", "SceneEditor", "EditResult"]
+__all__ = ["edit", "SceneEditor", "EditResult", "MAX_CLOCK_FPS", "MAX_CLOCK_FRAMES"]
 
 Array = NDArray[np.float64]
+
+#: Highest ``clock_fps``: ten times any capture rate the lessons use, and a bound on the work of resampling.
+MAX_CLOCK_FPS = 1000.0
+#: Most frames the edited motions on the shared clock may hold, summed over the characters (about 2.3 hours
+#: of one character at 120 fps), checked before they are built.
+MAX_CLOCK_FRAMES = 1_000_000
 
 _OPTIONS: Mapping[str, Any] = MappingProxyType(
     {
@@ -343,6 +355,7 @@ class SceneEditor(Undoable):
         opts = dict(_OPTIONS)
         opts.update(options)
         flip_step(opts["flip_rate"], 1.0, name="flip_rate")  # a bad rate fails here, not when a heading is first asked for
+        _check_clock_fps(opts["clock_fps"])
         self.options = opts
         chars = _characters(characters)
         K = len(chars)
@@ -438,6 +451,8 @@ class SceneEditor(Undoable):
                     raise ValueError(
                         f"constraint #{i} {c!r}: unknown character {c.character} (the scene has {K} characters)"
                     )
+                ee = c.constraint if isinstance(c, EndEffectorConstraint) else c
+                ee.check(self.characters[c.character], label=f"constraint #{i} {c!r}")
                 continue
             for k in c.characters:
                 if not 0 <= k < K:
@@ -450,6 +465,10 @@ class SceneEditor(Undoable):
                     raise ValueError(
                         f"constraint #{i} {c!r}: frame {f} out of range for character {k} ({n} frames: 0..{n - 1})"
                     )
+            if isinstance(c, TEMPORAL):
+                problem = self._time.target_problem(c)
+                if problem is not None:
+                    raise ValueError(f"constraint #{i} {c!r}: {problem}")
             if isinstance(c, SPATIAL) and not isinstance(c, SPATIAL[0]):
                 needs = (
                     [c.character]
@@ -679,6 +698,21 @@ def _naming_current(exc: ConstraintError, constraints: tuple[Any, ...]) -> Const
     if message == str(exc) and named == list(exc.constraints):
         return exc
     return ConstraintError(message, named, exc.indices)
+
+
+def _check_clock_fps(fps: Any) -> None:
+    """``clock_fps`` is None or a rate from 0.1 to :data:`MAX_CLOCK_FPS` (ValueError naming the limit)."""
+    if fps is None:
+        return
+    try:
+        value = float(fps)
+    except (TypeError, ValueError):
+        raise ValueError(f"Expected `clock_fps` to be None or a number of frames per second, got {fps!r}") from None
+    if not FPS_RANGE[0] <= value <= MAX_CLOCK_FPS:  # NaN fails too
+        raise ValueError(
+            f"Expected `clock_fps` from {FPS_RANGE[0]:g} to MAX_CLOCK_FPS = {MAX_CLOCK_FPS:g} frames per second, "
+            f"got {fps!r}"
+        )
 
 
 def edit(characters: Any, constraints: Sequence[Any] = (), **options: Any) -> EditResult:
@@ -923,6 +957,13 @@ class EditResult:
         t0 = min(float(t[0]) for t in self.times)
         t1 = max(float(t[-1]) for t in self.times)
         n = int(math.floor((t1 - t0) * self.clock_fps + 1e-9)) + 1
+        if n * len(self.times) > MAX_CLOCK_FRAMES:
+            raise ValueError(
+                f"The edited motions would hold {n} clock frames for each of {len(self.times)} characters "
+                f"({t1 - t0:.6g} s at clock_fps={self.clock_fps:g}), more than MAX_CLOCK_FRAMES = {MAX_CLOCK_FRAMES} "
+                "in all: lower `clock_fps`, or bring the characters' times closer (time targets that chain "
+                "far apart)"
+            )
         return _ro(t0 + np.arange(n) / self.clock_fps)
 
     @property

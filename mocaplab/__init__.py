@@ -25,6 +25,7 @@ _ENTRY_POINTS = {
     "load": ("mocaplab.io", "load"),
     "load_bvh": ("mocaplab.io", "load_bvh"),
     "save_bvh": ("mocaplab.io", "save_bvh"),
+    "save_gltf": ("mocaplab.io", "save_gltf"),
     "load_asf_amc": ("mocaplab.io", "load_asf_amc"),
     "cmu": ("mocaplab.data", "cmu"),
     "edit": ("mocaplab.editing", "edit"),

@@ -2,6 +2,9 @@
 
 * :func:`load_bvh`, :func:`save_bvh`: Biovision Hierarchy.
 * :func:`load_asf_amc`: the CMU's native Acclaim skeleton/motion pair.
+* :func:`load_fbx`: Autodesk FBX (binary or ASCII; skeleton and one take).
+* :func:`load_gltf`, :func:`save_gltf`: glTF 2.0 (``.gltf``/``.glb``; a skin's
+  joints and one animation).
 * :func:`load`: any of them by extension, in metres and Y up (frame rate
   snapped, optional Z-up conversion and joint roles).
 
@@ -16,7 +19,10 @@ from .errors import MocapFormatError
 # imported ``mocaplab.io.load`` (the import system sets the package attribute).
 from .load import load
 
-__all__ = ["MocapFormatError", "load", "load_bvh", "save_bvh", "estimate_scale", "load_asf_amc"]
+__all__ = [
+    "MocapFormatError", "load", "load_bvh", "save_bvh", "estimate_scale", "load_asf_amc", "load_fbx", "load_gltf",
+    "save_gltf",
+]
 
 
 def __getattr__(name: str):  # pragma: no cover - thin lazy import
@@ -24,4 +30,12 @@ def __getattr__(name: str):  # pragma: no cover - thin lazy import
         from .asfamc import load_asf_amc
 
         return load_asf_amc
+    if name == "load_fbx":
+        from .fbx import load_fbx
+
+        return load_fbx
+    if name in ("load_gltf", "save_gltf"):
+        from . import gltf
+
+        return getattr(gltf, name)
     raise AttributeError(name)

@@ -24,11 +24,22 @@ A character whose timing no constraint touches would leave the system
 singular (time shifts cost nothing); its shift is fixed by a hard gauge row
 keeping its mean time at the undeformed clock ``t0 = start + i h`` (see
 :func:`mocaplab.editing.laplacian.gauge_rows`), so no constraint is biased.
+
+How far times may reach: the edited characters are played on one shared
+clock that spans every character's times, so a time target far from the
+clips (a ``Sync`` offset of 10,000 s) would size that clock, and the memory of
+the edited motions, by the target rather than by the clips.  Start times
+(``start_times``), ``Sync`` offsets, ``AbsoluteTime`` times (from the
+character's start time) and ``Duration`` targets must lie within
+:func:`time_reach` of the scene: :data:`TIME_REACH` (10) times the scene's
+duration, the sum of its clips' durations.  Anything else is a
+``ValueError`` naming the value and the limit, raised before any solve.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections import OrderedDict
 from collections.abc import Sequence
 from typing import Any
@@ -40,9 +51,45 @@ from numpy.typing import NDArray
 from .constraints import AbsoluteTime, ConstraintError, Duration, Sync
 from .laplacian import KKT, HardRows, Layout, Rows, _mode_matrix, assemble, gauge_rows, independent_hard_rows
 
-__all__ = ["TimeSolver", "TimeFactors", "temporal_rows", "uniformity_matrix"]
+__all__ = ["TimeSolver", "TimeFactors", "temporal_rows", "uniformity_matrix", "time_reach", "TIME_REACH"]
 
 Array = NDArray[np.float64]
+
+#: Time options and targets reach at most this many times the scene's duration (:func:`time_reach`).
+TIME_REACH = 10.0
+
+
+def time_reach(n_frames: Sequence[int], dts: Sequence[float]) -> float:
+    """Seconds that time options and targets may reach: :data:`TIME_REACH` times the scene's duration.
+
+    The scene's duration is the sum of its clips' ``F_k h_k`` (characters
+    played one after another), so a scene of longer clips may place them
+    farther apart.
+
+    Parameters
+    ----------
+    n_frames : sequence of int
+    dts : sequence of float
+        Frame time of each character's clip, seconds.
+
+    Examples
+    --------
+    >>> time_reach([118, 118], [1 / 120, 1 / 120])  # two 0.98-second clips
+    19.666666666666664
+    """
+    return TIME_REACH * float(sum(int(n) * float(d) for n, d in zip(n_frames, dts, strict=True)))
+
+
+def _within(value: float, centre: float, reach: float, what: str) -> str | None:
+    """Why ``value`` is out of reach (None when it is within ``centre +- reach``)."""
+    if math.isfinite(value) and abs(value - centre) <= reach:
+        return None
+    span = f"from {centre - reach:.6g} to {centre + reach:.6g} s" if centre else f"within +-{reach:.6g} s"
+    return (
+        f"Expected {what} {span} ({TIME_REACH:g} times the scene's duration, "
+        f"mocaplab.editing.timewarp.TIME_REACH), got {value!r}: a time that far from the clips would size the shared "
+        "clock of the edited motions by itself"
+    )
 
 
 def uniformity_matrix(layout: Layout) -> sp.csr_matrix:
@@ -154,6 +201,13 @@ class TimeSolver:
             raise ValueError(f"Expected 0 < min_step < 1 < max_step, got min_step={min_step}, max_step={max_step}")
         self.layout = Layout(tuple(int(n) for n in n_frames))
         self.dts = np.asarray(dts, dtype=float)
+        #: seconds that start times and time targets may reach (:func:`time_reach`)
+        self.reach = time_reach(self.layout.n_frames, self.dts)
+        self.start_times = tuple(float(s) for s in start_times)
+        for k, s in enumerate(self.start_times):
+            problem = _within(s, 0.0, self.reach, f"`start_times[{k}]`")
+            if problem is not None:
+                raise ValueError(problem)
         self.t0 = np.concatenate(
             [s + np.arange(n) * d for n, d, s in zip(self.layout.n_frames, self.dts, start_times, strict=True)]
         )
@@ -177,6 +231,21 @@ class TimeSolver:
             1,
         )
         self.owner = np.arange(K)
+
+    def target_problem(self, c: Any) -> str | None:
+        """Why temporal constraint ``c``'s target is out of the scene's reach (None when it is within).
+
+        ``Sync.offset`` within +-:attr:`reach`; ``AbsoluteTime.time`` within
+        :attr:`reach` of the character's start time; ``Duration.duration`` at
+        most :attr:`reach`.
+        """
+        if isinstance(c, Sync):
+            return _within(float(c.offset), 0.0, self.reach, "`offset`")
+        if isinstance(c, AbsoluteTime):
+            return _within(float(c.time), self.start_times[c.character], self.reach, "`time`")
+        if isinstance(c, Duration):
+            return _within(float(c.duration), 0.0, self.reach, "`duration`")
+        return None
 
     def factorize(
         self, soft: Sequence[Rows], weights: Sequence[float], hard: Sequence[Rows], labels: Sequence[Any]

@@ -21,7 +21,6 @@ new one.
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from collections.abc import Sequence
 from functools import cached_property
 from typing import TYPE_CHECKING, Any
@@ -30,6 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import kinematics, quat
+from ._warnings import warn
 
 if TYPE_CHECKING:
     from .roles import Roles
@@ -472,10 +472,9 @@ class Motion:
             sk.__dict__["_path_joint_announced"] = True
             still = np.ptp(self.root_positions, axis=0).max() < 1e-9
             why = f"joint 0 {sk.names[0]!r} never moves" if still else "it is the pelvis"
-            warnings.warn(
+            warn(
                 f"The motion path follows joint {sk.names[j]!r} (index {j}), not joint 0: {why}",
                 UserWarning,
-                stacklevel=2,
             )
         return int(j)
 

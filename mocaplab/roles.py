@@ -85,12 +85,13 @@ False
 from __future__ import annotations
 
 import re
-import warnings
 from collections.abc import Iterator, Mapping
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
+
+from ._warnings import warn
 
 if TYPE_CHECKING:
     from .motion import Skeleton
@@ -457,7 +458,27 @@ def infer_roles(
     Returns
     -------
     Roles
+
+    Raises
+    ------
+    RolesError
+        For a skeleton that is plainly not a biped human (a quadruped, a
+        hand: see :func:`not_a_biped`) when no role is given in
+        ``overrides``; naming the roles yourself is the way out.
     """
+    result = _infer(skeleton, overrides=overrides, pose=pose)
+    for note in result.notes:
+        warn(note, RolesWarning)
+    return result
+
+
+def _infer(
+    skeleton: Skeleton,
+    *,
+    overrides: Mapping[str, Any] | None = None,
+    pose: NDArray[np.float64] | None = None,
+) -> Roles:
+    """:func:`infer_roles` without its warnings (the notes are kept on the result)."""
     names = tuple(skeleton.names)
     tree = _Tree(names, skeleton.parents, skeleton.offsets)
     fixed: dict[str, Any] = dict(overrides or {})
@@ -508,6 +529,14 @@ def infer_roles(
     # ---- geometric fallback for legs / arms without names
     rest = _rest_pose(skeleton)
     frames = rest[None] if pose is None else np.asarray(pose, dtype=float).reshape(-1, len(names), 3)
+    if not fixed:
+        why = _not_a_biped(tree, frames, parsed, kinds)
+        if why is not None:
+            raise RolesError(
+                f"This skeleton is not a biped human: {why}. Joint roles (pelvis, legs, arms, head) are a "
+                "human's; to use it anyway, name the joints that play them: skeleton.with_roles(pelvis=..., "
+                "left_ankle=..., ...) or roles={...} in mocaplab.load and every function that takes roles="
+            )
     if not all(f"{s}_ankle" in roles for s in SIDES):
         _legs_from_geometry(tree, frames, roles, notes)
     if not all(f"{s}_wrist" in roles for s in SIDES) and all(f"{s}_hip" in roles for s in SIDES):
@@ -541,11 +570,14 @@ def infer_roles(
         if cands:
             roles["head"] = cands[0]
     if "head" not in roles and pelvis is not None:
-        _head_from_geometry(tree, frames, roles, notes)
+        _head_from_neck(tree, roles, notes, kinds, named("neck", None))
+    if "head" not in roles and pelvis is not None:
+        _head_from_geometry(tree, frames, roles, notes, kinds)
     head = roles.get("head")
     if "neck" not in roles and head is not None and pelvis is not None:
         on_path = tree.path(pelvis, head)[1:-1]
-        necks = [j for j in on_path if "neck" in kinds[j]]
+        # the head itself when it is the last neck joint (a chain that ends at the neck)
+        necks = [j for j in on_path + [head] if "neck" in kinds[j]]
         if necks:
             roles["neck"] = necks[0]
         else:
@@ -579,10 +611,7 @@ def infer_roles(
         out["spine"] = tuple(fixed["spine"])
     elif pelvis is not None and "neck" in roles and tree.is_ancestor(pelvis, roles["neck"]):
         out["spine"] = tuple(names[j] for j in tree.path(pelvis, roles["neck"])[1:-1])
-    result = Roles(names, out, tuple(notes))
-    for note in notes:
-        warnings.warn(note, RolesWarning, stacklevel=3)
-    return result
+    return Roles(names, out, tuple(notes))
 
 
 def _plausible(frames: NDArray[np.float64], roles: dict[str, int]) -> bool:
@@ -594,6 +623,65 @@ def _plausible(frames: NDArray[np.float64], roles: dict[str, int]) -> bool:
     rise = frames[:, top, 1] - frames[:, pelvis, 1]
     span = np.linalg.norm(frames[:, top] - frames[:, pelvis], axis=-1)
     return bool(np.median(rise) > 0.8 * np.median(span) > 0)
+
+
+#: Words of finger joints (searched inside a joint's base word: ``RingFinger2``, ``LeftHandIndex1``).
+_FINGER_WORDS = ("thumb", "index", "middle", "ring", "pinky", "little", "finger")
+#: Share of the rest pose's height within which a limb's end counts as on the ground.
+GROUND_BAND = 0.1
+
+
+def _not_a_biped(
+    tree: _Tree,
+    frames: NDArray[np.float64],
+    parsed: list[tuple[str | None, str, Any]],
+    kinds: list[dict[str, int]],
+) -> str | None:
+    """Why the skeleton is plainly not a biped human, or None.
+
+    * **A hand**: at least four finger chains (joints named like fingers
+      whose parent is not one) and no joint named like a leg (knee, ankle).
+    * **More than two legs** (a quadruped, a spider, a hand with its
+      fingers hanging): in an upright pose (its height at least a fifth of
+      its largest side), more than two limbs reach the ground.  A limb's
+      end reaches the ground when it lies within :data:`GROUND_BAND` of the
+      height of the lowest joint, and two ends belong to the same limb when
+      the joint they branch from is low too (a toe and a heel of one foot);
+      a limb is a chain of at least two bones hanging from a joint in the
+      upper part of the figure (not a ground marker under a root).
+    """
+    n = len(tree.names)
+    finger = [any(w in base for w in _FINGER_WORDS) for _, base, _ in parsed]
+    chains = [j for j in range(n) if finger[j] and (tree.parents[j] < 0 or not finger[tree.parents[j]])]
+    legs_named = any("knee" in k or "ankle" in k for k in kinds)
+    if len(chains) >= 4 and not legs_named and sum(finger) >= n // 2:
+        return f"it looks like a hand ({len(chains)} finger chains: {[tree.names[j] for j in chains[:5]]}, no legs)"
+    height = frames[..., 1].mean(axis=0)
+    extent = np.ptp(frames.mean(axis=0), axis=0)
+    tall = float(extent[1])
+    if not (np.isfinite(tall) and tall > 0.2 * float(extent.max()) > 0):
+        return None  # not an upright pose: nothing to judge by
+    low = float(height.min())
+    leaves = [j for j in range(n) if not tree.children[j] and height[j] - low <= GROUND_BAND * tall]
+    feet: list[list[int]] = []
+    for leaf in leaves:
+        # a limb: at least two bones from the leaf up to the upper part of the figure
+        bones, k = 0, leaf
+        while tree.parents[k] >= 0 and height[k] - low <= 0.4 * tall:
+            bones += tree.lengths[k] > tree.eps
+            k = tree.parents[k]
+        if bones < 2 or height[k] - low <= 0.4 * tall:
+            continue
+        for foot in feet:
+            if height[tree.lca(foot[0], leaf)] - low <= 0.25 * tall:  # they branch at an ankle, not a pelvis
+                foot.append(leaf)
+                break
+        else:
+            feet.append([leaf])
+    if len(feet) > 2:
+        ends = [tree.names[f[0]] for f in feet]
+        return f"{len(feet)} limbs reach the ground in its pose ({ends[:6]}), a biped stands on two"
+    return None
 
 
 def _two_bones(tree: _Tree, chain: list[int]) -> tuple[int, int, int] | None:
@@ -641,38 +729,94 @@ def _arms_from_geometry(
     legs |= {roles["left_hip"], roles["right_hip"]}
     upper = [j for j in tree.descendants(pelvis) if j not in legs]
     leaves = [j for j in upper if not tree.children[j]]
-    height = frames[..., 1].mean(axis=0)
-    if len(leaves) < 3:
+    if len(leaves) < 3:  # two arms and a head at least
         return
-    head_leaf = max(leaves, key=lambda j: height[j])
-    trunk = set(tree.path(pelvis, head_leaf))
-    arms = []
-    for leaf in leaves:
-        chain = [j for j in tree.path(pelvis, leaf) if j not in trunk]
-        if leaf in trunk or len(chain) < 3:
-            continue
-        limb = _two_bones(tree, [tree.parents[chain[0]]] + chain)
-        if limb is not None and limb not in arms:
-            arms.append(limb)
-    # the two arm chains are the two longest side branches
-    arms.sort(key=lambda lm: -(tree.lengths[lm[1]] + tree.lengths[lm[2]]))
-    if len(arms) >= 2:
-        for side, limb in zip(SIDES, arms[:2], strict=True):
+    # The arms are the pair of side chains whose shorter two-bone limb is the
+    # longest: not "everything but the highest chain", which in a T-pose can
+    # be a hand (a HumanIK clavicle rises above a neck that ends the chain).
+    depth = {j: len(tree.ancestors(j)) for j in leaves}
+    leaves = sorted(leaves, key=lambda j: -depth[j])[:40]  # fingertips and the head first; bounded work
+    best, arms = 0.0, []
+    for i, a in enumerate(leaves):
+        for b in leaves[i + 1 :]:
+            top = tree.lca(a, b)
+            ca, cb = tree.path(top, a), tree.path(top, b)
+            if len(ca) < 4 or len(cb) < 4:  # three joints below the branch on each side
+                continue
+            la, lb = _two_bones(tree, ca), _two_bones(tree, cb)
+            if la is None or lb is None or la == lb:
+                continue
+            reach = min(tree.lengths[la[1]] + tree.lengths[la[2]], tree.lengths[lb[1]] + tree.lengths[lb[2]])
+            if reach > best:
+                best, arms = reach, [la, lb]
+    if len(arms) == 2:
+        # each arm on the side of the leg whose hip it is nearer (the sides of both are settled later, together)
+        across_hips = frames[:, roles["left_hip"]] - frames[:, roles["right_hip"]]
+        across_arms = frames[:, arms[0][0]] - frames[:, arms[1][0]]
+        if np.median(np.einsum("fi,fi->f", across_hips, across_arms)) < 0:
+            arms.reverse()
+        for side, limb in zip(SIDES, arms, strict=True):
             for part, j in zip(("shoulder", "elbow", "wrist"), limb, strict=True):
                 roles.setdefault(f"{side}_{part}", j)
         notes.append(f"Arms found from geometry: {tree.names[arms[0][2]]!r} and {tree.names[arms[1][2]]!r}")
 
 
-def _head_from_geometry(tree: _Tree, frames: NDArray[np.float64], roles: dict[str, int], notes: list[str]) -> None:
+def _arm_joints(tree: _Tree, roles: dict[str, int]) -> set[int]:
+    """The limb joints found so far with the joints of each arm's own branch (a clavicle, named or not).
+
+    An arm's branch runs from the shoulder up to the joint the two arms
+    share (the chest), that joint excluded; with one arm known, up to the
+    nearest ancestor with another child on the trunk side.
+    """
+    out = {roles[k] for k in roles if k.endswith(LIMB_PARTS)}
+    shoulders = [roles[f"{s}_shoulder"] for s in SIDES if f"{s}_shoulder" in roles]
+    chest = tree.lca(*shoulders) if len(shoulders) == 2 else -1
+    for sh in shoulders:
+        for a in tree.ancestors(sh):
+            if a == chest or (chest < 0 and len(tree.children[a]) > 1):
+                break
+            out.add(a)
+    return out
+
+
+def _head_from_neck(
+    tree: _Tree, roles: dict[str, int], notes: list[str], kinds: list[dict[str, int]], necks: list[int]
+) -> None:
+    """A chain that ends at the neck (MotionBuilder HumanIK without a Head joint): its last neck joint is the head.
+
+    Its end site (or child) marks the top of the head, which is what the
+    head role stands for.  Never an arm joint.
+    """
+    arms = _arm_joints(tree, roles)
+    pelvis = roles["pelvis"]
+    necks = [j for j in necks if tree.is_ancestor(pelvis, j) and not (set(tree.path(pelvis, j)) & arms)]
+    if not necks:
+        return
+    last = max(necks, key=lambda j: len(tree.ancestors(j)))
+    if not any(kinds[k] for k in tree.descendants(last)):  # no body-part word below it
+        roles["head"] = last
+        notes.append(
+            f"No head joint: the head is the last neck joint {tree.names[last]!r} "
+            "(its end site marks the top of the head)"
+        )
+
+
+def _head_from_geometry(
+    tree: _Tree, frames: NDArray[np.float64], roles: dict[str, int], notes: list[str], kinds: list[dict[str, int]]
+) -> None:
     if not all(f"{s}_hip" in roles for s in SIDES):
         return
     pelvis = roles["pelvis"]
-    limbs = {roles[k] for k in roles if k.endswith(("_hip", "_clavicle", "_shoulder"))}
+    arms = _arm_joints(tree, roles)  # legs and arms, clavicles included: never the head
+    limb_words = set(LIMB_PARTS)
     height = frames[..., 1].mean(axis=0)
     cands = [
         j
         for j in tree.descendants(pelvis)
-        if not (set(tree.path(pelvis, j)) & limbs) and tree.lengths[j] > tree.eps and height[j] > height[pelvis]
+        if not (set(tree.path(pelvis, j)) & arms)
+        and not (limb_words & set(kinds[j]))
+        and tree.lengths[j] > tree.eps
+        and height[j] > height[pelvis]
     ]
     if not cands:
         return

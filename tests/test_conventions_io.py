@@ -237,11 +237,13 @@ def test_up_z_is_a_rigid_turn_to_y_up_hand_computed(tmp_path):
     assert np.allclose(quat.yaw(quat.mul(m.rotations[1, 0], quat.inv(m.rotations[0, 0]))), np.pi / 2)
 
 
-@pytest.mark.parametrize("up", ["x", "Y", "-z", None])
+@pytest.mark.parametrize("up", ["x", "Y", "-z", "auto"])  # None is the default: the axis is found from the body
 def test_bad_up_value(tmp_path, up):
     with pytest.raises(ValueError) as info:
         load(tmp_path / "missing.bvh", up=up)  # checked before the file is read
-    assert str(info.value) == f"Expected `up` to be 'y' or 'z' (the file's up axis), got {up!r}"
+    assert str(info.value) == (
+        f"Expected `up` to be 'y' or 'z' (the file's up axis) or None (found from the body), got {up!r}"
+    )
 
 
 def test_unknown_extension(tmp_path):

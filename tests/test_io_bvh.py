@@ -347,11 +347,13 @@ def test_binary_garbage_nul(tmp_path):
     assert_format_error(path, 10, "expected text, got binary data (NUL byte)")
 
 
-def test_binary_garbage_invalid_utf8(tmp_path):
+def test_bytes_that_are_not_utf8_are_read_as_latin1_then_parsed(tmp_path):
+    """Not UTF-8: read as Latin-1 with a warning naming line and byte; garbage then fails where it lies."""
     data = CHAIN.encode()
     pos = data.index(b"MOTION")
     path = write(tmp_path, data[:pos] + b"\xff\xfe\x80" + data[pos:])
-    assert_format_error(path, 21, "expected UTF-8 or ASCII text, got undecodable byte 0xff")
+    with pytest.warns(UserWarning, match=r"line 21: byte 0xff is not UTF-8; read as the Latin-1 character 'ÿ'"):
+        assert_format_error(path, 21, "expected 'MOTION' after the hierarchy, got 'ÿþ\\x80MOTION'")
 
 
 def test_random_binary_file(tmp_path, rng):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -219,3 +220,176 @@ def test_roles_mapping_is_immutable(cmu_skeleton):
     assert r.foot_joints() == ("LeftFoot", "LeftToeBase", "RightFoot", "RightToeBase")
     assert r.limb("right", "arm") == ("RightArm", "RightForeArm", "RightHand")
     assert infer_roles(cmu_skeleton) == r  # inference is deterministic
+
+
+# ------------------------------------------- a chain that ends at the neck (issue 22)
+
+# A MotionBuilder HumanIK skeleton without a Head joint, after the shared file
+# realworld/motionmachine/animation.bvh (centimetres): the chain ends at Neck
+# (with an end site at the top of the head), and the clavicles RightShoulder /
+# LeftShoulder start higher than the Neck joint.
+HUMANIK = [
+    ("Hips", None, [0, 96, 0]),
+    ("LeftUpLeg", "Hips", [16.1, 0, 0]), ("LeftLeg", "LeftUpLeg", [2.5, -32.8, 2.1]),
+    ("LeftLegRoll", "LeftLeg", [0, 0, 0]), ("LeftFoot", "LeftLegRoll", [2.6, -34.4, -3.3]),
+    ("LeftToeBase", "LeftFoot", [5.3, -23.3, 32.4]),
+    ("RightUpLeg", "Hips", [-16.1, 0, 0]), ("RightLeg", "RightUpLeg", [-2.5, -32.8, 2.1]),
+    ("RightLegRoll", "RightLeg", [0, 0, 0]), ("RightFoot", "RightLegRoll", [-2.6, -34.4, -3.3]),
+    ("RightToeBase", "RightFoot", [-5.3, -23.3, 32.4]),
+    ("Spine", "Hips", [0, 13.9, 0]), ("Spine1", "Spine", [0, 14.5, 0]), ("Spine2", "Spine1", [0, 23.7, 0]),
+    ("Neck", "Spine2", [0, 39.7, 18.0]),
+    ("RightShoulder", "Spine2", [-3.4, 45.4, -4.4]), ("RightArm", "RightShoulder", [-47.9, 0.8, 0]),
+    ("RightForeArm", "RightArm", [-46.4, -1.3, -0.1]), ("RightHand", "RightForeArm", [-60.8, -1.8, 1.2]),
+    ("LeftShoulder", "Spine2", [3.4, 45.4, -4.4]), ("LeftArm", "LeftShoulder", [47.9, 0.8, 0]),
+    ("LeftForeArm", "LeftArm", [46.4, -1.3, -0.1]), ("LeftHand", "LeftForeArm", [60.8, -1.8, 1.2]),
+]
+ARM_ROLES = tuple(f"{s}_{p}" for s in ("left", "right") for p in ("clavicle", "shoulder", "elbow", "wrist"))
+
+
+def humanik() -> Skeleton:
+    names = [n for n, _, _ in HUMANIK]
+    ends = {"Neck": [0, 6.6, 13.0], "LeftToeBase": [0, 0, 5], "RightToeBase": [0, 0, 5], "LeftHand": [15, 0, 0],
+            "RightHand": [-15, 0, 0]}
+    return Skeleton(
+        names,
+        [-1 if p is None else names.index(p) for _, p, _ in HUMANIK],
+        np.array([o for _, _, o in HUMANIK], dtype=float) / 100,
+        end_site_parents=[names.index(n) for n in ends],
+        end_site_offsets=np.array(list(ends.values()), dtype=float) / 100,
+    )
+
+
+def test_no_head_joint_the_last_neck_joint_is_the_head_never_an_arm():
+    sk = humanik()
+    assert sk.offsets[sk.index("RightShoulder"), 1] > sk.offsets[sk.index("Neck"), 1]  # the trap: a higher clavicle
+    with pytest.warns(RolesWarning, match=r"No head joint: the head is the last neck joint 'Neck'"):
+        r = infer_roles(sk)
+    assert r["head"] == "Neck" and r["neck"] == "Neck" and r["spine"] == ("Spine", "Spine1", "Spine2")
+    assert r["right_clavicle"] == "RightShoulder" and r["right_wrist"] == "RightHand"
+    assert r["left_ankle"] == "LeftFoot" and r["left_knee"] == "LeftLeg"  # the roll joint is skipped
+
+
+def test_no_head_joint_and_no_names_the_head_is_still_no_arm_joint():
+    sk = humanik()
+    plain = dataclasses.replace(sk, names=tuple(f"j{i:02d}" for i in range(sk.n_joints)))
+    with pytest.warns(RolesWarning):
+        r = plain.roles
+    arms = {sk.names[plain.index(r[k])] for k in ARM_ROLES if k in r}
+    assert sk.names[plain.index(r["head"])] == "Neck"
+    assert {"RightShoulder", "LeftShoulder", "RightHand", "LeftHand"} <= arms  # both arms found, clavicles included
+    assert sk.names[plain.index(r["left_wrist"])] == "LeftHand"  # each arm on the side of its leg
+
+
+def test_shared_humanik_file_head_and_body(mocap_dir):
+    from mocaplab.io import load_bvh
+    from mocaplab.physics import Body
+
+    m = load_bvh(mocap_dir / "realworld" / "motionmachine" / "animation.bvh", scale=0.01)
+    with pytest.warns(RolesWarning, match="No head joint"):
+        r = m.skeleton.roles
+    assert r["head"] == "Neck" and r["head"] not in {r[k] for k in ARM_ROLES}
+    # what asks the head role keeps working: the body model's head runs from the neck to its end site
+    body = Body.from_skeleton(m)
+    head = body.link_names.index("head")
+    assert body.joint_names[int(body.owners[head])] == "Neck"
+    # its centre lies between the neck joint and the end site at the top of the head, in the rest pose
+    sk = m.skeleton
+    neck = sk.index("Neck")
+    top = sk.end_site_offsets[list(sk.end_site_parents).index(neck)]
+    assert np.allclose(body.offsets[head], 0.5 * top, atol=1e-9)
+    g = m.global_positions()
+    assert np.median(g[:, m.skeleton.index("Neck"), 1] - g[:, m.skeleton.index("Hips"), 1]) > 0.4
+
+
+# ------------------------------------------- not a biped (issue 22)
+
+
+def quadruped() -> Skeleton:
+    """A four-legged figure standing in its rest pose (a dog's proportions, metres), named like a biped."""
+    spec: list[tuple[str, str | None, list[float]]] = [("Hips", None, [0.0, 0.6, 0.0])]
+
+    def leg(top: str, side: str, front: bool) -> None:
+        x, word = (0.1, "Left") if side == "L" else (-0.1, "Right")
+        up, low, foot = ("Arm", "ForeArm", "Hand") if front else ("UpLeg", "Leg", "Foot")
+        spec.extend([
+            (f"{word}{up}", top, [x, -0.05, 0.0]),
+            (f"{word}{low}", f"{word}{up}", [0.0, -0.25, 0.05]),
+            (f"{word}{foot}", f"{word}{low}", [0.0, -0.25, -0.05]),
+            (f"{word}{foot}End", f"{word}{foot}", [0.0, -0.05, 0.05]),
+        ])
+
+    leg("Hips", "L", False)
+    leg("Hips", "R", False)
+    spec += [("Spine", "Hips", [0.0, 0.02, 0.3]), ("Chest", "Spine", [0.0, 0.0, 0.3])]
+    leg("Chest", "L", True)
+    leg("Chest", "R", True)
+    spec += [("Neck", "Chest", [0.0, 0.15, 0.15]), ("Head", "Neck", [0.0, 0.1, 0.1]), ("Tail", "Hips", [0, 0, -0.3])]
+    names = [n for n, _, _ in spec]
+    return Skeleton(names, [-1 if p is None else names.index(p) for _, p, _ in spec], [o for _, _, o in spec])
+
+
+def hand(*, hanging: bool, named: bool) -> Skeleton:
+    """A hand: a wrist and five fingers of three bones (fingers along -Y when hanging, else along +Z)."""
+    words = ("Thumb", "Index", "Middle", "Ring", "Pinky")
+    names, parents, offsets = ["Hand_R" if named else "n00"], [-1], [[0.0, 1.0, 0.0]]
+    for f, word in enumerate(words):
+        x = 0.02 * (f - 2)
+        for k in range(3):
+            names.append(f"{word}{k + 1}_R" if named else f"n{len(names):02d}")
+            parents.append(0 if k == 0 else len(names) - 2)
+            step = [x if k == 0 else 0.0, -0.03, 0.0] if hanging else [x if k == 0 else 0.0, 0.0, 0.03]
+            offsets.append(step)
+    return Skeleton(names, parents, offsets)
+
+
+def test_quadruped_is_not_a_biped_and_roles_are_the_way_out():
+    sk = quadruped()
+    with pytest.raises(RolesError) as info:
+        sk.roles  # noqa: B018
+    assert str(info.value) == (
+        "This skeleton is not a biped human: 4 limbs reach the ground in its pose (['LeftFootEnd', 'RightFootEnd', "
+        "'LeftHandEnd', 'RightHandEnd']), a biped stands on two. Joint roles (pelvis, legs, arms, head) are a "
+        "human's; to use it anyway, name the joints that play them: skeleton.with_roles(pelvis=..., left_ankle=..., "
+        "...) or roles={...} in mocaplab.load and every function that takes roles="
+    )
+    r = sk.with_roles(left_ankle="LeftFoot", right_ankle="RightFoot").roles  # the hind legs as legs
+    assert r["pelvis"] == "Hips" and r["left_knee"] == "LeftLeg" and r["left_wrist"] == "LeftHand"
+    # the same figure standing on its hind legs is a biped: the front legs no longer reach the ground
+    offsets = np.array(sk.offsets)
+    for name in ("Spine", "Chest", "Neck", "Head"):
+        offsets[sk.index(name)] = offsets[sk.index(name)][[0, 2, 1]]  # forward becomes up
+    for name in ("LeftArm", "RightArm"):
+        offsets[sk.index(name)] = [offsets[sk.index(name)][0], 0.0, 0.0]
+    for name in ("LeftForeArm", "LeftHand", "LeftHandEnd", "RightForeArm", "RightHand", "RightHandEnd"):
+        offsets[sk.index(name)] = [0.0, -0.1, 0.1]
+    assert dataclasses.replace(sk, offsets=offsets).roles["left_wrist"] == "LeftHand"
+
+
+@pytest.mark.parametrize(
+    ("hanging", "named", "message"),
+    [
+        (False, True, "it looks like a hand (5 finger chains: ['Thumb1_R', 'Index1_R', 'Middle1_R', 'Ring1_R', "
+         "'Pinky1_R'], no legs)"),
+        (True, True, "it looks like a hand"),
+        (True, False, "5 limbs reach the ground in its pose"),
+    ],
+)
+def test_hand_is_not_a_biped(hanging, named, message):
+    sk = hand(hanging=hanging, named=named)
+    with pytest.raises(RolesError, match=re.escape(f"This skeleton is not a biped human: {message}")):
+        sk.roles  # noqa: B018
+    assert sk.with_roles(pelvis=sk.names[0]).roles["pelvis"] == sk.names[0]  # roles given: no verdict
+
+
+def test_bipeds_with_many_ground_joints_are_bipeds(cmu_skeleton):
+    """Heels, toe ends and foot pinkies are one foot: a biped still stands on two limbs."""
+    names = list(cmu_skeleton.names)
+    parents = list(cmu_skeleton.parents)
+    offsets = list(np.asarray(cmu_skeleton.offsets))
+    for foot in ("LeftFoot", "RightFoot"):
+        for extra, off in (("Heel", [0.0, -0.02, -0.05]), ("Pinky", [0.03, -0.03, 0.1])):
+            names.append(foot + extra)
+            parents.append(names.index(foot))
+            offsets.append(np.array(off))
+    sk = Skeleton(names, parents, np.array(offsets))
+    assert sk.roles["left_ankle"] == "LeftFoot" and sk.roles["head"] == "Head"

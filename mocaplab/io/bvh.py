@@ -20,8 +20,13 @@ Every problem raises :class:`~mocaplab.io.MocapFormatError` with the file
 name, the line and what was expected; no partial Motion is ever returned.
 Numbers are plain ASCII decimals or exponent floats (``1e-5``, ``+2.5E3``);
 ``nan``/``inf``, digit separators and non-ASCII digits are rejected.  LF,
-CRLF and CR line endings and a UTF-8 byte-order mark are accepted; blank lines
-between frame rows are skipped.
+CRLF and CR line endings and a UTF-8 byte-order mark are accepted; blank
+(or whitespace-only) lines anywhere are skipped: in the hierarchy, between
+``MOTION``, ``Frames:`` and ``Frame Time:`` (Perception Neuron writes one
+after ``MOTION``) and between frame rows; spaces and tabs around any token
+do not matter.  The text is UTF-8; a byte that is not (a Latin-1 accent in a
+joint name) is read as Latin-1 with a warning naming its line
+(:func:`decode_text`).
 
 Paths and limits
 ----------------
@@ -52,12 +57,13 @@ takes a few times less than pure-Python readers (``benchmarks/bench_io.py``).
 
 from __future__ import annotations
 
+import codecs
 import errno
 import math
 import os
+import re
 import stat
 import unicodedata
-import warnings
 from dataclasses import dataclass, field
 from os import PathLike
 
@@ -66,6 +72,7 @@ from numpy.typing import NDArray
 
 from .. import quat
 from .._atomic import atomic_write
+from .._warnings import warn
 from ..motion import FPS_RANGE as MOTION_FPS_RANGE
 from ..motion import VALID_CHANNELS, Motion, Skeleton, _owned
 from . import euler
@@ -247,15 +254,42 @@ def read_text(path: str, what: str = "a text file") -> str:
 
 
 def decode_text(path: str, raw: bytes) -> str:
-    """``raw`` as text, or MocapFormatError (naming ``path``) for binary or undecodable bytes."""
+    """``raw`` as text, or MocapFormatError (naming ``path``) for binary data.
+
+    UTF-8 (with or without a byte-order mark) is the encoding.  A byte that is
+    not part of valid UTF-8 (a Latin-1 ``\xe9`` in a comment or a joint name,
+    as older Windows tools write) is read as the Latin-1 character of that
+    byte, with a :class:`UserWarning` naming the line and the byte; valid
+    UTF-8 around it is kept as UTF-8.  A NUL byte means binary data: error.
+    """
     if b"\x00" in raw:
         line = raw[: raw.index(b"\x00")].count(b"\n") + 1
         raise MocapFormatError(path, line, "text", "binary data (NUL byte)")
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        raise MocapFormatError(path, line, "UTF-8 or ASCII text", f"undecodable byte 0x{raw[exc.start]:02x}") from None
+        first = exc.start
+    bom = len(codecs.BOM_UTF8) if raw.startswith(codecs.BOM_UTF8) else 0
+    # surrogateescape maps each byte b >= 0x80 that is not UTF-8 to U+DC00 + b: turn it into Latin-1 chr(b)
+    escaped = raw[bom:].decode("utf-8", "surrogateescape")
+    n_bad = len(_ESCAPED.findall(escaped))
+    text = escaped.translate(_ESCAPED_TO_LATIN1)
+    line = raw[:first].count(b"\n") + 1
+    start = raw.rfind(b"\n", 0, first) + 1
+    stop = raw.find(b"\n", first)
+    shown = raw[start : stop if stop >= 0 else len(raw)].decode("latin-1").strip()
+    more = f" ({n_bad - 1} more such byte(s) read the same way)" if n_bad > 1 else ""
+    warn(
+        f"{path}, line {line}: byte 0x{raw[first]:02x} is not UTF-8; read as the Latin-1 character "
+        f"{chr(raw[first])!r} (the line reads {shown[:60]!r}){more}. Save the file as UTF-8 to silence this",
+        UserWarning,
+    )
+    return text
+
+
+#: ``str.translate`` table from surrogate-escaped bytes (U+DC80-U+DCFF) to their Latin-1 characters.
+_ESCAPED_TO_LATIN1 = {0xDC00 + b: b for b in range(0x80, 0x100)}
+_ESCAPED = re.compile("[\udc80-\udcff]")
 
 
 _read_text = read_text  # former private name
@@ -360,13 +394,25 @@ def _parse_channels(tok: _Tokens) -> tuple[str, ...]:
     return tuple(names)
 
 
-def _header_value(path: str, lines: list[str], i: int, label: str) -> str:
+#: The two header lines after MOTION; any whitespace around and inside the label.
+_HEADER_LABELS = {"Frames:": re.compile(r"Frames\s*:"), "Frame Time:": re.compile(r"Frame\s+Time\s*:")}
+
+
+def _header_value(path: str, lines: list[str], i: int, label: str) -> tuple[str, int]:
+    """The value of header line ``label`` at the first line with text from index ``i``, and that line's index.
+
+    Blank lines before it are skipped (Perception Neuron writes one after
+    ``MOTION``); whitespace around and inside the label does not matter.
+    """
+    while i < len(lines) and not lines[i].strip():
+        i += 1
     if i >= len(lines):
         raise MocapFormatError(path, len(lines), f"'{label}' line", "end of file (truncated)")
     text = lines[i].strip()
-    if not text.startswith(label):
+    match = _HEADER_LABELS[label].match(text)
+    if match is None:
         raise MocapFormatError(path, i + 1, f"'{label} <value>'", repr(text[:40]))
-    return text[len(label):].strip()
+    return text[match.end():].strip(), i
 
 
 def header_integer(text: str) -> int | None:
@@ -410,28 +456,28 @@ def _parse_bvh_text(path: str, text: str) -> tuple[list[_Joint], float, NDArray[
     n_channels = sum(len(j.channels) for j in joints)
     if n_channels == 0:
         raise MocapFormatError(path, joints[0].line, "at least one CHANNELS entry in the hierarchy", "none")
-    frames_text = _header_value(path, lines, motion_line + 1, "Frames:")
+    frames_text, at = _header_value(path, lines, motion_line + 1, "Frames:")
     n_frames = header_integer(frames_text)
     if n_frames is None:
         if frames_text.isascii() and frames_text.isdigit():
             raise MocapFormatError(
-                path, motion_line + 2, f"a frame count of at most {MAX_INTEGER_DIGITS} digits", f"{len(frames_text)} digits"
+                path, at + 1, f"a frame count of at most {MAX_INTEGER_DIGITS} digits", f"{len(frames_text)} digits"
             )
-        raise MocapFormatError(path, motion_line + 2, "an integer frame count", repr(frames_text[:40]))
+        raise MocapFormatError(path, at + 1, "an integer frame count", repr(frames_text[:40]))
     if n_frames < 1:
-        raise MocapFormatError(path, motion_line + 2, "a frame count of at least 1", str(n_frames))
-    ft_text = _header_value(path, lines, motion_line + 2, "Frame Time:")
+        raise MocapFormatError(path, at + 1, "a frame count of at least 1", str(n_frames))
+    ft_text, at = _header_value(path, lines, at + 1, "Frame Time:")
     frame_time = _to_float(ft_text)
     if frame_time is None:
-        raise MocapFormatError(path, motion_line + 3, "a number of seconds per frame", repr(ft_text[:40]))
+        raise MocapFormatError(path, at + 1, "a number of seconds per frame", repr(ft_text[:40]))
     if not (math.isfinite(frame_time) and frame_time > 0 and math.isfinite(1.0 / frame_time)):
-        raise MocapFormatError(path, motion_line + 3, "a positive, finite Frame Time", ft_text[:40])
+        raise MocapFormatError(path, at + 1, "a positive, finite Frame Time", ft_text[:40])
     if not FPS_RANGE[0] <= 1.0 / frame_time <= FPS_RANGE[1]:
         raise MocapFormatError(
-            path, motion_line + 3, f"a Frame Time from {1 / FPS_RANGE[1]:g} to {1 / FPS_RANGE[0]:g} s "
+            path, at + 1, f"a Frame Time from {1 / FPS_RANGE[1]:g} to {1 / FPS_RANGE[0]:g} s "
             f"({FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} frames per second)", f"{ft_text[:40]} ({1.0 / frame_time:.6g} fps)"
         )
-    data = _parse_rows(path, lines, motion_line + 3, n_frames, n_channels)
+    data = _parse_rows(path, lines, at + 1, n_frames, n_channels)
     return joints, frame_time, data
 
 
@@ -442,9 +488,11 @@ def _parse_rows(path: str, lines: list[str], start: int, n_frames: int, n_channe
     # Fast path: numpy's C reader checks that every row has the same number of
     # columns and that every token is a number; anything it rejects is
     # re-read row by row below to say exactly what is wrong and where.
-    if len(rows) == n_frames:
+    # Blank lines between rows (and whitespace-only ones) are left out first.
+    text_rows = rows if len(rows) == n_frames else [row for row in rows if row and not row.isspace()]
+    if len(text_rows) == n_frames:
         try:
-            flat = np.loadtxt(rows, dtype=np.float64, ndmin=2, comments=None)
+            flat = np.loadtxt(text_rows, dtype=np.float64, ndmin=2, comments=None)
         except ValueError:
             flat = None
         if flat is not None and flat.shape == (n_frames, n_channels) and np.isfinite(flat).all():
@@ -565,7 +613,7 @@ def load_bvh(path: str | bytes | PathLike[str], *, scale: float | None = None, n
     """
     path = as_path(path)
     _check_scale(scale)
-    return _motion_from_text(path, read_text(path, "a BVH file"), scale=scale, name=name, stacklevel=3)
+    return _motion_from_text(path, read_text(path, "a BVH file"), scale=scale, name=name)
 
 
 def _check_scale(scale: object) -> None:
@@ -582,10 +630,10 @@ def load_bvh_bytes(raw: bytes, path: str, *, scale: float | None = None, name: s
     registry hashes a file, then parses those same bytes).
     """
     _check_scale(scale)
-    return _motion_from_text(path, decode_text(path, raw), scale=scale, name=name, stacklevel=3)
+    return _motion_from_text(path, decode_text(path, raw), scale=scale, name=name)
 
 
-def _motion_from_text(path: str, text: str, *, scale: float | None, name: str | None, stacklevel: int) -> Motion:
+def _motion_from_text(path: str, text: str, *, scale: float | None, name: str | None) -> Motion:
     joints, frame_time, data = _parse_bvh_text(path, text)
     n = len(joints)
     offsets = np.array([j.offset for j in joints])
@@ -601,11 +649,10 @@ def _motion_from_text(path: str, text: str, *, scale: float | None, name: str | 
     )
     if scale is None:
         scale, unit = estimate_scale(raw_skeleton)
-        warnings.warn(
+        warn(
             f"{path}: BVH has no unit; assuming {unit} ({scale:g} m per unit) from the skeleton size. "
             "Pass scale=... to load_bvh to choose.",
             UserWarning,
-            stacklevel=stacklevel,
         )
     scale = float(scale)
     n_frames = data.shape[0]

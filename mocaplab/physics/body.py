@@ -141,7 +141,6 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from functools import lru_cache
 from types import MappingProxyType
@@ -153,6 +152,7 @@ from scipy import sparse
 from scipy.ndimage import gaussian_filter1d
 
 from .. import quat
+from .._warnings import warn
 from ..kinematics import fk
 from ..motion import Motion, Skeleton, mirror_name, readonly
 from ..roles import Roles, RolesError, _plausible, resolve_roles
@@ -447,24 +447,22 @@ def _reference(source: Skeleton | Motion, roles: Mapping[str, Any] | None, pose:
     if why is None:
         return rest
     if not isinstance(source, Motion):
-        warnings.warn(
+        warn(
             f"The rest pose of this skeleton is not a standing pose ({why}; bones laid along one axis, "
             "rest rotations baked into the motion?): link centres and support points measured in it are off. "
             "Give the motion (Body.from_skeleton(motion)) or a pose (pose=motion.rotations[k])",
             RestPoseWarning,
-            stacklevel=3,
         )
         return rest
     standing = _pose_points(sk, standing_pose(source, roles=r))
     still = _not_standing(r, standing)
-    warnings.warn(
+    warn(
         f"The rest pose of this skeleton is not a standing pose ({why}; bones laid along one axis, rest "
         "rotations baked into the motion?): link centres and support points are measured in a standing pose "
         "of the motion instead (mocaplab.physics.standing_pose: its mean pose, the chains inside links "
         "straight)" + ("" if still is None else f", which does not stand either ({still}): the body may be off")
         + ". Pass pose= to choose (pose='rest' keeps the rest pose)",
         RestPoseWarning,
-        stacklevel=3,
     )
     return standing
 

@@ -184,7 +184,6 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from functools import cached_property, lru_cache
 from typing import TYPE_CHECKING, Any, Literal, NamedTuple
@@ -194,6 +193,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import gaussian_filter1d
 
 from .. import quat
+from .._warnings import warn
 from ..contacts import intervals_from_mask
 from ..displacement import blend_ramp
 from ..motion import Motion, Skeleton, _owned, readonly
@@ -1423,12 +1423,11 @@ def _check_stages(motion: Motion, contacts: Contacts) -> None:
     long = [(a, b) for a, b in flight_stages(contacts, at_ends=True) if (b - a) / motion.fps > LONG_FLIGHT]
     if long:
         spans = ", ".join(f"frames {a}-{b - 1} ({(b - a) / motion.fps:.2f} s)" for a, b in long)
-        warnings.warn(
+        warn(
             f"Flights longer than {LONG_FLIGHT:g} s: {spans}. A human jump lasts well under a second; are the "
             "contacts right (a walk whose feet are not detected as planted)? Each is touched up as one "
             "ballistic flight (one that touches the first or last frame is left alone)",
             TouchUpWarning,
-            stacklevel=3,
         )
 
 
@@ -1456,20 +1455,18 @@ def _check_input(motion: Motion, contacts: Contacts, bal: Balance, gpos: Array) 
     """Warn about sliding feet and ground frames without a ZMP."""
     slide = _median_slide(gpos, motion.skeleton, contacts)
     if slide > SLIDE_WARNING:
-        warnings.warn(
+        warn(
             f"The planted joints slide by {100 * slide:.0f} cm over a median contact (more than "
             f"{100 * SLIDE_WARNING:.0f} cm): the touch-up keeps the feet where the input has them and measures "
             "balance against where they are. Run refine first: mocaplab.refine(edited, reference=original)",
             TouchUpWarning,
-            stacklevel=3,
         )
     if bal.dropped:
-        warnings.warn(
+        warn(
             f"{bal.dropped} of {int(bal.ground.sum())} ground frames have no ZMP (the vertical ground force "
             "would be negative: the body accelerates down faster than gravity); they are left out of the mean "
             "ZMP distance and of the corrections (TouchUpState.dropped counts them)",
             TouchUpWarning,
-            stacklevel=3,
         )
 
 

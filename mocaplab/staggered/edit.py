@@ -75,6 +75,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import kinematics, quat
+from .._warnings import warn
 from ..displacement import blend_ramp
 from ..motion import Motion, Skeleton
 from ..roles import RolesError, resolve_roles
@@ -1251,8 +1252,6 @@ class ConstraintLayer:
         target or a two-bone goal's blended target lies beyond its limb's
         reach (:func:`mocaplab.ik.reach_residual`).
         """
-        import warnings
-
         from ..contacts import intervals_from_mask
         from ..refinement import Goal, solve_goals
 
@@ -1312,13 +1311,12 @@ class ConstraintLayer:
             rows[frames[bad.any(axis=1)]] = True
             spans = ", ".join(f"{a}-{b - 1}" if b - a > 1 else f"{a}" for a, b in intervals_from_mask(rows))
             worst = np.unravel_index(int(np.argmax(miss)), miss.shape)
-            warnings.warn(
+            warn(
                 f"Constraint layer: targets out of reach on frames {spans} "
                 f"({self.joints[worst[1]]!r} misses by up to {1000 * miss[worst]:.0f} mm): an edit moved the "
                 "limb too far from where it was planted; undo part of the edit"
                 + ("" if self.adjust_root else ", or let the solver lower the root (adjust_root=True)"),
                 UnreachableTargetWarning,
-                stacklevel=4,
             )
         rot = np.array(motion.rotations, copy=True)
         rot[frames] = solved.rotations

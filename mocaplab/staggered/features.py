@@ -76,7 +76,6 @@ lasts about 0.7 s), so it keeps more poses per second than a walk.
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
@@ -84,6 +83,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import quat
+from .._warnings import warn
 from ..motion import Motion
 from .representation import translation_joints, variable_names
 
@@ -697,13 +697,12 @@ def analyze(
         contacts = stillness_contacts(motion, joints=contact_joints, roles=roles, min_duration="gait")
         if not contacts.mask.any():
             label = f" {motion.name!r}" if motion.name else ""
-            warnings.warn(
+            warn(
                 f"No environmental contacts found in the clip{label} on {list(contacts.joints)} "
                 "(Appendix B: no joint still within 3 cm long enough): contact changes add no pose "
                 "evidence and a constraint layer would hold nothing. Pass `contacts` (for example "
                 "mocaplab.contacts.foot_contacts(motion)) or contacts=None to silence this.",
                 NoContactsWarning,
-                stacklevel=2,
             )
     if contacts is None:
         events = np.zeros((motion.n_frames, 0))

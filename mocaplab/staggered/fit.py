@@ -81,6 +81,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize
 
 from .. import quat
+from .._warnings import warn
 from ..motion import Motion
 from ..roles import resolve_roles
 from .noise import FILTER_SIGMA, orientation_filter
@@ -787,11 +788,10 @@ def extract(
         if not layer.masks.any() and not detected_here:
             from .features import NoContactsWarning
 
-            warnings.warn(
+            warn(
                 f"The constraint layer of {motion.name or 'the clip'!r} holds nothing: no contact of "
                 f"{list(layer.joints) or list(analysis.contacts.joints)} in the given contacts",
                 NoContactsWarning,
-                stacklevel=2,
             )
         sm = _with(sm, constraints=layer)
     return sm

@@ -96,7 +96,6 @@ the extreme knot equal changes.
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -104,6 +103,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import quat
+from .._warnings import warn
 from ..motion import Motion, Skeleton
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -870,11 +870,10 @@ class StaggeredMotion:
         bad = self.timing_conflicts()
         if bad.any():
             k, i = np.argwhere(bad)[0]
-            warnings.warn(
+            warn(
                 f"{int(bad.sum())} refined knot(s) are closer to a neighbouring pose than to their own, e.g. "
                 f"{self.variables[i]!r} of pose {k} at {self.times[k] + self.refinements[k, i]:.3f} s",
                 StaggeredTimingWarning,
-                stacklevel=3,
             )
 
     # -------------------------------------------------------------- editing

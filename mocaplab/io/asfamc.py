@@ -53,6 +53,9 @@ Paths and limits
   directory, a device or pipe, or an unreadable file is a
   :class:`~mocaplab.io.MocapFormatError` naming that path (line 0), for the
   ASF and the AMC alike.  No ``OSError`` escapes.
+* **Text** is UTF-8; a byte that is not (a Latin-1 accent in a header
+  comment, as in some HDM05 files) is read as Latin-1 with a warning naming
+  its file, line and byte (:func:`~mocaplab.io.bvh.decode_text`).
 * **Work is linear in the file**: an ASF of 20,000 bones (a chain or a
   star) parses in a fraction of a second; AMC frame numbers longer than
   :data:`~mocaplab.io.bvh.MAX_INTEGER_DIGITS` digits are rejected before

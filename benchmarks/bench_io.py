@@ -10,6 +10,12 @@ Work timed, on CMU 49_03 (1504 frames, 31 joints, 96 channels):
   reads the file once, checks its sha256 and parses those bytes on every call
   (the price of the integrity check over a bare ``load_bvh``).
 
+* FBX and glTF beside BVH, on CMU 05_02 (1123 frames; the largest of the
+  Blender FBX exports in ``fbx/``): ``load(bvh) + FK``, ``load(fbx) + FK``
+  (ufbx in a worker process, see :mod:`mocaplab.io.fbx`), ``load(glb) + FK``
+  of the clip written by ``save_gltf``, and ``save_gltf`` itself; the FBX and
+  glTF results are checked against the BVH first.
+
 The two BVH readers are run alternately in the same process; the medians of
 the repeats and their ratio are printed (the target is mocaplab at least 2x
 faster).  Both results are checked to be the same joint positions first.
@@ -115,6 +121,43 @@ def main() -> None:
     print(f"  mocaplab load_asf_amc + FK (same clip, Acclaim files): {statistics.median(acclaim_t) * 1e3:.2f} ms")
     m_verified, m_bare = statistics.median(verified_t) * 1e3, statistics.median(bare_t) * 1e3
     print(f"  data.cmu (sha256 + load, every call) : {m_verified:7.2f} ms  vs load_bvh {m_bare:.2f} ms ({m_verified / m_bare:.2f}x)")
+    _formats(mirror, max(5, args.repeats // 3))
+
+
+def _formats(mirror: Path, repeats: int) -> None:
+    """FBX and glTF load times beside BVH's, on the same clip."""
+    import tempfile
+
+    from mocaplab.io import load, save_gltf
+
+    clip = "05_02"
+    bvh_path, fbx_path = mirror / "bvh" / f"{clip}.bvh", mirror / "fbx" / f"{clip}.fbx"
+    if not fbx_path.is_file():
+        print(f"  (no {fbx_path}: FBX and glTF not timed)")
+        return
+    scale = 0.0254 / 0.45
+    reference = load(bvh_path, scale=scale)
+    with tempfile.TemporaryDirectory() as folder:
+        glb_path = Path(folder) / f"{clip}.glb"
+        save_gltf(reference, glb_path)
+        runs = {
+            "BVH  load + FK": lambda: load(bvh_path, scale=scale).global_positions(),
+            "FBX  load + FK": lambda: load(fbx_path).global_positions(),
+            "glTF load + FK": lambda: load(glb_path).global_positions(),
+            "glTF save_gltf": lambda: save_gltf(reference, glb_path),
+        }
+        order = [reference.skeleton.index(n) for n in load(fbx_path).skeleton.names]
+        err_fbx = np.abs(runs["FBX  load + FK"]() - reference.global_positions()[:, order]).max()
+        err_glb = np.abs(runs["glTF load + FK"]() - reference.global_positions()).max()
+        print(f"{clip}: {reference.n_frames} frames; FBX vs BVH {err_fbx * 1000:.4f} mm, glTF vs BVH {err_glb * 1000:.4f} mm")
+        times: dict[str, list[float]] = {k: [] for k in runs}
+        for _ in range(repeats):  # alternate, so load on the machine hits all alike
+            for label, fn in runs.items():
+                times[label] += _time(fn, 1)
+        base = statistics.median(times["BVH  load + FK"])
+        for label, t in times.items():
+            m = statistics.median(t)
+            print(f"  {label} : {m * 1e3:8.2f} ms  (min {min(t) * 1e3:.2f}; {m / base:5.1f}x BVH)")
 
 
 if __name__ == "__main__":

@@ -32,8 +32,17 @@ def test_round_trip(walk: ml.Motion, tmp_path: Path, ext: str) -> None:
     assert back.skeleton.names == walk.skeleton.names and back.n_frames == walk.n_frames
     assert back.fps == 120.0  # from the key spacing, snapped by load
     error = np.abs(back.global_positions() - walk.global_positions()).max()
-    assert error < 1e-4  # float32 in the file; measured 1.5e-5 m
+    assert error < 1e-5  # float32 in the file; measured 5e-7 m
     assert dict(back.skeleton.roles) == dict(walk.skeleton.roles)
+
+
+def test_long_clip_keeps_every_frame_on_its_key(mocap_dir: Path, tmp_path: Path) -> None:
+    """float32 key times read as 120.0001 fps; the rate is snapped, so frame 1503 still falls on its key."""
+    hops = ml.load(mocap_dir / "bvh" / "49_03.bvh", scale=0.0254 / 0.45)
+    save_gltf(hops, tmp_path / "hops.glb")
+    back = load_gltf(tmp_path / "hops.glb")
+    assert back.fps == 120.0 and back.n_frames == hops.n_frames == 1504
+    assert np.abs(back.global_positions() - hops.global_positions()).max() < 1e-5  # measured 1.4e-6 m
 
 
 def test_round_trip_with_animated_translations(walk: ml.Motion, tmp_path: Path) -> None:

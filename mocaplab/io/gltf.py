@@ -19,9 +19,10 @@ Reading
   samplers as the specification defines them (cubic Hermite with the
   in/out tangents scaled by the key interval; rotations normalised).  It is
   sampled from its first key time to its last at ``fps``; glTF stores no
-  frame rate, so by default the rate is that of the keys (one over the
-  median key interval of the densest channel), which :func:`mocaplab.io.load`
-  snaps to a standard rate.
+  frame rate, so by default the rate is that of the keys of the densest
+  channel (over its whole span when they are evenly spaced, else one over
+  the median interval), snapped to an integer or NTSC rate within
+  :data:`KEY_RATE_TOLERANCE` (key times are float32).
 * glTF is metres and Y up by definition, so nothing is converted.
 * Accessors of float, or of normalised integers (rotations may be stored so),
   are read; every accessor, buffer view and buffer is checked against the
@@ -62,10 +63,15 @@ from ._hierarchy import motion_from_transforms
 from .bvh import as_path, read_bytes
 from .errors import MocapFormatError
 
-__all__ = ["load_gltf", "save_gltf", "DEFAULT_FPS"]
+__all__ = ["load_gltf", "save_gltf", "DEFAULT_FPS", "KEY_RATE_TOLERANCE"]
 
 #: Frame rate of a clip whose keys have no regular spacing to take the rate from.
 DEFAULT_FPS = 30.0
+
+#: Relative distance within which the rate of the keys is snapped to an
+#: integer or NTSC rate: key times are float32, so 120 fps keys read as
+#: 120.0001 fps, and sampling at that rate would drift off the keys.
+KEY_RATE_TOLERANCE = 1e-4
 
 _GLB_MAGIC = b"glTF"
 _COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
@@ -397,9 +403,15 @@ def _frame_times(path: str, channels: list[Any], fps: float | None) -> tuple[NDA
     if fps is None:
         steps = np.diff(densest)
         fps = float(1.0 / np.median(steps)) if steps.size else DEFAULT_FPS
+        if steps.size and np.ptp(steps) <= 1e-3 * np.median(steps):  # evenly keyed: the rate of the whole span
+            fps = (len(densest) - 1) / float(densest[-1] - densest[0])
+        for rate in (float(round(fps)), 24000 / 1001, 30000 / 1001, 60000 / 1001):
+            if rate > 0 and abs(fps - rate) <= KEY_RATE_TOLERANCE * rate:  # float32 key times: snap, or frames drift
+                fps = rate
+                break
         if not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:
             fps = DEFAULT_FPS
-    n = int(math.floor((end - begin) * fps + 1e-6)) + 1
+    n = int(math.floor((end - begin) * fps + 1e-3)) + 1  # key times may be float32
     most = max(len(c[2]) for c in channels)
     limit = max(100_000, 2 * most)
     if n > limit:

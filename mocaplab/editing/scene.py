@@ -468,7 +468,7 @@ class SceneEditor(Undoable):
             if isinstance(c, TEMPORAL):
                 problem = self._time.target_problem(c)
                 if problem is not None:
-                    raise ValueError(f"constraint #{i} {c!r}: {problem}")
+                    raise ConstraintError(f"constraint #{i} {c!r}: {problem}", [c], [i])
             if isinstance(c, SPATIAL) and not isinstance(c, SPATIAL[0]):
                 needs = (
                     [c.character]

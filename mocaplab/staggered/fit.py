@@ -84,6 +84,7 @@ from .. import quat
 from .._warnings import warn
 from ..motion import Motion
 from ..roles import resolve_roles
+from .features import check_rates
 from .noise import FILTER_SIGMA, orientation_filter
 from .representation import StaggeredMotion, locate, next_active, pose_u, quat_bezier, translation_joints
 
@@ -713,8 +714,11 @@ def extract(
     filter_sigma : float or None
         Filter the rotations before fitting and keep the filtered-out noise
         on the pose timing (section 6; Gaussian sigma in seconds, default
-        0.03 s, ``None`` turns it off): see :mod:`mocaplab.staggered.noise`.
-        The clip is reproduced exactly either way.
+        0.03 s, at most :data:`~mocaplab.staggered.features.MAX_FILTER_SECONDS`,
+        ``None`` turns it off): see :mod:`mocaplab.staggered.noise`.
+        The clip is reproduced exactly either way.  The clip's frame rate
+        must be at most :data:`~mocaplab.staggered.features.MAX_FPS`
+        (1000 fps).
     constraints : bool
         Attach the contact constraint layer
         (:class:`~mocaplab.staggered.edit.ConstraintLayer`: the feet of the
@@ -753,6 +757,8 @@ def extract(
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
     if motion.n_frames < 2:
         raise ValueError(f"Expected a clip of at least 2 frames, got {motion.n_frames}")
+    # the filters' work grows with the rate and the widths: bounded before anything is computed
+    check_rates(motion.fps, filter_sigma=filter_sigma, constraint_window=constraint_window)
     if not 0.0 <= max_refinement:
         raise ValueError(f"Expected `max_refinement` >= 0 seconds, got {max_refinement!r}")
     if roles is not None:

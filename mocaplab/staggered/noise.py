@@ -50,6 +50,7 @@ from scipy.ndimage import correlate1d
 
 from .. import quat
 from ..motion import Motion
+from .features import check_rates
 
 __all__ = ["FILTER_SIGMA", "orientation_filter", "filter_mask", "jitter"]
 
@@ -86,8 +87,10 @@ def orientation_filter(rotations: ArrayLike, sigma: float, fps: float) -> Array:
     rotations : array_like, shape (F, ...,  4)
         Unit quaternions, frames first.
     sigma : float
-        Gaussian sigma, seconds (0 returns a copy).
+        Gaussian sigma, seconds (0 returns a copy), at most
+        :data:`~mocaplab.staggered.features.MAX_FILTER_SECONDS`.
     fps : float
+        At most :data:`~mocaplab.staggered.features.MAX_FPS`.
 
     Returns
     -------
@@ -110,6 +113,7 @@ def orientation_filter(rotations: ArrayLike, sigma: float, fps: float) -> Array:
         raise ValueError(f"Expected `rotations` of shape (F, ..., 4), got {q.shape}")
     if not (np.isfinite(sigma) and sigma >= 0):
         raise ValueError(f"Expected `sigma` >= 0 seconds, got {sigma!r}")
+    check_rates(float(fps), sigma=float(sigma))  # the mask has 6 sigma fps + 1 taps: bounded before it is built
     if sigma == 0 or q.shape[0] < 2:
         return np.array(q, copy=True)
     a = filter_mask(sigma, fps)

@@ -57,7 +57,7 @@ __all__ = [
 ]
 
 #: File extensions :func:`load` reads (lowercase; matched case-insensitively).
-SUPPORTED_EXTENSIONS: tuple[str, ...] = (".bvh", ".asf", ".amc")
+SUPPORTED_EXTENSIONS: tuple[str, ...] = (".bvh", ".asf", ".amc", ".fbx", ".gltf", ".glb")
 
 #: Relative distance within which a frame rate is snapped to a standard rate.
 FPS_SNAP_TOLERANCE = 1e-5
@@ -190,6 +190,16 @@ def load(
         else:
             skeleton = file if ext == ".asf" else _asf_for(file)
         motion = load_asf_amc(skeleton, _amc_for(file) if ext == ".asf" else file, scale=scale, name=name)
+    elif ext == ".fbx":  # units and axes from the file (take=, fps=, skeleton=: mocaplab.io.load_fbx)
+        from .fbx import load_fbx
+
+        motion = load_fbx(file, scale=scale, name=name)
+    elif ext in (".gltf", ".glb"):  # metres and Y up by definition (animation=, fps=: mocaplab.io.load_gltf)
+        from .gltf import load_gltf
+
+        if scale is not None:
+            raise ValueError(f"Expected no `scale` for a glTF file (glTF is in metres), got {scale!r}")
+        motion = load_gltf(file, name=name)
     else:
         raise ValueError(
             f"Expected `path` to end in one of {', '.join(SUPPORTED_EXTENSIONS)} (case-insensitive), "

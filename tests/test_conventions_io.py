@@ -247,11 +247,13 @@ def test_bad_up_value(tmp_path, up):
 
 
 def test_unknown_extension(tmp_path):
-    path = tmp_path / "clip.fbx"
+    path = tmp_path / "clip.c3d"
     path.write_text("not read")
     with pytest.raises(ValueError) as info:
         load(path)
-    assert str(info.value) == f"Expected `path` to end in one of .bvh, .asf, .amc (case-insensitive), got {str(path)!r}"
+    assert str(info.value) == (
+        f"Expected `path` to end in one of .bvh, .asf, .amc, .fbx, .gltf, .glb (case-insensitive), got {str(path)!r}"
+    )
 
 
 def test_bvh_dispatch_any_case_and_name(tmp_path):

@@ -101,6 +101,23 @@ with its own host; otherwise the address is ``http://localhost:<port>/``.
 ``MOCAPLAB_TRAME_PROXY`` sets the prefix for other proxies, or ``off`` (see
 :func:`trame_proxy_prefix`).
 
+Who may connect
+---------------
+The trame server's websocket (wslink) lets a client in only if its first
+message carries the server's secret, and wslink's default secret is the
+public string ``"wslink-secret"``: with it, any process of the machine (any
+user's, on a shared course server) could connect to the 3D view and call its
+remote methods.  The viewer gives the kernel's trame server a random secret
+instead (:func:`secrets.token_urlsafe`, 256 bits, one per kernel: pyvista
+runs one trame server per kernel for all its views), set before the server
+starts through trame's own ``--authKey`` option, and hands it only to the
+page that shows the view, in its iframe's address (``secret=``, which the
+trame page reads with its other address parameters and sends in its first
+message).  The server still listens on 127.0.0.1 only, and the address still
+goes through ``jupyter-server-proxy`` where one is used.  A plain pyvista
+plot that started the server earlier with the default secret has its secret
+replaced: its page must be shown again.
+
 Threads
 -------
 VTK renders only in the thread that owns its (EGL off-screen) render window:
@@ -140,6 +157,7 @@ import io
 import logging
 import math
 import os
+import secrets
 import sys
 import threading
 import time
@@ -348,13 +366,41 @@ def _session_url(src: str) -> str | None:
 
 
 def _iframe_widget(viewer: Any, src: str, **kwargs: Any) -> Any:
-    """pyvista's trame iframe widget, its address naming the websocket (no launcher request, no 405)."""
+    """pyvista's trame iframe widget, its address naming the websocket (no launcher request, no 405) and
+    carrying the server's secret (see "Who may connect" in the module notes)."""
     from trame_pyvista.jupyter import Widget
 
     ws = _session_url(src)
     if ws is not None:
         src = f"{src}{'&' if '?' in src else '?'}sessionURL={urllib.parse.quote(ws, safe='')}"
+    src = f"{src}{'&' if '?' in src else '?'}secret={urllib.parse.quote(_TRAME_SECRET, safe='')}"
     return Widget(viewer, src, **kwargs)
+
+
+# The kernel's trame secret (module notes, "Who may connect"): made once per process and never changed.
+# The prefix keeps the trame page from reading it as a number (it converts numeric address parameters).
+_TRAME_SECRET = "mocaplab-" + secrets.token_urlsafe(32)
+
+
+def _secure_trame_server() -> Any:
+    """The kernel's pyvista trame server, set to admit only clients that know :data:`_TRAME_SECRET`.
+
+    Before it starts, the secret becomes the default of trame's ``--authKey``
+    option (what the server reads when it starts); a server that already runs
+    (a plain pyvista plot started it) gets the secret on its running protocol.
+    """
+    import pyvista as pv
+    from trame_pyvista.widgets import get_server
+    from trame_server.protocol import CoreServer
+
+    server = get_server(name=pv.global_theme.trame.jupyter_server_name)
+    server.cli.set_defaults(authKey=_TRAME_SECRET, authKeyFile=None)
+    if CoreServer.authentication_token != _TRAME_SECRET:
+        CoreServer.authentication_token = _TRAME_SECRET  # what a protocol created from now on takes
+        protocol = server.protocol
+        if protocol is not None:
+            protocol.updateSecret(_TRAME_SECRET)
+    return server
 
 
 def _main_thread_loop() -> asyncio.AbstractEventLoop | None:
@@ -1618,6 +1664,7 @@ class MotionViewer:
         elif os.environ.get(PROXY_ENV_VAR, "").strip().lower() in _PROXY_OFF:
             options["server_proxy_enabled"] = False
         # else pyvista's theme decides (off unless set with pv.global_theme.trame.server_proxy_enabled)
+        _secure_trame_server()
         with _without_vtklocal():
             return self.plotter.show(
                 jupyter_backend=_TRAME_MODES[self.backend],

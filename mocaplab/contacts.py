@@ -45,6 +45,8 @@ __all__ = [
     "intervals_from_mask",
     "mask_from_intervals",
     "clean_mask",
+    "Floor",
+    "estimate_floor",
 ]
 
 # --------------------------------------------------------------------------
@@ -491,3 +493,124 @@ def _gait_windows(motion: Motion, travel: float, cap: float = 0.25) -> NDArray[n
     mean = (c[stop] - c[np.arange(n)]) / (stop - np.arange(n))
     seconds = np.minimum(cap, travel / np.maximum(mean, 1e-9))
     return np.clip(np.round(seconds * fps).astype(np.int64), 2, longest)
+
+
+# --------------------------------------------------------------------------
+# the floor the feet stand on
+# --------------------------------------------------------------------------
+#: Horizontal spread (metres, standard deviation of the planted samples) below
+#: which a floor's slope cannot be told from capture noise: the floor is
+#: taken as level.
+FLOOR_SLOPE_SPREAD = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class Floor:
+    """The ground plane the feet stand on, and each foot joint's height above it when planted.
+
+    The plane is ``y = slope[0] * x + slope[1] * z`` plus each joint's own
+    level: joint ``joints[k]`` rests at ``slope . (x, z) + levels[k]`` when
+    planted (an ankle some centimetres above a toe joint), so
+    :meth:`depth` is how far a joint is below where it would stand.
+
+    Attributes
+    ----------
+    joints : tuple of str
+    slope : ndarray, shape (2,)
+        Rise of the floor per metre along x and along z (0 for a level floor).
+    levels : ndarray, shape (n,)
+        Height of each joint above ``slope . (x, z)`` when planted, metres.
+    """
+
+    joints: tuple[str, ...]
+    slope: NDArray[np.float64]
+    levels: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "joints", tuple(self.joints))
+        object.__setattr__(self, "slope", readonly(np.array(self.slope, dtype=float)))
+        object.__setattr__(self, "levels", readonly(np.array(self.levels, dtype=float)))
+
+    @property
+    def angle(self) -> float:
+        """Steepest inclination of the floor, degrees."""
+        return float(np.degrees(np.arctan(np.linalg.norm(self.slope))))
+
+    def depth(self, motion: Motion) -> NDArray[np.float64]:
+        """How far each joint is below its planted height on every frame, metres, shape (F, n) (negative above)."""
+        idx = [motion.skeleton.index(j) for j in self.joints]
+        p = motion.global_positions()[:, idx]
+        return p[..., [0, 2]] @ self.slope + self.levels - p[..., 1]
+
+    def describe(self) -> str:
+        """One line: the slope and the planted heights."""
+        levels = ", ".join(f"{j} {1000 * h:.0f} mm" for j, h in zip(self.joints, self.levels, strict=True))
+        return f"floor inclined {self.angle:.1f} deg; planted heights {levels}"
+
+
+def estimate_floor(
+    motion: Motion, contacts: Contacts, *, percentile: float = 5.0
+) -> Floor | None:
+    """The floor a motion's feet stand on, fitted to its planted frames.
+
+    A least-squares plane ``y = a x + b z + c_k`` through the positions of
+    the contact joints on their planted frames, with one height ``c_k`` per
+    joint (joints rest at different heights above the sole).  The slope is
+    fitted only along the horizontal directions over which the planted
+    samples spread by at least :data:`FLOOR_SLOPE_SPREAD` metres (standard
+    deviation): along a straight walk but not across it, and not for a dance
+    on the spot, where the floor is taken as level.  Each joint's level is then the
+    ``percentile`` percentile of its heights above the plane while planted,
+    so capture noise leaves only a few planted frames below the floor.
+
+    Parameters
+    ----------
+    motion : Motion
+    contacts : Contacts
+        Planted joints, over the motion's frames.
+    percentile : float
+        See above (0-100).
+
+    Returns
+    -------
+    Floor, or None when no joint is ever planted.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab import Motion, Skeleton
+    >>> sk = Skeleton(["foot"], [-1], [[0, 0, 0]])
+    >>> root = np.column_stack([np.linspace(0, 3, 4), np.linspace(0, 0.3, 4), np.zeros(4)])
+    >>> m = Motion(sk, np.tile([0, 0, 0, 1.0], (4, 1, 1)), root, 30)
+    >>> floor = estimate_floor(m, Contacts(("foot",), np.ones((4, 1), bool), 30))
+    >>> round(float(floor.slope[0]), 6), round(floor.angle, 2)
+    (0.1, 5.71)
+    """
+    if contacts.n_frames != motion.n_frames:
+        raise ValueError(f"Expected contacts over {motion.n_frames} frames, got {contacts.n_frames}")
+    if not 0.0 <= percentile <= 100.0:
+        raise ValueError(f"Expected `percentile` in [0, 100], got {percentile!r}")
+    if not contacts.mask.any():
+        return None
+    idx = [motion.skeleton.index(j) for j in contacts.joints]
+    pos = motion.global_positions()[:, idx]
+    frames, cols = np.nonzero(contacts.mask)
+    samples = pos[frames, cols]
+    n = len(contacts.joints)
+    onehot = np.zeros((len(frames), n))
+    onehot[np.arange(len(frames)), cols] = 1.0
+    # the slope only along horizontal directions the planted samples spread over
+    # (a straight walk says nothing about the floor's tilt across its path)
+    xz = samples[:, [0, 2]] - samples[:, [0, 2]].mean(axis=0)
+    var, vecs = np.linalg.eigh(xz.T @ xz / len(xz))
+    dirs = vecs[:, np.sqrt(np.maximum(var, 0.0)) >= FLOOR_SLOPE_SPREAD]  # (2, d), d in 0..2
+    used = onehot.any(axis=0)
+    design = np.column_stack([xz @ dirs, onehot[:, used]])
+    coef = np.linalg.lstsq(design, samples[:, 1], rcond=None)[0]
+    slope = dirs @ coef[: dirs.shape[1]]
+    above = pos[..., 1] - pos[..., [0, 2]] @ slope  # (F, n) heights above the tilted plane
+    levels = np.empty(n)
+    for k in range(n):
+        planted = contacts.mask[:, k]
+        levels[k] = np.percentile(above[planted, k] if planted.any() else above[:, k], percentile)
+    return Floor(tuple(contacts.joints), slope, levels)

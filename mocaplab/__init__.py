@@ -36,7 +36,7 @@ _ENTRY_POINTS = {
 }
 _SUBMODULES = (
     "contacts", "data", "displacement", "editing", "ik", "io", "kinematics", "lessons", "motion", "physics",
-    "quat", "refinement", "roles", "staggered", "undo",
+    "quality", "quat", "refinement", "roles", "staggered", "undo",
 )
 
 __all__ = ["Motion", "Skeleton", "concatenate", *_ENTRY_POINTS, "__version__"]

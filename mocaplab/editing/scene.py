@@ -67,6 +67,13 @@ clock_fps : float, optional
     (a ``ValueError`` when ``motions`` are built, before any allocation).
 refine : bool, default False
     ``motions`` are the full-body refined ones (:meth:`EditResult.refined`).
+refine_tolerance : float, default 1e-3 (m)
+    Incremental refinement: a character keeps the refined motion the editor
+    last computed for it (the same object) while its path stays within this
+    distance of the path that motion was refined on, its frame times within
+    1 microsecond, its end effectors and the shared clock the same; only the
+    others are refined again (see :class:`RefineCache`).  0 refines a
+    character again whenever its path moved at all.
 roles : mapping of role name to joint name, or one per character, optional
     Joint roles fixed by hand (:func:`mocaplab.roles.resolve_roles`), for
     skeletons whose roles cannot be inferred: the characters' skeletons get
@@ -112,7 +119,7 @@ from .laplacian import (
 from .paths import MotionPath, apply_path, contact_joints, laplacian_coordinates, stationary_segments, with_roles
 from .timewarp import TimeFactors, TimeSolver, temporal_rows
 
-__all__ = ["edit", "SceneEditor", "EditResult", "MAX_CLOCK_FPS", "MAX_CLOCK_FRAMES"]
+__all__ = ["edit", "SceneEditor", "EditResult", "RefineCache", "MAX_CLOCK_FPS", "MAX_CLOCK_FRAMES"]
 
 Array = NDArray[np.float64]
 
@@ -139,6 +146,7 @@ _OPTIONS: Mapping[str, Any] = MappingProxyType(
         "start_times": None,
         "clock_fps": None,
         "refine": False,
+        "refine_tolerance": 1e-3,
         "roles": None,
         "joints": None,
     }
@@ -172,6 +180,108 @@ class WarmResults:
         for old in self._results[self._size :]:
             old.release()
         del self._results[self._size :]
+
+
+_TIME_TOLERANCE = 1e-6  # seconds: frame times closer than this count as unchanged for refinement
+
+
+class RefineCache:
+    """Refined motions per character, kept between edits so only what changed is refined again.
+
+    Full-body refinement (:func:`mocaplab.refinement.refine_scene`) costs
+    tens of milliseconds per character; a drag usually moves one character
+    (and, through soft relative constraints, its neighbours a little).  Each
+    entry remembers what a character was refined from: the shared clock
+    (first tick, rate, length), the character's edited path and frame
+    times, and its end-effector constraints (by identity).  A later result
+    reuses the refined motion itself when the clock and the end effectors
+    are the same, the frame times within :data:`_TIME_TOLERANCE` and the
+    path within ``tolerance`` metres; characters tied by end effectors
+    relative to one another (:class:`~mocaplab.refinement.RelativeTo` of
+    another character) are refined, or reused, together.
+
+    The time-warped input clips and their foot contacts (the references of
+    refinement) depend on the frame times only and are kept the same way.
+
+    Parameters
+    ----------
+    tolerance : float
+        Metres a path may move and still keep its refined motion.
+    """
+
+    def __init__(self, tolerance: float) -> None:
+        tolerance = float(tolerance)
+        if not (math.isfinite(tolerance) and tolerance >= 0.0):
+            raise ValueError(f"Expected `refine_tolerance` >= 0 metres, got {tolerance!r}")
+        self.tolerance = tolerance
+        self._motions: dict[int, tuple[tuple[float, float, int], Array, Array, tuple[Any, ...], Motion]] = {}
+        self._references: dict[int, tuple[tuple[float, float, int], Array, Any]] = {}
+        #: How many characters were refined (not reused) so far.
+        self.refined = 0
+
+    def motion(self, k: int, clock: tuple[float, float, int], path: Array, times: Array, ees: tuple[Any, ...]) -> Any:
+        """Character ``k``'s refined motion if its inputs are those it was refined from (within tolerance), else None."""
+        entry = self._motions.get(k)
+        if entry is None:
+            return None
+        c, p, t, e, motion = entry
+        if c != clock or len(e) != len(ees) or any(a is not b for a, b in zip(e, ees, strict=True)):
+            return None
+        if p.shape != path.shape or t.shape != times.shape:
+            return None
+        if np.max(np.abs(t - times), initial=0.0) > _TIME_TOLERANCE:
+            return None
+        if np.max(np.linalg.norm(p - path, axis=-1), initial=0.0) > self.tolerance:
+            return None
+        return motion
+
+    def store(
+        self, k: int, clock: tuple[float, float, int], path: Array, times: Array, ees: tuple[Any, ...], motion: Motion
+    ) -> None:
+        """Remember ``motion`` as character ``k``'s refinement of these inputs."""
+        self._motions[k] = (clock, np.array(path, dtype=float), np.array(times, dtype=float), tuple(ees), motion)
+        self.refined += 1
+
+    def reference(self, k: int, clock: tuple[float, float, int], times: Array, make: Any) -> Any:
+        """``make()`` (the warped input and its contacts), or what it returned for the same clock and times."""
+        entry = self._references.get(k)
+        if entry is not None and entry[0] == clock and entry[1].shape == times.shape:
+            if np.max(np.abs(entry[1] - times), initial=0.0) <= _TIME_TOLERANCE:
+                return entry[2]
+        value = make()
+        self._references[k] = (clock, np.array(times, dtype=float), value)
+        return value
+
+
+def _renumbered(ee: EndEffector, local: Mapping[int, int]) -> EndEffector:
+    """``ee`` with its character (and a RelativeTo's other character) numbered within its group."""
+    target = ee.target
+    other = getattr(target, "character", None)
+    if other is not None:
+        target = dataclasses.replace(target, character=local[int(other)])
+    return dataclasses.replace(ee, character=local[ee.character], target=target)
+
+
+def _effector_groups(end_effectors: Sequence[Sequence[EndEffector]]) -> list[list[int]]:
+    """Characters tied by end effectors relative to another character's joint, as sorted groups (union-find)."""
+    K = len(end_effectors)
+    root = list(range(K))
+
+    def find(a: int) -> int:
+        while root[a] != a:
+            root[a] = root[root[a]]
+            a = root[a]
+        return a
+
+    for k, per in enumerate(end_effectors):
+        for ee in per:
+            other = getattr(ee.target, "character", None)
+            if other is not None and 0 <= int(other) < K:
+                root[find(k)] = find(int(other))
+    groups: dict[int, list[int]] = {}
+    for k in range(K):
+        groups.setdefault(find(k), []).append(k)
+    return list(groups.values())
 
 
 def _effectors(constraints: Sequence[Any], K: int) -> tuple[tuple[EndEffector, ...], ...]:
@@ -369,6 +479,7 @@ class SceneEditor(Undoable):
                 except ValueError as exc:
                     raise ValueError(f"character {k}: {exc}") from None
         self._joints = joints
+        self._refine_cache = RefineCache(opts["refine_tolerance"])
         self.paths = tuple(MotionPath.from_motion(m, min_speed=opts["min_speed"]) for m in self.characters)
         self.segments = self._stationary(opts["stationary"])
         step = int(opts["variational_step"])
@@ -1015,13 +1126,34 @@ class EditResult:
             raise NotImplementedError("full-body refinement needs mocaplab.refine, which is not available") from None
         from ..contacts import foot_contacts
 
-        K = len(self.characters)
-        warped = [self._plain[k] for k in range(K)]
-        refs = [self._warp(k, self.characters[k]) for k in range(K)]
-        # the input's contacts, on the clock, of the roles' feet (or the `joints` option)
-        contacts = [foot_contacts(refs[k], joints=self._ed.contact_joints(k)) for k in range(K)]
-        ees = [self._effector_on_clock(ee) for per in self.end_effectors for ee in per]
-        return refine_scene(warped, ees, references=refs, contacts=contacts)
+        cache: RefineCache = self._ed._refine_cache
+        clock = (float(self.clock[0]), float(self.clock_fps), len(self.clock))
+        out: list[Any] = [None] * len(self.characters)
+        for group in _effector_groups(self.end_effectors):
+            kept = [cache.motion(k, clock, self.paths[k], self.times[k], self.end_effectors[k]) for k in group]
+            if all(m is not None for m in kept):
+                for k, m in zip(group, kept, strict=True):
+                    out[k] = m
+                continue
+
+            def reference(k: int) -> tuple[Motion, Any]:
+                ref = self._warp(k, self.characters[k])
+                # the input's contacts, on the clock, of the roles' feet (or the `joints` option)
+                return ref, foot_contacts(ref, joints=self._ed.contact_joints(k))
+
+            refs = [cache.reference(k, clock, self.times[k], lambda k=k: reference(k)) for k in group]
+            local = {k: i for i, k in enumerate(group)}
+            ees = [_renumbered(self._effector_on_clock(ee), local) for k in group for ee in self.end_effectors[k]]
+            refined = refine_scene(
+                [self._plain[k] for k in group],
+                ees,
+                references=[r for r, _ in refs],
+                contacts=[c for _, c in refs],
+            )
+            for k, m in zip(group, refined, strict=True):
+                cache.store(k, clock, self.paths[k], self.times[k], self.end_effectors[k], m)
+                out[k] = m
+        return out
 
     def _refine_all(self) -> list[Motion]:
         return self._refined_list

@@ -229,7 +229,8 @@ def test_viewer_gets_new_motions_on_release_and_follows_time(walks, monkeypatch)
     assert pe.viewer is first and not first.closed, "the same viewer is updated, not replaced"
     assert pe.viewer_updates == 1 and len(first.updates) == 1, "one update per release, none per motion event"
     assert pe._viewer_box.children[0] is first.widget
-    assert pe.viewer.motions[0] is pe.result.motions[0]
+    assert pe.viewer.motions[0] is pe.result.refined()[0], "the 3D view shows the refined motion"
+    assert _status(pe).rstrip("</span>").endswith("refined")
     moved_root = pe.viewer.motions[0].root_positions[:, [0, 2]]
     assert not np.allclose(moved_root, walks[0].root_positions[: len(moved_root), [0, 2]], atol=1e-3), (
         "edited motion shown"
@@ -260,8 +261,8 @@ def test_real_motion_viewer_is_updated_in_place_after_a_drag(walks, monkeypatch)
     assert (first.characters[0].bones, first.characters[0].joints) == meshes, "the meshes were updated in place"
     assert pe._viewer_box.children[0] is widget
     shown = pe.viewer.characters[0].positions[:, 0, [0, 2]]
-    edited = pe.result.motions[0].global_positions()
-    assert np.allclose(shown, edited[:, 0, [0, 2]]), "the 3D view shows the edited motion"
+    edited = pe.result.refined()[0].global_positions()
+    assert np.allclose(shown, edited[:, 0, [0, 2]]), "the 3D view shows the edited (refined) motion"
     assert not np.allclose(edited[:, 0, [0, 2]], walks[0].global_positions()[:, 0, [0, 2]], atol=1e-3)
     f = pe.viewer.character_frames()[0]
     n = walks[0].n_joints
@@ -502,7 +503,7 @@ def test_editors_work_on_any_skeleton_with_no_joint_name(walks, cmu_gestures, co
     assert np.allclose(tt.result.times[0], cmu_tt.result.times[0], atol=1e-9), "the same re-timing"
     assert np.allclose(pe._lines[0].get_xydata(), path), "the drawn path is the pelvis path"
     shown = pe.viewer.motions[0]
-    assert shown is pe.result.motions[0]
+    assert shown is pe.result.refined()[0]
     assert np.abs(body(shown) - body(cmu_pe.viewer.motions[0])).max() < 1e-3, "the 3D view gets the same motion"
 
 
@@ -585,7 +586,7 @@ def test_undo_redo_reset_buttons_restore_the_drawn_paths_handles_and_3d_view(wal
     assert [h["data"] for h in _published(pe)] == [h[2] for h in first_handles], "the page gets the first handles"
     for line, path in zip(pe._lines, first_paths, strict=True):
         assert np.array_equal(line.get_xydata(), path), "the drawn paths are the first ones, bitwise"
-    assert pe.viewer.motions[0] is first_result.motions[0], "the 3D view shows the restored motions"
+    assert pe.viewer.motions[0] is first_result.refined()[0], "the 3D view shows the restored motions"
     assert undo.disabled and not redo.disabled
     assert "restored: 2 constraints" in _status(pe)
 
@@ -627,13 +628,69 @@ def test_export_writes_the_edited_motions_as_bvh(walks, tmp_path):
     for k, f in enumerate(files):
         back = load_bvh(f, scale=0.01)
         on = np.asarray(pe.result.active[k])  # the character's own span on the shared clock
-        edited = pe.result.motions[k]
+        edited = pe.result.refined()[k]
         assert back.n_frames == int(on.sum())
         np.testing.assert_allclose(back.pelvis_positions[:, [0, 2]], edited.pelvis_positions[on][:, [0, 2]], atol=1e-5)
     back = load_bvh(files[0], scale=0.01)
     moved = np.linalg.norm(back.pelvis_positions[:, [0, 2]] - walks[0].root_positions[: back.n_frames, [0, 2]], axis=1)
     assert moved.max() > 0.3, "the file holds the edited path, not the input"
     assert "wrote" in pe.export_control.label.value
+
+
+def _skate(before, after):
+    from mocaplab import quality
+
+    report = quality.compare(before, after)
+    return report["skate"].after
+
+
+def test_refined_on_release_plants_the_feet_in_the_view_and_the_file(walks, tmp_path):
+    """The default view refines on release: the 3D view and the BVH file skate no more than the input."""
+    from mocaplab.io import load_bvh
+
+    pe = PathEditor([walks[0]], viewer=ViewerStub([]))
+    assert pe.refine.value and "mocaplab-refine" in pe.refine._dom_classes
+    pe.figure.canvas.draw()
+    start = np.array(pe.result.paths[0][50])
+    _drag(pe, start, start + np.array([0.8, 0.5]))
+    assert pe.last_error is None, pe.last_error
+    assert "· refined" in _status(pe), "the status line says the shown motion is refined"
+    shown = pe.viewer.motions[0]
+    plain = pe.result.motions[0]
+    assert shown is pe.result.refined()[0] and shown is not plain
+    input_skate = _skate(walks[0], walks[0])
+    assert _skate(walks[0], shown) <= input_skate, "the refined view skates no more than the input"
+    assert _skate(walks[0], plain) > 2.0 * _skate(walks[0], shown), "the plain edit skates: refinement mattered"
+    (written,) = pe.export(tmp_path / "refined.bvh")
+    back = load_bvh(written, scale=0.01)
+    np.testing.assert_allclose(back.global_positions(), shown.global_positions(), atol=1e-4)
+
+    # unticked: the view and the file hold the plain edit, and the status says so
+    pe.refine.value = False
+    assert pe.viewer.motions[0] is plain and "not refined" in _status(pe)
+    (written,) = pe.export(tmp_path / "plain.bvh")
+    np.testing.assert_allclose(load_bvh(written, scale=0.01).global_positions(), plain.global_positions(), atol=1e-4)
+    pe.refine.value = True
+    assert pe.viewer.motions[0] is shown, "ticked again: the refinement of this edit, not computed again"
+
+
+def test_time_track_refines_on_release(walks, tmp_path):
+    tt = TimeTrackEditor(walks, [AbsoluteTime(0, 0, 0.0, hard=True)])
+    tt.figure.canvas.draw()
+    t = float(tt.result.times[0][60])
+    _drag(tt, (t, 0.0), (t + 0.5, 0.0))
+    assert tt.last_error is None and "· refined" in _status(tt)
+    files = tt.export(tmp_path / "timed.bvh")
+    on = np.asarray(tt.result.active[0])
+    refined = tt.result.refined()[0]
+    assert np.abs(refined.pelvis_positions - tt.result.motions[0].pelvis_positions).max() > 1e-3
+    np.testing.assert_allclose(load_pelvis(files[0]), refined.pelvis_positions[on], atol=1e-5)
+
+
+def load_pelvis(path):
+    from mocaplab.io import load_bvh
+
+    return load_bvh(path, scale=0.01).pelvis_positions
 
 
 def test_export_error_is_shown_and_the_view_stays_in_sync(walks, tmp_path):
@@ -648,7 +705,7 @@ def test_export_writes_each_characters_own_span_not_the_padded_clock(walks, tmp_
     from mocaplab.io import load_bvh
 
     cons = [AbsoluteTime(0, 0, 0.0, hard=True), AbsoluteTime(1, 0, 3.0, hard=True)]
-    tt = TimeTrackEditor(walks, cons)
+    tt = TimeTrackEditor(walks, cons, refine=False)  # the plain edit: the late character's file is its clip
     result = tt.result
     assert result.motions[1].n_frames > walks[1].n_frames, "on the shared clock the late character is padded"
     files = tt.export(tmp_path / "late.bvh")
@@ -702,7 +759,7 @@ def test_a_failing_listener_does_not_keep_the_others_on_the_old_state(walks):
     restored = pe.editor.result
     assert restored is not dragged and pe.result is restored
     assert seen[-1] is restored, "the later listener shows the undone state"
-    assert pe.viewer.motions[0] is restored.motions[0], "the 3D view shows the undone state"
+    assert pe.viewer.motions[0] is restored.refined()[0], "the 3D view shows the undone state"
     assert np.array_equal(pe._lines[0].get_xydata(), restored.paths[0])
 
 

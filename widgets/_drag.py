@@ -35,10 +35,21 @@ editor (:meth:`DragView.resync`), so what it shows is what the editor holds
 History and export: every view shows Undo / Redo / Reset buttons
 (:class:`~mocaplab.widgets._controls.HistoryButtons` over the editor's own
 ``undo``/``redo``/``reset``) and an "Export BVH" control writing the current
-edited motions (one file per character: ``result.motions[k]`` cut to the
+edited motions (one file per character: the motion shown, cut to the
 character's own span ``result.active[k]``, see :func:`own_spans`).  The release
 of the mouse ends a gesture: the view calls ``editor.checkpoint()``, so one
 drag is one undo step.
+
+Refined where a person looks: the path editing moves whole bodies rigidly,
+so feet slide until full-body refinement (Kim et al. 2009, section 4.3;
+:meth:`mocaplab.editing.EditResult.refined`) plants them again.  With the
+"refine on release" box ticked (the default) the view refines the edit when
+the mouse is released (and after undo, redo, reset or a refresh); the 3D
+view shows and the export writes those refined motions
+(:meth:`DragView.shown_motions`) and the status line ends with
+``refined``.  The editor refines only the characters that changed
+(:class:`mocaplab.editing.RefineCache`).  During a drag the plain edit is
+drawn (the paths); unticked, the view shows and writes the plain edit.
 """
 
 from __future__ import annotations
@@ -213,6 +224,7 @@ class DragView:
         pick_radius: float,
         editor_options: dict[str, Any] | None = None,
         roles: Any = None,
+        refine: bool = True,
     ) -> None:
         if not pick_radius > 0:
             raise ValueError(f"Expected `pick_radius` > 0 pixels, got {pick_radius!r}")
@@ -228,10 +240,22 @@ class DragView:
         self._handles: list[Handle] = []
         self._listeners: list[Callable[[Any], None]] = []
         self.result = current_result(self.editor)
+        self._refined_for: Any = None  # the result whose motions _refined_motions holds
+        self._refined_motions: list[Any] | None = None
+        self._refine_note = ""
+        self.refine = W.Checkbox(
+            value=bool(refine),
+            description="refine on release",
+            indent=False,
+            tooltip="Plant the feet (full-body refinement) of the edited motions the 3D view shows and export writes",
+            layout=W.Layout(width="auto"),
+        )
+        self.refine.add_class("mocaplab-refine")
+        self.refine.observe(self._on_refine_toggle, names="value")
         self.history_buttons = HistoryButtons(self.editor, self._after_history, guard=self._guard)
         self.export_control = ExportControl(self._export_motions, default=_export_name(self.editor), guard=self._guard)
         self.controls = W.HBox(
-            [self.history_buttons.box, self.export_control.box], layout=W.Layout(flex_flow="row wrap")
+            [self.history_buttons.box, self.refine, self.export_control.box], layout=W.Layout(flex_flow="row wrap")
         )
         self.controls.add_class("mocaplab-edit-controls")
         # the "wrote ..." note goes under the button when it does not fit beside it (never squeezing it)
@@ -294,6 +318,39 @@ class DragView:
         """Redraw from the editor's current result (after editing it in code)."""
         self._apply(current_result(self.editor))
         self._settle(grow_only=self._refresh_grows_view)
+
+    def shown_motions(self) -> list[Any]:
+        """The motions the 3D view shows and export writes (on the shared clock), one per character.
+
+        The current result's refined motions
+        (:meth:`~mocaplab.editing.EditResult.refined`) while "refine on
+        release" is ticked, refined on first call for each result; its plain
+        ``motions`` otherwise, or when refinement failed (the status line
+        says why).
+        """
+        if self._refined_for is not self.result:
+            self._refined_for = self.result
+            self._refined_motions, self._refine_note = self._refine_result(self.result)
+        return list(self._refined_motions) if self._refined_motions is not None else list(self.result.motions)
+
+    def _refine_result(self, result: Any) -> tuple[list[Any] | None, str]:
+        """``(refined motions or None, status note)`` for ``result``."""
+        if not self.refine.value:
+            return None, " · not refined (refine on release is off)"
+        refined = getattr(result, "refined", None)
+        if not callable(refined):
+            return None, ""
+        try:
+            motions = list(refined())
+        except Exception as exc:  # noqa: BLE001 - the plain edit is still shown; the status says why
+            return None, f" · not refined ({type(exc).__name__}: {exc})"
+        return motions, " · refined"
+
+    @guarded
+    def _on_refine_toggle(self, change: dict[str, Any]) -> None:
+        self._refined_for = None
+        self._settle()
+        self._set_status(("refine on release: on" if change["new"] else "refine on release: off") + self._refine_note)
 
     def resync(self) -> None:
         """Make every control and drawing show the editor's state (after an error; the status is kept).
@@ -375,8 +432,12 @@ class DragView:
         return first
 
     def _export_motions(self) -> list[Any]:
-        """The motions the Export button writes: each character's own retimed span (:func:`own_spans`)."""
-        return own_spans(current_result(self.editor))
+        """The motions the Export button writes: each character's own retimed span (:func:`own_spans`).
+
+        Refined while "refine on release" is ticked (:meth:`shown_motions`).
+        """
+        self.result = current_result(self.editor)
+        return own_spans(self.result, self.shown_motions())
 
     def _after_history(self) -> None:
         """After Undo, Redo or Reset: redraw everything (handles, paths, 3D view) from the editor."""
@@ -384,7 +445,7 @@ class DragView:
         self._apply(current_result(self.editor))
         self._settle(grow_only=self._refresh_grows_view)
         n = len(self.editor.constraints)
-        self._set_status(f"restored: {n} constraint{'s' if n != 1 else ''}" + self._history_note())
+        self._set_status(f"restored: {n} constraint{'s' if n != 1 else ''}" + self._history_note() + self._refine_note)
 
     def _history_note(self) -> str:
         """Extra status text after an undo, redo or reset (subclasses add to it)."""
@@ -416,7 +477,8 @@ class DragView:
         self._apply(current_result(self.editor, out))
 
     def _settle(self, *, grow_only: bool = True) -> None:
-        """After a gesture or a refresh: the subclass hook, the view fitted, a final redraw."""
+        """After a gesture or a refresh: refinement (if on), the subclass hook, the view fitted, a final redraw."""
+        self.shown_motions()
         self._edited()
         self._fit_view(grow_only=grow_only)
         self._redraw(final=True)
@@ -441,6 +503,7 @@ class DragView:
 
     def _set_status(self, text: str) -> None:
         """The status text, wrapped at the figure's width (all of it shown), html-escaped."""
+        self._status_text = text
         style = _STATUS_STYLE.format(px=self._status_width())
         self.status.value = (
             f'<span class="mocaplab-ok" style="{style}" title="{html.escape(text)}">{html.escape(text)}</span>'
@@ -544,6 +607,8 @@ class DragView:
             self._describe(drag.index, prefix="moved")
         self.result = current_result(self.editor)
         self._settle()
+        if self.last_error is None:
+            self._set_status(getattr(self, "_status_text", "") + self._refine_note)
         self.history_buttons.sync()
 
     # -- subclasses implement
@@ -602,15 +667,16 @@ def _export_name(editor: Any) -> str:
     return f"{stem}_edited.bvh"
 
 
-def own_spans(result: Any) -> list[Any]:
+def own_spans(result: Any, motions: Sequence[Any] | None = None) -> list[Any]:
     """Each character's motion on the shared clock cut to its own time span (``result.active[k]``).
 
-    ``result.motions`` hold the first / last pose outside each character's
-    span so that all play on one clock; a file gets only the character's
-    retimed motion (a character starting 3 s late is not written with 3 s
-    of frozen first pose).
+    ``result.motions`` (or ``motions``, the same characters on the same
+    clock: the refined ones) hold the first / last pose outside each
+    character's span so that all play on one clock; a file gets only the
+    character's retimed motion (a character starting 3 s late is not written
+    with 3 s of frozen first pose).
     """
-    motions = list(result.motions)
+    motions = list(result.motions if motions is None else motions)
     active = getattr(result, "active", None)
     if active is None:
         return motions

@@ -49,9 +49,11 @@ last applied transformation changed are highlighted on the path and the
 status line names it (the core's own description, e.g. ``character 0:
 duplicate frames 40..75 (1.20 s)``).
 
-Undo, Redo and Reset buttons and an "Export BVH" control sit under the
-status line (:mod:`widgets._drag`): each drag is one undo step, and export
-writes the edited motions, one BVH file per character.  Handle positions, in data and in canvas pixels, are published in
+Undo, Redo and Reset buttons, a "refine on release" box and an "Export BVH"
+control sit under the status line (:mod:`widgets._drag`): each drag is one
+undo step; on release the edit is refined (feet planted, only the characters
+that changed) and the 3D view shows and export writes the refined motions,
+one BVH file per character.  Handle positions, in data and in canvas pixels, are published in
 the hidden HTML widget ``handles_info`` (CSS class ``mocaplab-path-handles``) as
 JSON, for browser tests.  The gesture itself (press, drag, release, click to
 remove, errors shown in the status line) is shared with
@@ -146,6 +148,10 @@ class PathEditor(DragView):
     viewer_options : dict, optional
         Keyword options for the :class:`~mocaplab.widgets.MotionViewer` (e.g.
         ``{"window_size": (480, 360), "backend": "static"}``).
+    refine : bool
+        Initial state of the "refine on release" box (``refine``): the 3D
+        view shows and export writes the full-body refined motions, feet
+        planted (:meth:`shown_motions`); ``False``: the plain edit.
 
     Attributes
     ----------
@@ -162,9 +168,12 @@ class PathEditor(DragView):
         Reference time shown by the markers and the 3D viewer
         (CSS class ``mocaplab-path-time``).
     viewer : MotionViewer or None
-        Given the edited motions with ``set_motions`` when the mouse is
+        Given the edited motions (:meth:`shown_motions`: refined while
+        ``refine`` is ticked) with ``set_motions`` when the mouse is
         released after an edit (the same viewer and 3D view are kept);
         ``viewer_updates`` counts these updates.
+    refine : ipywidgets.Checkbox
+        "refine on release" (CSS class ``mocaplab-refine``).
     history_buttons : HistoryButtons
         Undo / Redo / Reset (CSS classes ``mocaplab-undo``, ``-redo``, ``-reset``).
     export_control : ExportControl
@@ -208,9 +217,15 @@ class PathEditor(DragView):
         editor_options: dict[str, Any] | None = None,
         viewer_options: dict[str, Any] | None = None,
         roles: Any = None,
+        refine: bool = True,
     ) -> None:
         super().__init__(
-            editor_or_characters, constraints, pick_radius=pick_radius, editor_options=editor_options, roles=roles
+            editor_or_characters,
+            constraints,
+            pick_radius=pick_radius,
+            editor_options=editor_options,
+            roles=roles,
+            refine=refine,
         )
         self.title = title
         self.arrow_length = arrow_length
@@ -312,13 +327,13 @@ class PathEditor(DragView):
             from .viewer import MotionViewer
         except ImportError:
             return None
-        return MotionViewer(list(self.result.motions), colors=self.colors, **self.viewer_options)
+        return MotionViewer(self.shown_motions(), colors=self.colors, **self.viewer_options)
 
     def _edited(self) -> None:
         """After a gesture or a refresh: show the edited motions in the 3D viewer, in place (same viewer, same 3D view)."""
         if self.viewer is None:
             return
-        self.viewer.set_motions(list(self.result.motions))
+        self.viewer.set_motions(self.shown_motions())
         self.viewer_updates += 1
         self._sync_viewer_time()
 

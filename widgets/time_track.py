@@ -81,6 +81,9 @@ class TimeTrackEditor(DragView):
     roles : mapping of role name to joint name, or one per character, optional
         Joint roles fixed by hand (the editor's ``roles`` option), for
         skeletons whose roles cannot be inferred; not needed otherwise.
+    refine : bool
+        Initial state of the "refine on release" box: export writes the
+        refined motions (as :class:`~mocaplab.widgets.PathEditor`).
 
     Attributes
     ----------
@@ -115,9 +118,15 @@ class TimeTrackEditor(DragView):
         title: str = "mocaplab time tracks",
         editor_options: dict[str, Any] | None = None,
         roles: Any = None,
+        refine: bool = True,
     ) -> None:
         super().__init__(
-            editor_or_characters, constraints, pick_radius=pick_radius, editor_options=editor_options, roles=roles
+            editor_or_characters,
+            constraints,
+            pick_radius=pick_radius,
+            editor_options=editor_options,
+            roles=roles,
+            refine=refine,
         )
         self.original_times = [np.array(t, dtype=float) for t in self.result.times]
         n = len(self.original_times)

@@ -32,9 +32,11 @@ file's unit, since a :class:`~mocaplab.motion.Motion` is in metres):
     Pops in rotation: the peak angular acceleration of each joint's local
     rotation, rad/s^2 (second difference of the rotation over frames).
 ``bone_drift``
-    The largest change of a bone's length (joint to parent), mm: against the
-    bone's median length in the clip (one motion), or against the input's
-    (an edit).  Zero for rotation-only files.
+    The largest change of a bone's length (joint to parent), mm, against the
+    input's length, over the bones the input keeps rigid (length range within
+    :data:`RIGID_BONE`): bones the input animates (a pelvis translating below
+    a static root, stretchy rigs) are left out.  Zero for one motion measured
+    against itself unless a rigid bone varies by up to 1 mm.
 ``hinge_flips``
     Frames on which a knee or elbow bends the other way: the hinge axis
     ``(upper bone x lower bone)``, seen in the frame of the upper bone's joint,
@@ -79,6 +81,7 @@ __all__ = [
     "Limit",
     "LIMITS",
     "FLIP_MIN_BEND",
+    "RIGID_BONE",
     "Measure",
     "Quality",
     "Row",
@@ -95,6 +98,10 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
+
+#: A bone whose length varies by less than this over the input (metres) is
+#: rigid: its drift in an output is measured.
+RIGID_BONE = 1e-3
 
 #: A limb bent by less than this (degrees) has no defined hinge axis: it is
 #: straight, and its bend direction is not counted as a flip.
@@ -456,7 +463,10 @@ def _reference(motion: Motion, contacts: Contacts | Literal["auto"] | None, role
         floor = estimate_floor(motion, found)
         if floor is None:
             why = "no planted frame"
-    return _Reference(found, floor, hinge_axes(motion, roles=roles), np.median(bone_lengths(motion), axis=0), why)
+    lengths = bone_lengths(motion)
+    rigid = np.ptp(lengths, axis=0) <= RIGID_BONE
+    bones = np.where(rigid, np.median(lengths, axis=0), np.nan)  # NaN: a bone the input animates
+    return _Reference(found, floor, hinge_axes(motion, roles=roles), bones, why)
 
 
 def _zmp_mm(motion: Motion, contacts: Contacts | None, roles: Mapping[str, Any] | None) -> tuple[float, str]:
@@ -507,7 +517,10 @@ def _measures(
     acc = angular_acceleration(motion)
     j = int(np.argmax(acc))
     out["angular_acceleration"] = Measure("angular_acceleration", _UNITS["angular_acceleration"], float(acc[j]), names[j])
-    drift = np.abs(bone_lengths(motion) - ref.bones).max(axis=0) * 1000.0 if ref.bones is not None else None
+    drift = None
+    if ref.bones is not None:
+        diff = np.abs(bone_lengths(motion) - ref.bones)
+        drift = np.where(np.isnan(ref.bones), 0.0, np.nan_to_num(diff, nan=0.0).max(axis=0)) * 1000.0
     if drift is not None and drift.size:
         j = int(np.argmax(drift))
         out["bone_drift"] = Measure("bone_drift", "mm", float(drift[j]), names[j] if drift[j] > 0 else "")
@@ -729,7 +742,7 @@ def compare(
     order = [after.skeleton.index(n) for n in before.skeleton.names]
     ref = _reference(before, contacts, roles)
     mb = _measures(before, ref, roles, static_before=None)
-    bones = np.median(bone_lengths(after), axis=0)  # joints only the output has keep their own lengths
+    bones = np.full(after.n_joints, np.nan)  # joints only the output has: not measured
     bones[order] = ref.bones
     ref_after = dataclasses.replace(ref, bones=bones)
     ma = _measures(after, ref_after, roles, static_before=before if _static_root(before) else None)

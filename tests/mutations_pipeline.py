@@ -6,8 +6,9 @@ message contains ``message`` (None: any assert).
 
 * Lesson 14 (your own motion capture) teaches what ``mocaplab.load`` and the
   joint roles do for a file in another convention: each switch removes one
-  of them (the unit estimate, the frame-rate snap, the travelling path
-  joint, the names in role inference).
+  of them (the unit estimate, the frame-rate snap, the up axis found from
+  the body, the travelling path joint, the names in role inference), or the
+  refinement whose output the quality report judges.
 * Lesson 15 (the capstone) teaches that the touch-up balances and the
   staggered-pose exaggeration stylises: each switch turns one of them off.
 """
@@ -46,6 +47,25 @@ def path_joint_is_joint_0(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(Motion, "path_joint", property(lambda self: 0))
 
 
+def no_up_axis_detection(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The loader never looks at the body for the up axis: a Z-up file is read in its own axes."""
+    load = importlib.import_module("mocaplab.io.load")
+
+    monkeypatch.setattr(load, "find_up_axis", lambda motion, roles=None: None)
+
+
+def refinement_off(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Refinement returns its input: an edited walk keeps the feet the path edit slid."""
+    import mocaplab
+    from mocaplab import refinement
+
+    def unchanged(motion, *args, **kwargs):
+        return motion
+
+    monkeypatch.setattr(refinement, "refine", unchanged)
+    monkeypatch.setattr(mocaplab, "refine", unchanged, raising=False)
+
+
 def role_names_ignored(monkeypatch: pytest.MonkeyPatch) -> None:
     """Role inference ignores the joint names, sides included (hierarchy and geometry only)."""
     from mocaplab import roles
@@ -66,6 +86,8 @@ CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
     (L14, no_fps_snap, "exactly 30 fps"),
     (L14, path_joint_is_joint_0, "travelling pelvis"),
     (L14, role_names_ignored, "swapped"),
+    (L14, no_up_axis_detection, "stands along Z"),
+    (L14, refinement_off, "refinement plants them"),
     (L15, no_ground_adjustment, "lowers the mean ZMP distance"),
     (L15, no_exaggeration, "doubles the upper body"),
 ]

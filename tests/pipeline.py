@@ -64,24 +64,27 @@ def trimmed(motion: Motion, seconds: float = MAX_SECONDS) -> Motion:
 
 
 def _pins(motion: Motion, *, bend: float, squeeze: float) -> list[PinPosition]:
-    """Hard pins at both ends and the middle of the path: the middle moved sideways, the ends pulled in.
+    """Pins a user would set: a bend drags the middle of the path sideways, a squeeze pulls the end in.
 
     ``bend`` moves the middle frame sideways by that fraction of the chord (at
-    least 0.3 m, so a clip on the spot is moved too); ``squeeze`` pulls the
-    last pin towards the first by that fraction of the chord.
+    least 0.3 m, so a clip on the spot is bent too), with the first frame
+    pinned hard and the last one soft (a standing clip's path is one rigid
+    stationary segment, in which a hard middle and a hard end would
+    conflict); ``squeeze`` pins the first frame and pulls the last one
+    towards it by that fraction of the chord, both hard.
     """
     p = motion.pelvis_positions[:, [0, 2]]
     n = len(p)
     chord = p[-1] - p[0]
     length = float(np.linalg.norm(chord))
+    if squeeze:
+        return [PinPosition(0, 0, p[0], hard=True), PinPosition(0, n - 1, p[-1] - squeeze * chord, hard=True)]
     along = chord / length if length > 1e-6 else np.array([1.0, 0.0])
     side = np.array([-along[1], along[0]])
-    end = p[-1] - squeeze * chord
-    middle = p[n // 2] + side * max(bend * length, 0.3 if bend else 0.0)
     return [
         PinPosition(0, 0, p[0], hard=True),
-        PinPosition(0, n // 2, middle, hard=True),
-        PinPosition(0, n - 1, end, hard=True),
+        PinPosition(0, n // 2, p[n // 2] + side * max(bend * length, 0.3), hard=True),
+        PinPosition(0, n - 1, p[-1], hard=False),
     ]
 
 

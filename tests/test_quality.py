@@ -280,6 +280,7 @@ def test_the_same_edit_at_another_frame_rate_gives_the_same_ratios(cmu):
 def test_a_static_root_that_moves_is_reported(converted):
     studio, _ = converted("16_15", "game_studio")
     assert quality.measure(studio)["static_root"].value == 0.0
+    assert quality.measure(studio)["bone_drift"].value < 1.0, "the pelvis translating below the root is no bone"
     moved = studio.transformed(translation=[0.3, 0.0, 0.0])  # moves the pelvis below the static root
     assert quality.compare(studio, moved)["static_root"].after == pytest.approx(0.0, abs=1e-6)
     broken = studio.replace(root_positions=studio.root_positions + [0.1, 0.0, 0.0])

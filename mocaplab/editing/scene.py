@@ -105,6 +105,7 @@ from numpy.typing import NDArray
 from ..motion import FPS_RANGE, Motion
 from ..refinement import EndEffector
 from ..undo import Undoable, UndoStack
+from ._threads import single_blas_thread
 from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint, Relative, effector_frames
 from .energy import Energies
 from .laplacian import (
@@ -620,7 +621,8 @@ class SceneEditor(Undoable):
         """
         saved = self.snapshot()
         try:
-            return self._install(constraints, changed)
+            with single_blas_thread():  # small systems: one BLAS thread, the caller's setting restored
+                return self._install(constraints, changed)
         except ConstraintError as exc:
             self.restore(saved)
             current = _naming_current(exc, constraints)

@@ -88,6 +88,9 @@ _TINY = 1e-9
 # upper-bone lengths of the axis (no twist below 0.05).
 _PLANE_FADE = (0.005, 0.02)
 _POLE_FADE = (0.05, 0.15)
+# Below this sine of its bend (about 0.06 to 0.23 degrees) a limb counts as
+# straight, blended: its bend axis is rounding noise there.
+_STRAIGHT_FADE = (1e-3, 4e-3)
 
 
 def _ramp(x: Array, edges: tuple[float, float]) -> Array:
@@ -265,6 +268,7 @@ def two_bone_deltas(
     pole: ArrayLike | None = None,
     bend_axis: ArrayLike | None = None,
     hinge: ArrayLike | None = None,
+    weight: ArrayLike | None = None,
 ) -> tuple[Array, Array]:
     """World-frame rotations that carry a two-bone limb's end to ``target``.
 
@@ -296,7 +300,17 @@ def two_bone_deltas(
         bends the other way (a knee hyperextended by a fraction of a degree),
         the bend goes back through straight to the hinge's side instead of
         bending further backwards; a straight limb bends about it.
-        :func:`hinge_axes` estimates it from a clip.
+        :func:`hinge_axes` estimates it from a clip.  The solution is
+        continuous through straight: within about 0.2 degrees of straight
+        (where the current bend axis is rounding noise) the bend blends into
+        one about the hinge.
+    weight : array_like, shape (...,), optional
+        How firmly the goal holds, in [0, 1] (default 1), used with
+        ``hinge``: a limb bent against its hinge is carried to the hinge's
+        side only by this fraction (a weight-0 goal whose target is the
+        current end position changes nothing; with weight 1 the end reaches
+        the target on the hinge's side), so the correction fades in and out
+        with a goal's blend weights instead of jumping.
 
     Returns
     -------
@@ -337,19 +351,37 @@ def two_bone_deltas(
     beta = np.arctan2(sin_b, _dot(u, v))
     cos_new = (l1**2 + l2**2 - d**2) / np.maximum(2.0 * l1 * l2, _TINY)
     beta_new = np.arccos(np.clip(cos_new, -1.0, 1.0))
-    straight = sin_b <= 1e-9 * np.maximum(l1 * l2, _TINY)
+    sin_rel = sin_b / np.maximum(l1 * l2, _TINY)
+    straight = sin_rel <= 1e-9
     axis = cross / np.where(straight, 1.0, sin_b)[..., None]  # unit where not straight
+    # the new interior angle, as a flexion about the current bend axis
+    # (flexion = pi - interior angle; negative: bent through straight to the
+    # other side of that axis)
+    flex = np.pi - beta
+    flex_new = c_new = np.pi - beta_new
     if hinge is not None:
         h = np.broadcast_to(np.asarray(hinge, dtype=float), shape)
         if bend_axis is None:
             bend_axis = h
-        # bending the wrong way: measure the bend about the hinge's side,
-        # as an interior angle beyond pi (through straight)
-        flip = (_dot(axis, h) < 0.0) & ~straight
-        if np.any(flip):
-            axis = np.where(flip[..., None], -axis, axis)
-            beta = np.where(flip, 2.0 * np.pi - beta, beta)
-    if np.any(straight):
+        hn, _ = _unit(h)
+        # on the hinge's side (side = 1) the limb takes the flexion the
+        # distance asks for; bent against it (side = 0) the flexion changes
+        # by what the distance asks and, by the goal's weight, goes on to the
+        # hinge's side of straight (about the current axis:
+        # -(flex_new - 2 (1 - w) flex)), so a weight-0 goal on the current
+        # end position changes nothing and the correction grows with the weight
+        w = np.ones(shape[:-1]) if weight is None else np.broadcast_to(np.asarray(weight, dtype=float), shape[:-1])
+        w = np.clip(w, 0.0, 1.0)
+        side = np.where(straight | (_dot(axis, hn) >= 0.0), 1.0, 0.0)
+        against = 2.0 * (1.0 - w) * flex - flex_new
+        flex_new = side * flex_new + (1.0 - side) * against
+    # the bend as a rotation vector about the current axis; within a fraction
+    # of a degree of straight (where that axis is rounding noise) it blends
+    # into a bend about the fallback axis (the hinge) from straight, which it
+    # matches there, so the solution is continuous through straight
+    rotvec = axis * (flex - flex_new)[..., None]
+    near = _ramp(sin_rel, _STRAIGHT_FADE)
+    if np.any(near < 1.0):
         if bend_axis is not None:
             fallback = np.broadcast_to(np.asarray(bend_axis, dtype=float), shape)
             fallback = fallback - _dot(fallback, u)[..., None] * u / np.maximum(l1**2, _TINY)[..., None]
@@ -358,8 +390,10 @@ def two_bone_deltas(
             pick = np.argmin(np.abs(u), axis=-1)
             fallback = _cross(u, np.eye(3)[pick])
         fallback, _ = _unit(fallback)
-        axis = np.where(straight[..., None], fallback, axis)
-    middle_delta = _axis_angle(axis, beta_new - beta)
+        rotvec = near[..., None] * rotvec - ((1.0 - near) * c_new)[..., None] * fallback
+    angle = _norm(rotvec)
+    axis = rotvec / np.maximum(angle, _TINY)[..., None]
+    middle_delta = _axis_angle(axis, angle)
     c1 = b + quat.rotate(middle_delta, v)
 
     # step 2: swing the limb toward the target (shortest arc)
@@ -471,6 +505,7 @@ def two_bone_ik(
     keep_bend: bool = True,
     return_residual: bool = False,
     warn_unreachable: bool = True,
+    weight: ArrayLike | None = None,
 ) -> Any:
     """Analytic limb IK on every frame: new local rotations.
 
@@ -517,6 +552,10 @@ def two_bone_ik(
         Warn (:class:`UnreachableTargetWarning`, once per call) naming the
         end joint, the frames where the target is beyond reach by more than
         1 mm and the largest miss.
+    weight : array_like, shape () or (F,), optional
+        The goal's weight per frame in [0, 1] (default 1): how far a limb
+        bent against its hinge is carried to the hinge's side (see
+        :func:`two_bone_deltas`).
 
     Returns
     -------
@@ -561,8 +600,9 @@ def two_bone_ik(
         local = np.asarray(bend_axis, dtype=float) if bend_axis is not None else hinge_axes(grot, gpos, [(ju, jm, je)])[0]
         if np.any(local):
             hinge_w = quat.rotate(grot[:, jm], local)
+    wgt = None if weight is None else np.broadcast_to(np.asarray(weight, dtype=float), (n_frames,))
     q_up, q_mid = two_bone_deltas(
-        gpos[:, ju], gpos[:, jm], gpos[:, je], tgt, pole=pole_w, bend_axis=axis_w, hinge=hinge_w
+        gpos[:, ju], gpos[:, jm], gpos[:, je], tgt, pole=pole_w, bend_axis=axis_w, hinge=hinge_w, weight=wgt
     )
     want = None if end_rotation is None else _per_frame(end_rotation, n_frames, 4, "end_rotation")
     out = _two_bone_locals(rot, grot, skeleton.parents, (ju, jm, je), q_up, q_mid, want)

@@ -579,6 +579,15 @@ def _foot_targets(gpos: Array, ankle: int, g_ankle: Goal | None, toe: tuple[int,
     return target + shift[:, None] * d
 
 
+_IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def _leg_weight(g_ankle: Goal | None, toe: tuple[int, Goal] | None, n: int) -> Array:
+    """How firmly a leg is held on each frame, (F,): the larger of its ankle's and its toe's goal weights."""
+    w = np.zeros(n) if g_ankle is None else np.asarray(g_ankle.weights, dtype=float)
+    return w if toe is None else np.maximum(w, toe[1].weights)
+
+
 def _lower_envelope(need: Array, half: int) -> Array:
     """A smooth curve below ``need`` (F,): erosion then a Hann average.
 
@@ -731,10 +740,12 @@ def _solve_goals(
     if limbs:
         fk = (grot, gpos)
         for j, g in limbs:
-            rot = two_bone_ik(
+            solved = two_bone_ik(
                 rot, root, sk, j, _blend(gpos[:, j], g), end_rotation=grot[:, j], fk=fk, bend_axis=given.get(j),
                 warn_unreachable=False,  # refine() reports misses once, on the result
+                weight=g.weights,
             )
+            rot = np.where((g.weights > 0.0)[:, None, None], solved, rot)  # limbs no goal holds stay as they were
         grot, gpos = _fk(rot, root, motion)
     if foot_joints:
         legs = [limb_joints(sk, ankle) for ankle in foot_joints]
@@ -752,7 +763,13 @@ def _solve_goals(
                 if ankle in given:
                     local[k] = given[ankle]
             hinge = quat.rotate(grot[:, jm], local)
-            q_up, q_mid = two_bone_deltas(a, b, c, np.stack(targets, axis=1), hinge=hinge)
+            # a leg's goal weight: its ankle's or its toe's, whichever holds more
+            held = np.stack([_leg_weight(foot_of.get(ankle), toes.get(ankle), n) for ankle in foot_joints], axis=1)
+            q_up, q_mid = two_bone_deltas(a, b, c, np.stack(targets, axis=1), hinge=hinge, weight=held)
+            # legs no goal holds on a frame stay exactly as they were
+            free = held <= 0.0
+            q_up = np.where(free[..., None], _IDENTITY, q_up)
+            q_mid = np.where(free[..., None], _IDENTITY, q_mid)
             rot = _two_bone_locals(rot, grot, sk.parents, (ju, jm, je), q_up, q_mid, grot[:, je])
             if toes:
                 # where the solve put the ankles (the lower leg turned by
@@ -766,10 +783,12 @@ def _solve_goals(
                 g_ankle = grot[:, ankles]
         else:
             for ankle, target in zip(foot_joints, targets, strict=True):
-                rot = two_bone_ik(
+                held = _leg_weight(foot_of.get(ankle), toes.get(ankle), n)
+                solved = two_bone_ik(
                     rot, root, sk, ankle, target, end_rotation=grot[:, ankle], fk=(grot, gpos),
-                    bend_axis=given.get(ankle), warn_unreachable=False,
+                    bend_axis=given.get(ankle), warn_unreachable=False, weight=held,
                 )
+                rot = np.where((held > 0.0)[:, None, None], solved, rot)  # legs no goal holds stay as they were
             if toes:
                 grot2, gpos2 = _refresh(rot, (grot, gpos), motion, [leg[0] for leg in legs])
                 ankle_pos, toe_pos = gpos2[:, ankles], gpos2[:, tips]

@@ -987,6 +987,22 @@ def constraint_joints(
     return tuple(names), tuple(kinds)
 
 
+#: Seconds on each side over which the constraint layer's root lowering is
+#: smoothed (``drop_window`` of :func:`mocaplab.refinement.solve_goals`).
+_DROP_WINDOW = 0.15
+#: Fraction of a leg's length the layer's root lowering keeps a held leg
+#: within (``reach`` of :func:`mocaplab.refinement.solve_goals`).  Near full
+#: extension the knee angle is very sensitive to the hip: at 0.99 the broad
+#: jump 16_05 under a succession of 0.02 s snaps its knee to 167 degrees and
+#: back at take-off (1,048 rad/s^2, the input 198); at 0.96, 529.
+_REACH = 0.96
+
+
+def _frames_of(seconds: float, fps: float) -> int:
+    """Whole frames covering ``seconds`` at ``fps`` (at least 1)."""
+    return max(int(np.ceil(seconds * fps - 1e-9)), 1)
+
+
 class UnreachableTargetWarning(UserWarning):
     """The constraint layer could not bring a joint to its target on some frames (an edit took it out of reach)."""
 
@@ -1265,11 +1281,15 @@ class ConstraintLayer:
         need = np.any((w > 0) & (err > self.tolerance), axis=1)
         if not need.any():
             return motion
-        # solve whole contacts (runs of positive weight), so the solver sees them without gaps
+        # solve whole contacts (runs of positive weight), so the solver sees them without gaps, and
+        # the frames around them the root lowering spreads over (a smooth lower envelope of its need,
+        # which reaches zero within twice its half-width of the last frame a goal holds): cut short
+        # at a contact's end, the pelvis would jump back up in one frame
+        pad = 2 * _frames_of(_DROP_WINDOW, motion.fps) + 2 if self.adjust_root else 0
         on = np.zeros(w.shape[0], dtype=bool)
         for a, b in intervals_from_mask(np.any(w > 0, axis=1)):
             if need[a:b].any():
-                on[a:b] = True
+                on[max(a - pad, 0) : b + pad] = True
         frames = np.flatnonzero(on)
         kinds = self.kinds or constraint_joints(sk, self.joints)[1]
         if len(kinds) != len(self.joints):
@@ -1291,7 +1311,9 @@ class ConstraintLayer:
             for e, (j, kind) in enumerate(zip(idx, kinds, strict=True)):
                 end = int(sk.parents[j]) if kind == "toe" else j
                 hinges.setdefault(end, self.hinges[e])
-        solved = solve_goals(sub, goals, adjust_root=self.adjust_root, hinges=hinges)
+        solved = solve_goals(
+            sub, goals, adjust_root=self.adjust_root, hinges=hinges, drop_window=_DROP_WINDOW, reach=_REACH
+        )
         # out of reach: a fully held joint misses its target, or a two-bone
         # goal's blended target lies beyond its limb (the limb went straight)
         from ..ik import limb_joints, reach_residual

@@ -1,0 +1,94 @@
+"""The staggered constraint layer judged by :func:`mocaplab.quality.compare` (issue 25).
+
+Cases, limits and why:
+
+=====================  ======================  ===============================================
+clip, edit             rows checked            reason
+=====================  ======================  ===============================================
+05_02, succession 0.01 displacement, angular    the input's knees are numerically straight at
+                       acceleration, flips      the end: the bend axis there is rounding noise
+49_03, succession 0.01 the same                 long dance, many contact spans: the root
+                                                lowering must fade out past each span's end
+=====================  ======================  ===============================================
+
+Limits are quality's defaults: one-frame moves within 1.5x the input's + 2 mm,
+angular accelerations within 2x + 20 rad/s^2, no new flipped hinge frame.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from mocaplab import Motion, Skeleton, ik, quality
+from mocaplab.refinement import Goal, solve_goals
+from mocaplab.staggered import extract
+
+
+@pytest.mark.parametrize(("clip", "s"), [("05_02", 0.01), ("49_03", 0.01)])
+def test_layer_adds_no_pops(cmu, clip, s):
+    m = cmu(clip)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        out = extract(m, constraints=True).succession(s).evaluate()
+    report = quality.compare(m, out)
+    for row in ("displacement", "angular_acceleration", "hinge_flips"):
+        assert not report[row].regressed, report
+
+
+def _leg() -> Skeleton:
+    return Skeleton(["hip", "knee", "ankle"], [-1, 0, 1], [[0, 0, 0], [0, -0.5, 0], [0, -0.5, 0]])
+
+
+def test_hyperextended_knee_left_alone_at_zero_weight_and_carried_with_weight():
+    # a knee bent 5 degrees against its hinge (+x), the target where the ankle is
+    a, b = np.zeros(3), np.array([0.0, -0.5, 0.0])
+    bend = np.radians(5.0)
+    c = b + 0.5 * np.array([0.0, -np.cos(bend), -np.sin(bend)])  # bent about -x
+    hinge = np.array([1.0, 0.0, 0.0])
+    q_up0, q_mid0 = ik.two_bone_deltas(a, b, c, c, hinge=hinge, weight=0.0)
+    np.testing.assert_allclose(q_mid0, [0, 0, 0, 1], atol=1e-12)
+    np.testing.assert_allclose(np.abs(q_up0[3]), 1.0, atol=1e-12)
+    # weight 1: mirrored to the hinge's side (a 10 degree turn of the lower leg), distance kept
+    _, q_mid1 = ik.two_bone_deltas(a, b, c, c, hinge=hinge, weight=1.0)
+    assert np.degrees(2 * np.arccos(min(abs(q_mid1[3]), 1.0))) == pytest.approx(10.0, abs=1e-6)
+    # in between, the turn grows with the weight (continuous, no jump at small weights)
+    turns = [np.degrees(2 * np.arccos(min(abs(ik.two_bone_deltas(a, b, c, c, hinge=hinge, weight=w)[1][3]), 1.0)))
+             for w in (0.01, 0.5, 0.99)]
+    assert turns[0] < 0.5 and 4.0 < turns[1] < 6.0 and turns[2] > 9.5
+
+
+def test_near_straight_solution_is_continuous():
+    # bends of 1e-8 .. 1e-2 radians against the hinge: a target 2 cm closer gives nearly the same knee
+    a, b = np.zeros(3), np.array([0.0, -0.5, 0.0])
+    hinge = np.array([1.0, 0.0, 0.0])
+    target = np.array([0.0, -0.98, 0.0])
+    knees = []
+    for eps in (1e-8, 1e-5, 1e-3, 1e-2):
+        c = b + 0.5 * np.array([0.0, -np.cos(eps), -np.sin(eps)])
+        q_up, q_mid = ik.two_bone_deltas(a, b, c, target, hinge=hinge)
+        from mocaplab import quat
+
+        knees.append(a + quat.rotate(q_up, b - a))
+        end = a + quat.rotate(q_up, (b - a) + quat.rotate(q_mid, c - b))
+        np.testing.assert_allclose(end, target, atol=5e-4)  # the blend near straight misses by < 0.5 mm
+    knees = np.array(knees)
+    assert np.ptp(knees, axis=0).max() < 0.01  # all bend forward (+z side of the hinge), within 1 cm
+    assert np.all(knees[:, 2] > 0.05)
+
+
+def test_zero_weight_legs_are_left_exactly_as_they_were():
+    sk = _leg()
+    n = 5
+    rot = np.tile([0.0, 0.0, 0.0, 1.0], (n, 3, 1))
+    bend = np.radians(4.0)
+    rot[:, 1] = [np.sin(bend / 2), 0.0, 0.0, np.cos(bend / 2)]  # a knee bent 4 degrees against the hinge +x
+    m = Motion(sk, rot, np.zeros((n, 3)), 30)
+    target = m.global_positions()[:, 2]
+    w = np.array([0.0, 0.0, 0.5, 1.0, 0.0])
+    out = solve_goals(m, [Goal("ankle", target, w, kind="foot")], adjust_root=False, hinges={"ankle": [1.0, 0, 0]})
+    free = w == 0
+    np.testing.assert_array_equal(out.rotations[free], m.rotations[free])
+    assert not np.allclose(out.rotations[3], m.rotations[3])  # held with weight 1: carried to the hinge side

@@ -351,3 +351,28 @@ def test_pose_is_validated(cmu):
     # a pose of the motion itself: a body measured in the first frame
     body = Body.from_skeleton(walk, pose=walk.rotations[0])
     assert body.n_links == 17 and np.isfinite(body.offsets).all()
+
+
+@pytest.mark.parametrize("clip", CLIPS)
+def test_a_static_reference_root_stays_static(converted, cmu, clip):
+    """game_studio's ``joint_Root`` above the travelling ``Hips``: the touch-up turns the pelvis, never the root.
+
+    The rotations of the part holding the root go onto the carrier joint (``Motion.carrier_joint``), so
+    every channel of ``joint_Root`` keeps its input value and the other joints are where the touch-up of
+    the CMU original puts them (it used to animate ``joint_Root`` by up to 7.8 cm).
+    """
+    m, name_map = converted(clip, "game_studio")
+    ref = cmu(clip)[FRAMES]
+    assert m.carrier_joint == m.skeleton.index("Hips") != 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        hist, hist0 = touch_up(m), touch_up(ref)
+    out = hist.final
+    assert hist.best > 0
+    np.testing.assert_array_equal(out.root_positions, m.root_positions)
+    np.testing.assert_array_equal(out.rotations[:, 0], m.rotations[:, 0])
+    np.testing.assert_array_equal(out.translations[:, 0], m.translations[:, 0])
+    assert out.carrier_joint == m.carrier_joint
+    cols = _columns(m, name_map, ref.skeleton.names)
+    assert np.abs(out.global_positions()[:, cols] - hist0.final.global_positions()).max() < 1 * MM
+    np.testing.assert_allclose(hist.errors, hist0.errors, atol=1e-6)

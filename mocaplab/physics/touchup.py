@@ -767,9 +767,15 @@ def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None
     pivot, a carried part translates with its top joint, S1 stays.  All
     parts share the rotation, so each of these is one vectorised operation
     over all parts.
+
+    When joint 0 is a static reference above the pivot (the pivot is the
+    motion's :attr:`~mocaplab.motion.Motion.carrier_joint`), the static
+    joints stay where they are and the pivot's own rotation and translation
+    channels take the move, like :meth:`mocaplab.motion.Motion.transformed`.
     """
     motion, grot, gpos = posed
     lay = _apply_layout(sets)
+    static = _static_above(motion, sets, pivot)
     parents = motion.skeleton.parents
     q = quat.exp(omega)
     # the shared rotation as matrices acting on row vectors: quaternions
@@ -783,7 +789,8 @@ def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None
     pivots = gpos[:, list(sets.s2_tops)]  # (F, parts, 3)
     moved = pivots
     if sets.s2_tops[0] == 0:
-        rot[:, 0] = quat.mul(q, rot[:, 0])
+        if static is None:
+            rot[:, 0] = quat.mul(q, rot[:, 0])
         if pivot != 0:
             pivots = pivots.copy()
             pivots[:, 0] = gpos[:, pivot]
@@ -791,10 +798,10 @@ def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None
             moved = pivots.copy()
             if root_delta is not None:
                 moved[:, 0] += root_delta
-            # joint 0 turns about the pivot and moves with it
+            # joint 0 turns about the pivot and moves with it (unless static)
             if pivot == 0 and root_delta is not None:
                 root = root + root_delta
-            else:
+            elif static is None:
                 root = moved[:, 0] + quat.rotate(q, gpos[:, 0] - pivots[:, 0])
     tops = lay["tops"]
     if tops.size:
@@ -811,11 +818,43 @@ def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None
         new_gpos[:, lay["below"]] += shift[:, lay["below_slot"]]
         # inv(q) g: the transposed matrix
         rot[:, carried] = quat.mul(quat.inv(grot[:, parents[carried]]), grot[:, carried] @ lq.transpose(0, 2, 1))
-    if root is motion.root_positions:
+    if static is not None:
+        # the static chain keeps its transforms; the pivot's channels carry the move
+        new_grot[:, static] = grot[:, static]
+        new_gpos[:, static] = gpos[:, static]
+        parent = int(parents[pivot])
+        inv_parent = quat.inv(grot[:, parent])
+        rot[:, pivot] = quat.mul(inv_parent, new_grot[:, pivot])
+        tr = np.array(motion.translations, copy=True)
+        tr[:, pivot] = quat.rotate(inv_parent, new_gpos[:, pivot] - gpos[:, parent])
+        new = motion.replace(rotations=_owned(rot), translations=_owned(tr))
+    elif root is motion.root_positions:
         new = motion.replace(rotations=_owned(rot))
     else:
         new = motion.replace(rotations=_owned(rot), root_positions=_owned(root))
     return _Posed(new, new_grot, new_gpos)
+
+
+def _static_above(motion: Motion, sets: LinkSets, pivot: int) -> NDArray[np.int64] | None:
+    """The static joints above ``pivot`` in the part holding the root, or None when joint 0 moves with it.
+
+    They are returned when ``pivot`` is the motion's carrier joint below a
+    static reference root and every other joint of that part hangs below
+    ``pivot`` (a prop or a second chain on the static root would move with
+    joint 0 otherwise).
+    """
+    if pivot == 0 or not sets.s2_tops or sets.s2_tops[0] != 0 or motion.carrier_joint != pivot:
+        return None
+    chain = []
+    a = int(motion.skeleton.parents[pivot])
+    while a >= 0:
+        chain.append(a)
+        a = int(motion.skeleton.parents[a])
+    below = _subtree(motion.skeleton, pivot)
+    part0 = np.flatnonzero(sets.part == 0)
+    if not np.all(below[part0] | np.isin(part0, chain)):
+        return None
+    return np.array(sorted(chain), dtype=np.int64)
 
 
 # ======================================================================
@@ -1146,7 +1185,9 @@ def _flight_step(
         error[a:b] = _ballistic(com[a], com[b - 1], b - a, dt) - com[a:b]
     delta = _smooth(_carry_into_windows(error, stages, window, fps) * adj.rho, width)
     moved = out.motion.transformed(translation=delta)  # at the pelvis below a static reference root
-    out = _Posed(moved, out.grot, out.gpos + delta[:, None, :])
+    carrier = out.motion.carrier_joint
+    shift = delta[:, None, :] if carrier == 0 else delta[:, None, :] * _subtree(motion.skeleton, carrier)[:, None]
+    out = _Posed(moved, out.grot, out.gpos + shift)
     if np.all(sets.roles == 2):
         return out
     # then rotate S2 about the S1/S2 boundary so its centre of mass moves

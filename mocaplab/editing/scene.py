@@ -1069,7 +1069,7 @@ class EditResult:
         """Shared reference clock of :attr:`motions`, shape (N,)."""
         t0 = min(float(t[0]) for t in self.times)
         t1 = max(float(t[-1]) for t in self.times)
-        n = int(math.floor((t1 - t0) * self.clock_fps + 1e-9)) + 1
+        n = int(math.floor((t1 - t0) * self.clock_fps + 1e-6)) + 1  # the time solve's rounding is not a lost frame
         if n * len(self.times) > MAX_CLOCK_FRAMES:
             raise ValueError(
                 f"The edited motions would hold {n} clock frames for each of {len(self.times)} characters "

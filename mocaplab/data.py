@@ -64,7 +64,8 @@ laid out for ``MOCAPLAB_DATA_DIR``, with a progress bar; each file is
 verified by its registry sha256 before it is put in place, and files already
 there and verified are skipped, so an interrupted run is resumed by running
 it again.  The files come from ``--url`` (or ``MOCAPLAB_MIRROR_URL``), a web
-folder holding such a mirror (a course server); without one, the ASF/AMC
+folder holding such a mirror (a course server) or a local folder (a path or
+a ``file://`` URL: a USB stick, a shared drive); without one, the ASF/AMC
 files come from the CMU layout at ``MOCAPLAB_CMU_URL`` and the BVH files,
 which the CMU site does not have, are reported missing.
 ``python -m mocaplab.data check DEST`` (:func:`check_mirror`) verifies a
@@ -214,6 +215,18 @@ def mirror_dir() -> Path | None:
     return Path(value).expanduser() if value else None
 
 
+def _existing_mirror() -> Path | None:
+    """:func:`mirror_dir`, checked to be a folder (a mistyped path is not a layout problem)."""
+    root = mirror_dir()
+    if root is not None and not root.is_dir():
+        what = "is a file, not a folder" if root.exists() else "does not exist"
+        raise DataError(
+            f"{ENV_VAR}={root} is set but that folder {what}. Set {ENV_VAR} to the folder holding the "
+            f"mirror (bvh/, asfamc/<subject>/, pair_salsa_daz/), or unset it to download the clips."
+        )
+    return root
+
+
 def download_base() -> str:
     """Where trials are downloaded from: ``MOCAPLAB_CMU_URL``, default :data:`DEFAULT_CMU_URL` (no trailing ``/``).
 
@@ -324,7 +337,7 @@ def cmu(trial: str, *, source: Literal["auto", "bvh", "asfamc"] = "auto") -> Mot
     if source not in ("auto", "bvh", "asfamc"):
         raise ValueError(f"Expected source 'auto', 'bvh' or 'asfamc', got {source!r}")
     entry = CLIPS.get(trial)
-    root = mirror_dir()
+    root = _existing_mirror()
     is_pair = entry is not None and "asf" not in entry
     if source == "auto":
         if root is None:
@@ -651,6 +664,42 @@ def _source_url(rel: str, base: str | None) -> str | None:
     return None  # BVH files are not on the CMU site
 
 
+def _local_folder(base: str | None) -> Path | None:
+    """The folder a mirror source names when it is local (a path or a ``file://`` URL), else None.
+
+    Raises
+    ------
+    DataError
+        When it names a local folder that does not exist.
+    """
+    if base is None:
+        return None
+    if base.startswith("file://"):
+        from urllib.parse import unquote, urlparse
+        from urllib.request import url2pathname
+
+        folder = Path(url2pathname(unquote(urlparse(base).path)))
+    elif "://" in base:
+        return None
+    else:
+        folder = Path(base).expanduser()
+    if not folder.is_dir():
+        raise DataError(
+            f"--url {base!r} names a local folder that does not exist; expected a folder laid out like a mirror "
+            "(bvh/, asfamc/<subject>/, pair_salsa_daz/) or a web address (http:// or https://)"
+        )
+    return folder
+
+
+def _copy_local(source: Path, target: Path, *, check: Callable[[bytes], None]) -> None:
+    """Copy ``source`` to ``target`` like :func:`_download` does: checked first, then written whole or not at all."""
+    raw = _read(source)
+    check(raw)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_write(target) as fh:
+        fh.write(raw)
+
+
 class _Rejected(Exception):
     """A downloaded mirror file failed its check (the message says how); the download is discarded."""
 
@@ -682,8 +731,9 @@ def fetch_mirror(
     trials : list of str, optional
         Trial ids; default the lessons' clips.
     url : str, optional
-        A web folder holding a mirror of the same layout (a course server);
-        default ``MOCAPLAB_MIRROR_URL``.  Without one, the ASF/AMC files come
+        A web folder holding a mirror of the same layout (a course server),
+        or a local folder (a path or a ``file://`` URL: a USB stick, a shared
+        drive); default ``MOCAPLAB_MIRROR_URL``.  Without one, the ASF/AMC files come
         from ``MOCAPLAB_CMU_URL`` (default the CMU site), which has no BVH
         files: those are then reported as not fetched.
     progress : bool
@@ -694,11 +744,22 @@ def fetch_mirror(
     dict of str to str
         Each file that could not be fetched or verified and why; empty when
         the mirror is complete.
+
+    Raises
+    ------
+    DataError
+        When ``url`` names a local folder that does not exist.
+
+    Example
+    -------
+    >>> fetch_mirror("classroom", url="/media/usb/mocap")  # doctest: +SKIP
+    {}
     """
     from tqdm.auto import tqdm
 
     root = Path(dest)
     base = (url.rstrip("/") or None) if url is not None else mirror_url()
+    local = _local_folder(base)
     files = _mirror_files(lesson_clips() if trials is None else list(trials))
     problems: dict[str, str] = {}
     bar = tqdm(total=len(files), unit="file", desc="mocaplab data", disable=not progress)
@@ -708,7 +769,7 @@ def fetch_mirror(
             if _file_problem(root, trial, rel, digest, lf) is None:
                 bar.update(1)
                 continue
-            source = _source_url(rel, base)
+            source = str(local / rel) if local is not None else _source_url(rel, base)
             if source is None:
                 problems[rel] = f"not on the CMU site; give a course server holding a mirror ({MIRROR_URL_ENV_VAR})"
                 bar.update(1)
@@ -723,11 +784,16 @@ def fetch_mirror(
                     raise _Rejected(problem)
 
             try:
-                _download(source, target, check=check)
+                if local is None:
+                    _download(source, target, check=check)
+                elif not Path(source).is_file():
+                    problems[rel] = f"not in {local}"
+                else:
+                    _copy_local(Path(source), target, check=check)
             except _Rejected as rejected:
-                problems[rel] = f"downloaded from {source}, but it {rejected}"
+                problems[rel] = f"{'downloaded' if local is None else 'copied'} from {source}, but it {rejected}"
             except Exception as exc:  # noqa: BLE001 - reported per file
-                problems[rel] = f"could not download {source} ({exc})"
+                problems[rel] = f"could not {'download' if local is None else 'copy'} {source} ({exc})"
             bar.update(1)
     finally:
         bar.close()
@@ -751,7 +817,8 @@ def main(argv: list[str] | None = None) -> int:
         if name == "fetch":
             p.add_argument(
                 "--url",
-                help=f"a web folder holding a mirror of the same layout (default ${MIRROR_URL_ENV_VAR}; without one, "
+                help=f"a web folder or a local folder holding a mirror of the same layout (default "
+                f"${MIRROR_URL_ENV_VAR}; without one, "
                 f"ASF/AMC files from ${URL_ENV_VAR} or the CMU site)",
             )
             p.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -129,6 +129,23 @@ def test_mirror_without_the_file(tmp_path, monkeypatch):
         data.cmu("16_15")
 
 
+def test_a_mirror_folder_that_does_not_exist_is_named_as_such(tmp_path, monkeypatch):
+    """A mistyped MOCAPLAB_DATA_DIR is reported as a missing folder, not as a mirror laid out wrongly."""
+    gone = tmp_path / "does" / "not" / "exist"
+    monkeypatch.setenv(data.ENV_VAR, str(gone))
+    for trial, source in (("16_15", "auto"), ("16_15", "asfamc"), ("35_01", "auto")):
+        with pytest.raises(data.DataError) as info:
+            data.cmu(trial, source=source)
+        message = str(info.value)
+        assert f"MOCAPLAB_DATA_DIR={gone} is set but that folder does not exist" in message
+        assert "not in it" not in message and "laid out like" not in message
+    a_file = tmp_path / "mirror.txt"
+    a_file.write_text("not a folder")
+    monkeypatch.setenv(data.ENV_VAR, str(a_file))
+    with pytest.raises(data.DataError, match="is set but that folder is a file, not a folder"):
+        data.cmu("16_15")
+
+
 def test_no_mirror_bvh_says_how_to_get_the_data(monkeypatch):
     monkeypatch.delenv(data.ENV_VAR, raising=False)
     assert data.mirror_dir() is None
@@ -606,6 +623,46 @@ def test_fetch_lessons_builds_a_verified_mirror(course, tmp_path, monkeypatch, c
         data.cmu("16_15").root_positions, load_bvh(mocap_dir / "bvh/16_15.bvh", scale=1.0).root_positions * CMU_UNIT
     )
     assert data.cmu("60_10").fps == 60.0
+
+
+@pytest.mark.parametrize("as_url", [False, True], ids=["path", "file-url"])
+def test_fetch_from_a_local_folder_builds_the_same_mirror(course, tmp_path, monkeypatch, capsys, as_url):
+    """``--url`` may name a local folder (a USB stick, a shared drive): no adapter errors, the same verified files."""
+    source = course.mirror.as_uri() if as_url else str(course.mirror)
+    dest = tmp_path / "classroom"
+    trials = ["16_15", "02_01", "60_10"]
+    n = len(data._mirror_files(trials))
+    assert fetch(str(dest), *trials, "--url", source, "--no-progress") == 0
+    out, err = capsys.readouterr()
+    assert f"ok: {n} files of 3 trials verified in {dest}" in out and "error" not in err
+    assert course.log == []  # nothing went through the web server
+    files = sorted(str(p.relative_to(dest)) for p in dest.rglob("*") if p.is_file())
+    assert files == sorted(r for _, r, _, _ in data._mirror_files(trials))
+    for rel in files:
+        assert (dest / rel).read_bytes() == (course.mirror / rel).read_bytes()
+    # a damaged file in the source folder is rejected, a missing one is named, the rest is kept
+    (dest / "bvh/16_15.bvh").unlink()
+    (dest / "bvh/02_01.bvh").unlink()
+    bvh = course.mirror / "bvh/16_15.bvh"
+    bvh.write_bytes(bvh.read_bytes().replace(b"Hips", b"Hipz", 1))
+    (course.mirror / "bvh/02_01.bvh").unlink()
+    assert fetch(str(dest), *trials, "--url", source, "--no-progress") == 1
+    out, _ = capsys.readouterr()
+    assert f"bad: bvh/16_15.bvh: copied from {course.mirror / 'bvh/16_15.bvh'}, but it sha256 " in out
+    assert f"bad: bvh/02_01.bvh: not in {course.mirror}" in out and f"2 of {n} files missing or bad" in out
+    assert not (dest / "bvh/16_15.bvh").exists() and not list(dest.rglob(".*.tmp"))
+    assert data.check_mirror(dest, trials) == {"bvh/16_15.bvh": "missing", "bvh/02_01.bvh": "missing"}
+    # the environment variable may name a local folder too
+    monkeypatch.setenv(data.MIRROR_URL_ENV_VAR, str(course.mirror))
+    assert data.fetch_mirror(tmp_path / "other", ["16_35"], progress=False) == {}
+
+
+def test_fetch_from_a_local_folder_that_does_not_exist(tmp_path, capsys):
+    gone = tmp_path / "no-such-stick"
+    assert fetch(str(tmp_path / "classroom"), "16_15", "--url", str(gone), "--no-progress") == 2
+    err = capsys.readouterr().err
+    assert f"--url '{gone}' names a local folder that does not exist" in err
+    assert not (tmp_path / "classroom").exists()
 
 
 def test_fetch_resumes(course, tmp_path, capsys):

@@ -18,18 +18,41 @@ True
 ... except CheckError as e:
 ...     print(e)
 stride (m): not yet, your answer is too high
+
+Working copies
+--------------
+A student runs the lessons in a working copy, so a run (outputs, answers)
+never dirties the course's copy.  ``python -m mocaplab.lessons copy DEST``
+(:func:`copy_lessons`) copies the notebooks and ``00_glossary.md`` into
+``DEST``.  Run again after the course's copy was updated (``git pull``), it
+adds new lessons and updates the ones the student has not changed, keeps the
+ones the student changed (``--force`` replaces them), and says which is which.
+What it copied is recorded, by sha256, in ``DEST/.mocaplab-lessons.json``.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import numbers
+import os
+import sys
+from dataclasses import dataclass, field
 from fractions import Fraction
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["CheckError", "check"]
+from ._atomic import atomic_write
+
+__all__ = ["CheckError", "LessonsCopy", "check", "copy_lessons", "course_lessons"]
+
+#: What a working copy holds besides the notebooks.
+GLOSSARY = "00_glossary.md"
+#: The record of what :func:`copy_lessons` copied (file name -> sha256), inside the working copy.
+MANIFEST = ".mocaplab-lessons.json"
 
 
 class CheckError(AssertionError):
@@ -169,3 +192,196 @@ def _array_problem(answer: Any, expected: Any, *, rtol: float, atol: float) -> s
         )
     n = int(np.count_nonzero(off))
     return None if n == 0 else f"not yet, {n} of {off.size} entries are off"
+
+
+# ------------------------------------------------------------------ working copies
+@dataclass(frozen=True)
+class LessonsCopy:
+    """What :func:`copy_lessons` did, file names sorted in each list.
+
+    Attributes
+    ----------
+    added : list of str
+        Lessons the working copy did not have.
+    updated : list of str
+        Lessons the student had not changed whose course version changed.
+    kept : list of str
+        Lessons the student changed, left as they are (without ``force``).
+    replaced : list of str
+        Lessons the student changed, replaced by the course version (``force``).
+    unchanged : list of str
+        Lessons already the same as the course's.
+    """
+
+    added: list[str] = field(default_factory=list)
+    updated: list[str] = field(default_factory=list)
+    kept: list[str] = field(default_factory=list)
+    replaced: list[str] = field(default_factory=list)
+    unchanged: list[str] = field(default_factory=list)
+
+
+def course_lessons() -> Path:
+    """The course's ``lessons/`` folder: the one beside the installed (editable) package.
+
+    Raises
+    ------
+    FileNotFoundError
+        When there is none (a package installed without the repository): pass the folder explicitly.
+    """
+    folder = Path(__file__).resolve().parents[1] / "lessons"
+    if not (folder / GLOSSARY).is_file():
+        raise FileNotFoundError(
+            f"no lessons/ folder beside the mocaplab package (looked for {folder / GLOSSARY}); give the course's "
+            "lessons folder with --from (python -m mocaplab.lessons copy DEST --from COURSE/lessons)"
+        )
+    return folder
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _lesson_files(source: Path) -> list[str]:
+    names = sorted(p.name for p in source.glob("*.ipynb") if p.is_file())
+    if not names:
+        raise FileNotFoundError(f"{source}: expected the course's lessons folder (NN_topic.ipynb files), found none")
+    return ([GLOSSARY] if (source / GLOSSARY).is_file() else []) + names
+
+
+def _read_manifest(dest: Path) -> dict[str, str]:
+    path = dest / MANIFEST
+    if not path.is_file():
+        return {}
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ValueError(
+            f"{path}: expected the JSON record of a lessons copy ({exc}); delete it to start over"
+        ) from exc
+    if not isinstance(record, dict) or not all(isinstance(v, str) for v in record.values()):
+        raise ValueError(f"{path}: expected a JSON object of file name to sha256; delete it to start over")
+    return record
+
+
+def copy_lessons(
+    dest: str | os.PathLike[str],
+    *,
+    source: str | os.PathLike[str] | None = None,
+    force: bool = False,
+) -> LessonsCopy:
+    """Give a student a working copy of the lessons (notebooks and glossary), or bring one up to date.
+
+    A lesson missing from ``dest`` is added.  A lesson in ``dest`` that is
+    still what was copied there last time (the student has not changed it)
+    is updated to the course's version.  A lesson the student changed (its
+    content is neither what was copied nor the course's version) is kept,
+    unless ``force``.  Every file is written whole or not at all
+    (:func:`mocaplab._atomic.atomic_write`); the course's folder is only read.
+
+    Parameters
+    ----------
+    dest : path
+        The working copy (created if needed).
+    source : path, optional
+        The course's lessons folder; default :func:`course_lessons`.
+    force : bool
+        Replace the lessons the student changed too.
+
+    Returns
+    -------
+    LessonsCopy
+        Which files were added, updated, kept, replaced or already the same.
+
+    Raises
+    ------
+    FileNotFoundError
+        When ``source`` holds no lessons.
+    ValueError
+        When ``dest`` is the course's folder, or holds an unreadable record.
+
+    Example
+    -------
+    >>> done = copy_lessons("~/my-lessons")  # doctest: +SKIP
+    >>> done.kept  # doctest: +SKIP
+    ['03_laplacian_path_editing.ipynb']
+    """
+    src = course_lessons() if source is None else Path(source).expanduser()
+    out = Path(dest).expanduser()
+    if out.resolve() == src.resolve():
+        raise ValueError(f"Expected `dest` to be another folder than the course's lessons ({src}), got {dest!s}")
+    names = _lesson_files(src)
+    out.mkdir(parents=True, exist_ok=True)
+    record = _read_manifest(out)
+    done = LessonsCopy()
+    for name in names:
+        course, mine = src / name, out / name
+        new = _sha256(course)
+        if not mine.is_file():
+            bucket = done.added
+        else:
+            have = _sha256(mine)
+            if have == new:
+                record[name] = new
+                done.unchanged.append(name)
+                continue
+            if record.get(name) == have:
+                bucket = done.updated
+            elif force:
+                bucket = done.replaced
+            else:
+                done.kept.append(name)
+                continue
+        raw = course.read_bytes()
+        with atomic_write(mine) as fh:
+            fh.write(raw)
+        record[name] = hashlib.sha256(raw).hexdigest()
+        bucket.append(name)
+    with atomic_write(out / MANIFEST, mode="w", encoding="utf-8") as fh:
+        json.dump(dict(sorted(record.items())), fh, indent=1)
+        fh.write("\n")
+    return done
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m mocaplab.lessons copy DEST [--from SRC] [--force]`` (exit code 0 when done)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(
+        prog="python -m mocaplab.lessons",
+        description="Give a student a working copy of the lessons, or bring one up to date.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser(
+        "copy",
+        help="copy the lessons into DEST",
+        description="Copy the lesson notebooks and the glossary into DEST: new lessons are added, lessons you have "
+        "not changed are updated, lessons you changed are kept (--force replaces them).",
+    )
+    p.add_argument("dest", metavar="DEST", help="your working copy (created if needed)")
+    p.add_argument(
+        "--from",
+        dest="source",
+        metavar="SRC",
+        help="the course's lessons folder (default: the lessons/ folder beside the installed package)",
+    )
+    p.add_argument("--force", action="store_true", help="replace the lessons you changed too")
+    args = parser.parse_args(argv)
+    try:
+        done = copy_lessons(args.dest, source=args.source, force=args.force)
+    except (OSError, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    for label, names in (("added", done.added), ("updated", done.updated), ("replaced", done.replaced)):
+        for name in names:
+            print(f"{label}: {name}")
+    for name in done.kept:
+        print(f"kept: {name} (you changed it; --force replaces it with the course's version)")
+    print(
+        f"{args.dest}: {len(done.added)} added, {len(done.updated)} updated, {len(done.kept)} kept, "
+        f"{len(done.replaced)} replaced, {len(done.unchanged)} already up to date"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -193,8 +193,110 @@ def test_binder_post_build_and_runtime():
     assert version >= minimum, f".binder/runtime.txt asks for {runtime}, pyproject requires {requires}"
 
 
+# ------------------------------------------------------------ extras: what students and instructors install
+def _extras() -> dict[str, set[str]]:
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    found = {name: {_requirement_name(r) for r in reqs} for name, reqs in project["optional-dependencies"].items()}
+    return {"": {_requirement_name(r) for r in project["dependencies"]}, **found}
+
+
+def test_the_course_tools_are_an_extra_students_do_not_install():
+    extras = _extras()
+    assert {"jupyterhub", "nbgrader"} <= extras["course"]
+    assert not {"jupyterhub", "nbgrader"} & extras[""], "a student's `pip install -e .` must not pull the hub"
+    assert "jupyter-server-proxy" in extras[""], "students' servers behind the hub need jupyter-server-proxy"
+    assert "mocaplab" in extras["dev"], "dev includes the course extra (the suite runs the hub and nbgrader)"
+    assert not {"jupyterhub", "nbgrader"} & extras["dev"], "one home for the course tools: the course extra"
+
+
+# ------------------------------------------------------------ deploy/jupyterhub_config.py
+DEPLOY_CONFIG = ROOT / "deploy" / "jupyterhub_config.py"
+
+
+def load_hub_config(monkeypatch, **settings: str):
+    """deploy/jupyterhub_config.py as JupyterHub loads it, with ``settings`` in the hub's environment."""
+    from traitlets.config.loader import PyFileConfigLoader
+
+    for name in [n for n in os.environ if n.startswith("MOCAPLAB_HUB_")] + ["MOCAPLAB_DATA_DIR"]:
+        monkeypatch.delenv(name, raising=False)
+    for name, value in settings.items():
+        monkeypatch.setenv(name, value)
+    return PyFileConfigLoader(DEPLOY_CONFIG.name, path=str(DEPLOY_CONFIG.parent)).load_config()
+
+
+def test_the_hub_config_sets_up_a_small_course(tmp_path, monkeypatch):
+    state = tmp_path / "state"
+    c = load_hub_config(
+        monkeypatch,
+        MOCAPLAB_HUB_STATE=str(state),
+        MOCAPLAB_DATA_DIR="/srv/mocap",
+        MOCAPLAB_HUB_USERS="ann, bob",
+        MOCAPLAB_HUB_ADMINS="teacher",
+        MOCAPLAB_HUB_PORT="8123",
+        MOCAPLAB_HUB_THREADS="2",
+    )
+    assert state.is_dir() and c.JupyterHub.db_url == f"sqlite:///{state / 'jupyterhub.sqlite'}"
+    assert c.JupyterHub.cookie_secret_file == str(state / "jupyterhub_cookie_secret")
+    assert c.JupyterHub.port == 8123
+    assert c.JupyterHub.authenticator_class == "pam" and c.JupyterHub.spawner_class == "localprocess"
+    assert c.Authenticator.allowed_users == {"ann", "bob", "teacher"} and c.Authenticator.admin_users == {"teacher"}
+    environment = c.Spawner.environment
+    assert environment["MOCAPLAB_DATA_DIR"] == "/srv/mocap", "the students' kernels find the shared mirror"
+    assert environment["OPENBLAS_NUM_THREADS"] == environment["OMP_NUM_THREADS"] == "2"
+    assert c.Spawner.default_url == "/lab" and c.Spawner.start_timeout >= 60
+    singleuser = Path(c.Spawner.cmd[0])
+    assert singleuser.name == "jupyterhub-singleuser" and singleuser.is_file()
+    # no account list: anyone with an account on the machine; no mirror: nothing passed
+    open_course = load_hub_config(monkeypatch, MOCAPLAB_HUB_STATE=str(state))
+    assert open_course.Authenticator.allow_all is True and "MOCAPLAB_DATA_DIR" not in open_course.Spawner.environment
+
+
+class _Log:
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def info(self, message: str, *args: object) -> None:
+        self.lines.append(message % args)
+
+
+def test_each_student_gets_a_working_copy_of_the_course_lessons(tmp_path, monkeypatch):
+    """The pre-spawn hook copies the course's lessons to ~/mocaplab-lessons and opens the server there."""
+    from types import SimpleNamespace
+
+    course = tmp_path / "course-lessons"
+    shutil.copytree(ROOT / "lessons", course, ignore=shutil.ignore_patterns("*.py", ".*", "__pycache__"))
+    c = load_hub_config(monkeypatch, MOCAPLAB_HUB_STATE=str(tmp_path / "state"), MOCAPLAB_COURSE_LESSONS=str(course))
+    hook = c.Spawner.pre_spawn_hook
+    home = tmp_path / "home" / "ann"
+    spawner = SimpleNamespace(home_dir=str(home), user=SimpleNamespace(name="ann"), log=_Log(), notebook_dir="")
+    hook(spawner)
+    mine = home / "mocaplab-lessons"
+    assert spawner.notebook_dir == str(mine)
+    names = sorted(p.name for p in course.glob("*.ipynb")) + ["00_glossary.md"]
+    for name in names:
+        assert (mine / name).read_bytes() == (course / name).read_bytes()
+    assert f"{len(names)} added" in spawner.log.lines[-1]
+    # the student works; the course updates lesson 02 and adds a lesson; the next start keeps the work
+    (mine / "01_motion_data.ipynb").write_text("{}")
+    (course / "02_motion_paths.ipynb").write_bytes((course / "02_motion_paths.ipynb").read_bytes() + b"\n")
+    (course / "99_extra.ipynb").write_bytes((course / "01_motion_data.ipynb").read_bytes())
+    hook(spawner)
+    assert (mine / "01_motion_data.ipynb").read_text() == "{}"
+    assert (mine / "02_motion_paths.ipynb").read_bytes() == (course / "02_motion_paths.ipynb").read_bytes()
+    assert (mine / "99_extra.ipynb").is_file()
+    assert "1 added, 1 updated, 1 kept" in spawner.log.lines[-1]
+    # the default course copy is the lessons/ folder beside deploy/
+    default = load_hub_config(monkeypatch, MOCAPLAB_HUB_STATE=str(tmp_path / "state"))
+    bob = SimpleNamespace(home_dir=str(tmp_path / "bob"), user=SimpleNamespace(name="bob"), log=_Log(), notebook_dir="")
+    default.Spawner.pre_spawn_hook(bob)
+    assert (tmp_path / "bob" / "mocaplab-lessons" / "00_glossary.md").read_bytes() == (
+        ROOT / "lessons" / "00_glossary.md"
+    ).read_bytes()
+
+
 # ------------------------------------------------------------ nbgrader round trip
 ASSIGNMENT = "lab"
+GLOSSARY = "00_glossary.md"
 LESSONS = {
     "03_laplacian_path_editing.ipynb": "Kim et al. 2009",
     "09_touch_up_ground.ipynb": "Shin et al. 2003",
@@ -230,7 +332,7 @@ def course(tmp_path_factory, request):
     ``lazy`` hands in the student version untouched; ``diligent`` hands in
     the instructor's version (the solutions).
     """
-    pytest.importorskip("nbgrader", reason="nbgrader is a dev dependency (pip install -e '.[dev]')")
+    pytest.importorskip("nbgrader", reason="nbgrader is in the course extra (pip install -e '.[course]')")
     mocap = request.getfixturevalue("mocap_dir")
     for name in LESSONS:
         path = ROOT / "lessons" / name
@@ -247,7 +349,7 @@ def course(tmp_path_factory, request):
     )
     source = course / "source" / ASSIGNMENT
     source.mkdir(parents=True)
-    for name in LESSONS:
+    for name in (*LESSONS, GLOSSARY):  # the README's recipe: the glossary the lessons link goes with them
         shutil.copy2(ROOT / "lessons" / name, source / name)
     env = dict(os.environ)
     env.update(
@@ -292,6 +394,17 @@ def test_generate_assignment_removes_the_solutions(course):
         text = json.dumps(student)
         assert "BEGIN HIDDEN TESTS" not in text, f"{name}: hidden tests left in the student version"
         assert len(graded_cells(student)) == len(graded_cells(instructor)) >= 1
+
+
+@pytest.mark.slow  # the course fixture runs each lesson twice under nbgrader (~100 s)
+def test_the_released_assignment_has_the_glossary_its_lessons_link(course):
+    release = course / "release" / ASSIGNMENT
+    assert (release / GLOSSARY).read_bytes() == (ROOT / "lessons" / GLOSSARY).read_bytes()
+    for name in LESSONS:
+        text = "".join(c.source for c in nbformat.read(release / name, as_version=4).cells if c.cell_type == "markdown")
+        linked = set(re.findall(r"\]\(([^)#\s]+\.md)", text))
+        assert GLOSSARY in linked, f"{name} no longer links the glossary"
+        assert all((release / target).is_file() for target in linked), f"{name} links files not released: {linked}"
 
 
 def _scores(course: Path) -> dict[str, tuple[float, float]]:

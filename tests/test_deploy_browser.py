@@ -88,33 +88,27 @@ class BaseUrlLab(JupyterLabServer):
         """Nothing to do: the lesson's address carries the server's token."""
 
 
+DEPLOY_CONFIG = ROOT / "deploy" / "jupyterhub_config.py"
+# The course's configuration (deploy/jupyterhub_config.py), with only what a test on 127.0.0.1 changes:
+# the dummy authenticator (the student has no system account), the simple spawner (the student's server
+# runs as the current user, home in the test's folder), the proxy from npm, and a service token for the test.
 _HUB_CONFIG = """\
 c = get_config()  # noqa: F821 - JupyterHub's config loader defines it
-c.JupyterHub.ip = "127.0.0.1"
-c.JupyterHub.port = {port}
+load_subconfig({deploy!r})  # noqa: F821
 c.JupyterHub.hub_ip = "127.0.0.1"
 c.JupyterHub.hub_port = {hub_port}
-c.JupyterHub.db_url = {db_url!r}
-c.JupyterHub.cookie_secret_file = {cookie!r}
-c.JupyterHub.pid_file = {pid_file!r}
-c.JupyterHub.cleanup_servers = True
 c.ConfigurableHTTPProxy.command = [{chp!r}]
 c.ConfigurableHTTPProxy.api_url = "http://127.0.0.1:{api_port}"
-c.ConfigurableHTTPProxy.pid_file = {proxy_pid!r}
 c.JupyterHub.authenticator_class = "dummy"
 c.JupyterHub.spawner_class = "simple"
 c.SimpleLocalProcessSpawner.home_dir_template = {home!r}
 c.Spawner.cmd = [{singleuser!r}]
 c.Spawner.args = {args!r}
-c.Spawner.notebook_dir = {notebook_dir!r}
-c.Spawner.default_url = "/lab"
-c.Spawner.environment = {environment!r}
-c.Spawner.start_timeout = 120
-c.Spawner.http_timeout = 120
-c.JupyterHub.services = [{{"name": "mocaplab-test", "api_token": {token!r}}}]
-c.JupyterHub.load_roles = [
+c.Spawner.environment.update({environment!r})
+c.JupyterHub.services.append({{"name": "mocaplab-test", "api_token": {token!r}}})
+c.JupyterHub.load_roles.append(
     {{"name": "mocaplab-test", "scopes": ["admin:users", "admin:servers", "access:servers"], "services": ["mocaplab-test"]}}
-]
+)
 """
 
 # What the student's server needs from the test's environment (the spawner passes only what it is given).
@@ -130,9 +124,10 @@ class Hub:
     """
 
     def __init__(self, root_dir: Path, *, env: dict[str, str], state_dir: Path, user: str = STUDENT) -> None:
-        self.root_dir = Path(root_dir)
-        self.env = dict(env)
+        self.course_lessons = Path(root_dir)  # the course's copy; the student works in a copy of it
         self.state_dir = Path(state_dir)
+        self.root_dir = self.state_dir / "home" / user / "mocaplab-lessons"  # deploy/: ~/mocaplab-lessons
+        self.env = dict(env)
         self.user = user
         self.token = secrets.token_hex(16)
         self.port = 0
@@ -173,19 +168,22 @@ class Hub:
         ]
         if hasattr(os, "geteuid") and os.geteuid() == 0:  # CI runs as root
             args.append("--ServerApp.allow_root=True")
+        # deploy/jupyterhub_config.py's settings
+        self.env.update(
+            MOCAPLAB_HUB_IP="127.0.0.1",
+            MOCAPLAB_HUB_PORT=str(self.port),
+            MOCAPLAB_HUB_STATE=str(state),
+            MOCAPLAB_COURSE_LESSONS=str(self.course_lessons),
+            MOCAPLAB_HUB_IDLE_MINUTES="0",
+        )
         text = _HUB_CONFIG.format(
-            port=self.port,
+            deploy=str(DEPLOY_CONFIG),
             hub_port=free_port(),
             api_port=free_port(),
-            db_url=f"sqlite:///{state / 'jupyterhub.sqlite'}",
-            cookie=str(state / "cookie_secret"),
-            pid_file=str(state / "jupyterhub.pid"),
-            proxy_pid=str(state / "proxy.pid"),
             chp=CHP,
             home=str(state / "home" / "{username}"),
             singleuser=str(Path(sys.executable).parent / "jupyterhub-singleuser"),
             args=args,
-            notebook_dir=str(self.root_dir),
             environment=environment,
             token=self.token,
         )
@@ -444,3 +442,13 @@ def test_lesson_03_path_editor_drags(open_lesson: Any, deployed: Any) -> None:
     assert change > tb.MIN_CHANGE, f"the 3D view did not change after the path edit (mean change {change:.3f})"
     tb.assert_no_widget_errors(lesson)
     print(f"lesson 03 drag test took {time.monotonic() - t0:.1f} s")
+
+
+def test_the_hub_gives_the_student_a_working_copy(deployed: Any) -> None:
+    """deploy/jupyterhub_config.py copies the course's lessons to ~/mocaplab-lessons and opens the server there."""
+    if not isinstance(deployed, Hub):
+        pytest.skip("the hub's pre-spawn hook")
+    names = {p.name for p in deployed.course_lessons.glob("*.ipynb")} | {"00_glossary.md"}
+    assert names <= {p.name for p in deployed.root_dir.iterdir()}
+    listing = deployed.api("GET", "/api/contents")  # the student's server serves the working copy
+    assert names <= {item["name"] for item in listing["content"]}

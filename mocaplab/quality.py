@@ -254,15 +254,15 @@ def _hinges(motion: Motion, roles: Mapping[str, Any] | None) -> list[tuple[str, 
         known = resolve_roles(motion, roles)
     except RolesError:
         return []
-    out = []
-    for limb, label in (("leg", "knee"), ("arm", "elbow")):
+    out: list[tuple[str, int, int, int]] = []
+    limbs: tuple[tuple[Literal["leg", "arm"], str], ...] = (("leg", "knee"), ("arm", "elbow"))
+    for limb, label in limbs:
         for side in ("left", "right"):
             try:
-                names = known.limb(side, limb)
+                upper, middle, lower = (motion.skeleton.index(n) for n in known.limb(side, limb))
             except RolesError:
                 continue
-            idx = [motion.skeleton.index(n) for n in names]
-            out.append((f"{side}_{label}", *idx))
+            out.append((f"{side}_{label}", upper, middle, lower))
     return out
 
 

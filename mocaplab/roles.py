@@ -85,7 +85,7 @@ False
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -634,7 +634,7 @@ GROUND_BAND = 0.1
 def _not_a_biped(
     tree: _Tree,
     frames: NDArray[np.float64],
-    parsed: list[tuple[str | None, str, Any]],
+    parsed: Sequence[tuple[str | None, str, Any]],
     kinds: list[dict[str, int]],
 ) -> str | None:
     """Why the skeleton is plainly not a biped human, or None.

@@ -259,7 +259,7 @@ def _renumbered(ee: EndEffector, local: Mapping[int, int]) -> EndEffector:
     target = ee.target
     other = getattr(target, "character", None)
     if other is not None:
-        target = dataclasses.replace(target, character=local[int(other)])
+        target = dataclasses.replace(target, character=local[int(other)])  # type: ignore[type-var]
     return dataclasses.replace(ee, character=local[ee.character], target=target)
 
 

@@ -59,7 +59,7 @@ Array = NDArray[np.float64]
 TIME_REACH = 10.0
 
 
-def time_reach(n_frames: Sequence[int], dts: Sequence[float]) -> float:
+def time_reach(n_frames: Sequence[int], dts: Sequence[float] | NDArray[np.float64]) -> float:
     """Seconds that time options and targets may reach: :data:`TIME_REACH` times the scene's duration.
 
     The scene's duration is the sum of its clips' ``F_k h_k`` (characters

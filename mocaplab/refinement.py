@@ -615,6 +615,7 @@ def solve_goals(
     dls_options: dict[str, Any] | None = None,
     fk: tuple[Array, Array] | None = None,
     hinges: Mapping[JointRef, Any] | None = None,
+    max_reach: float = 1.0,
 ) -> Motion:
     """The IK layer: meet every goal on every frame (no temporal smoothing).
 
@@ -628,7 +629,8 @@ def solve_goals(
     reach : float
         Fraction of the leg's full length the root adjustment aims for: a
         little short of straight, where the knee angle is very sensitive to
-        the ankle's position.
+        the ankle's position.  A leg already straighter than that may stay
+        as straight as it is, up to ``max_reach``.
     max_drop : float
         Largest root lowering, metres.
     drop_window : float
@@ -648,6 +650,13 @@ def solve_goals(
         for instance measured on the motion before an edit so a knee keeps
         the input's bending direction.  Default: estimated from ``motion``
         itself.
+    max_reach : float
+        Fraction of a leg's full length beyond which the root is lowered
+        even for a leg that is already that straight (1: never).  Near
+        full extension the knee angle goes as the square root of the
+        distance left, so a target that brushes past straight makes the
+        knee dip and come back in a few frames; a cap below 1 lowers the
+        root (smoothly, by ``drop_window``) instead.
 
     Returns
     -------
@@ -670,7 +679,7 @@ def solve_goals(
     """
     return _solve_goals(
         motion, goals, adjust_root=adjust_root, reach=reach, max_drop=max_drop, drop_window=drop_window,
-        dls_options=dls_options, fk=fk, hinges=hinges,
+        dls_options=dls_options, fk=fk, hinges=hinges, max_reach=max_reach,
     )[0]
 
 
@@ -685,6 +694,7 @@ def _solve_goals(
     dls_options: dict[str, Any] | None,
     fk: tuple[Array, Array] | None,
     hinges: Mapping[JointRef, Any] | None = None,
+    max_reach: float = 1.0,
 ) -> tuple[Motion, tuple[Array, Array]]:
     """:func:`solve_goals`, also returning the new motion's forward kinematics.
 
@@ -713,8 +723,9 @@ def _solve_goals(
             target = _foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle))
             u, m, e = limb_joints(sk, ankle)
             full = np.linalg.norm(gpos[:, m] - gpos[:, u], axis=-1) + np.linalg.norm(gpos[:, e] - gpos[:, m], axis=-1)
-            # a leg may stay as straight as it already is, else up to `reach`
-            allowed = np.maximum(reach * full, np.linalg.norm(gpos[:, e] - gpos[:, u], axis=-1))
+            # a leg may stay as straight as it already is (up to `max_reach`), else up to `reach`
+            current = np.minimum(np.linalg.norm(gpos[:, e] - gpos[:, u], axis=-1), max_reach * full)
+            allowed = np.maximum(reach * full, current)
             r = target - gpos[:, u]
             s2 = allowed**2 - r[:, 0] ** 2 - r[:, 2] ** 2
             need = np.where(s2 > 0, r[:, 1] + np.sqrt(np.maximum(s2, 0.0)), r[:, 1])

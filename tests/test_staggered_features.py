@@ -61,6 +61,33 @@ def test_tent_filter_preserves_constants_and_mass() -> None:
     assert np.count_nonzero(out) == 2 * half + 1  # support of 0.15 s
 
 
+@pytest.mark.parametrize("fps", [24.0, 30.0, 60.0, 120.0, 50.0])
+def test_tent_filter_is_built_in_continuous_time(fps: float) -> None:
+    """The tent reaches zero 75 ms from its centre and keeps its shape (in seconds) at every frame rate."""
+    impulse = np.zeros(201)
+    impulse[100] = 1.0
+    k = tent_filter(impulse, 0.15, fps)
+    t = (np.arange(201) - 100) / fps
+    assert np.isclose(k.sum(), 1.0)
+    assert np.all(np.abs(t[k > 0]) < 0.075 + 0.5 / fps)  # support: the frames whose interval meets the tent
+    # the kernel's spread in seconds is about the tent's own (variance h^2 / 6) plus a frame's (1 / (12 fps^2))
+    var = float((k * t**2).sum())
+    assert var == pytest.approx(0.075**2 / 6 + 1.0 / (12 * fps**2), rel=0.05)  # whole-frame half-widths: x1.2-2.1
+
+
+@pytest.mark.parametrize("trial", ["16_15", "05_02"])
+def test_pose_spacing_and_density_do_not_depend_on_the_frame_rate(cmu, trial: str) -> None:
+    """The same clip at 24, 30, 60 and 120 fps: no two poses within 75 ms, as many per second (within 25 %)."""
+    m = cmu(trial)
+    per_second = {}
+    for fps in (120.0, 60.0, 30.0, 24.0):
+        clip = m if fps == m.fps else m.resample(fps)
+        a = analyze(clip)
+        assert np.diff(a.candidates).min() / fps >= 0.075 - 1e-9, fps
+        per_second[fps] = (a.candidates.size - 2) / clip.duration
+    assert all(d == pytest.approx(per_second[120.0], rel=0.25) for d in per_second.values()), per_second
+
+
 def test_contact_events_mark_starts_and_ends() -> None:
     mask = np.zeros((20, 1), dtype=bool)
     mask[0:5, 0] = True

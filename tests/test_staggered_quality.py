@@ -92,3 +92,22 @@ def test_zero_weight_legs_are_left_exactly_as_they_were():
     free = w == 0
     np.testing.assert_array_equal(out.rotations[free], m.rotations[free])
     assert not np.allclose(out.rotations[3], m.rotations[3])  # held with weight 1: carried to the hinge side
+
+
+def test_max_reach_lowers_the_root_under_a_leg_held_nearly_straight():
+    # a leg bent 2 degrees, held where its ankle is: left alone by default, lowered to max_reach when capped
+    sk = _leg()
+    n = 40
+    rot = np.tile([0.0, 0.0, 0.0, 1.0], (n, 3, 1))
+    bend = np.radians(2.0)
+    rot[:, 1] = [np.sin(bend / 2), 0.0, 0.0, np.cos(bend / 2)]
+    m = Motion(sk, rot, np.tile([0.0, 1.0, 0.0], (n, 1)), 30)
+    ankle = m.global_positions()[:, 2]
+    goal = Goal("ankle", ankle, np.ones(n), kind="foot")
+    free = solve_goals(m, [goal], reach=0.96)
+    np.testing.assert_allclose(free.root_positions, m.root_positions, atol=1e-12)
+    capped = solve_goals(m, [goal], reach=0.96, max_reach=0.99)
+    pos = capped.global_positions()
+    assert np.linalg.norm(pos[:, 2] - pos[:, 0], axis=-1).max() <= 0.99 * 1.0 + 1e-9
+    np.testing.assert_allclose(pos[:, 2], ankle, atol=1e-6)  # the ankle still held
+    assert np.all(capped.root_positions[:, 1] < 1.0 - 0.009)  # lowered, not pushed sideways

@@ -996,6 +996,13 @@ _DROP_WINDOW = 0.15
 #: jump 16_05 under a succession of 0.02 s snaps its knee to 167 degrees and
 #: back at take-off (1,048 rad/s^2, the input 198); at 0.96, 529.
 _REACH = 0.96
+#: The straightest a held leg may stay (``max_reach`` of :func:`mocaplab.refinement.solve_goals`): the
+#: walk 16_15 with its legs exaggerated by 0.5 straightens a knee to 4 degrees where the toe still holds,
+#: and a target brushing past that makes the held knee dip and return within 5 frames (peak knee
+#: acceleration 779 rad/s^2 uncapped, 436 at 0.997, 345 at 0.995; the edit alone 230).  Lower caps
+#: lower the root more often: the salsa 60_10 exaggerated by 0.3 goes from 1,970 to 2,122 (0.997) and
+#: 2,251 (0.995).
+_MAX_REACH = 0.997
 
 
 def _frames_of(seconds: float, fps: float) -> int:
@@ -1312,7 +1319,8 @@ class ConstraintLayer:
                 end = int(sk.parents[j]) if kind == "toe" else j
                 hinges.setdefault(end, self.hinges[e])
         solved = solve_goals(
-            sub, goals, adjust_root=self.adjust_root, hinges=hinges, drop_window=_DROP_WINDOW, reach=_REACH
+            sub, goals, adjust_root=self.adjust_root, hinges=hinges, drop_window=_DROP_WINDOW, reach=_REACH,
+            max_reach=_MAX_REACH,
         )
         # out of reach: a fully held joint misses its target, or a two-bone
         # goal's blended target lies beyond its limb (the limb went straight)

@@ -43,10 +43,10 @@ The paper applies the tent filter "to combine closely-clustered peaks" into
 one, and expects "very sparse poses" for physical motion.  On capture data
 the filtered ``P`` still ripples: a sum of many saturating curvature signals
 has small wiggles on the flanks of its peaks, and every wiggle is a local
-maximum.  Taken literally, 13 % of the gaps between candidates over the 17
-CMU clips of the mirror (18 % on the walk 16_15) were under 50 ms (maxima 2
-to 4 frames apart), and a walk had as many poses per second as a dance (7.1
-against 7.5).  Two rules make the candidates the
+maximum.  Taken literally, 7 % of the gaps between candidates over the 17
+CMU clips of the mirror (11 % on the walk 16_15) are under 50 ms (maxima 2
+to 5 frames apart), and a walk has as many poses per second as a dance (7.1
+against 7.1).  Two rules make the candidates the
 distinct maxima the filter is meant to leave (:func:`candidate_poses`):
 
 * **merge** maxima closer than the filter's half-width (0.075 s): of two
@@ -60,18 +60,24 @@ distinct maxima the filter is meant to leave (:func:`candidate_poses`):
   of the maxima split into ripples (39 % below 0.05) and the peaks of feature
   clusters (52 % above 0.1), with few in between (9 %).
 
-No two poses are then closer than 0.075 s (75 ms is also the smallest gap
-measured over the 17 CMU clips of the mirror; the literal rule gave 17 ms).
+No two poses are then closer than 0.075 s (between interior poses the
+smallest gap over the 17 CMU clips of the mirror is 108 ms; the literal rule
+gives 17 ms).  Both the tent and the separation are in seconds, not frames:
+the tent falls to zero 75 ms from its centre at any rate, and the
+separation is rounded *up* to whole frames, so the same clip at 24, 30, 60
+and 120 fps keeps its poses at least 75 ms apart and about as many per second
+(the walk 16_15: 3.3, 3.1, 2.8, 2.8 at 120, 60, 30, 24 fps; the dance
+05_02: 4.2, 4.0, 4.0, 3.9).
 Measured at 120 fps (``benchmarks/bench_staggered.py``), interior poses per
-second, every maximum -> distinct maxima: walk 16_15 7.1 -> 3.1, walk 02_01
-4.9 -> 3.5, broad jump 16_05 5.7 -> 3.3, vertical jump 16_01 9.0 -> 2.2,
-hops 49_03 6.9 -> 3.9, dance 05_02 7.5 -> 4.1, runs 09_06 and 16_35 6.0 and
-7.5 -> 4.3 and 4.5.  That is the paper's picture: "physical motion tends to
+second, every maximum -> distinct maxima: walk 16_15 7.1 -> 3.3, walk 02_01
+4.2 -> 3.5, broad jump 16_05 6.9 -> 4.1, vertical jump 16_01 7.9 -> 2.2,
+hops 49_03 6.5 -> 4.3, dance 05_02 7.1 -> 4.2, runs 09_06 and 16_35 9.4 and
+8.2 -> 5.1 and 4.5.  That is the paper's picture: "physical motion tends to
 have very sparse poses, as muscle activations are correlated with contact
 events" -- a walk gets about two poses per step (the peaks of P sit near
 foot strike and toe-off), a jump in place a handful in all; "looser motion often has
 more candidate poses, although it remains a sparse set" -- the dance has a
-third more than the walk.  A run's contact changes come faster (a stride
+quarter more than the walk.  A run's contact changes come faster (a stride
 lasts about 0.7 s), so it keeps more poses per second than a walk.
 """
 
@@ -362,15 +368,46 @@ def contact_events(contacts: Any, n_frames: int) -> Array:
 def tent_filter(signal: Array, width: float, fps: float) -> Array:
     """Low-pass tent (triangle) filter of total width ``width`` seconds along axis 0.
 
-    The kernel is normalised to sum 1, and renormalised near the ends of the
+    The tent is built in continuous time: it falls to zero ``width / 2``
+    seconds either side of its centre whatever the frame rate, and each
+    frame's weight is the tent's area over that frame's interval
+    ``[(i - 1/2) / fps, (i + 1/2) / fps]``.  Rounding the half-width to whole
+    frames instead would make the support 83 ms at 120 fps and 125 ms at
+    24 fps.  The kernel sums to 1 and is renormalised near the ends of the
     clip so a constant signal stays constant.
+
+    Parameters
+    ----------
+    signal : ndarray, shape (F, ...)
+    width : float
+        Total width of the tent, seconds (> 0).
+    fps : float
+        Frame rate of ``signal``.
+
+    Returns
+    -------
+    ndarray, shape (F, ...)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> tent_filter(np.ones(5), 0.15, 30.0).tolist()
+    [1.0, 1.0, 1.0, 1.0, 1.0]
     """
     from scipy.ndimage import convolve1d
 
     x = np.asarray(signal, dtype=float)
-    half = max(1, int(round(0.5 * width * fps)))
-    k = 1.0 - np.abs(np.arange(-half, half + 1)) / (half + 1.0)
-    k /= k.sum()
+    h = 0.5 * float(width) * float(fps)  # the half-width, in frames (not rounded)
+    n = int(np.ceil(h + 0.5))
+    edges = np.arange(-n, n + 2) - 0.5  # frame i covers [i - 1/2, i + 1/2]
+
+    def area(u: Array) -> Array:
+        # the tent's integral from -h to u (its cumulative distribution), total 1
+        v = np.clip(u / h, -1.0, 1.0)
+        return np.where(v < 0.0, 0.5 * (1.0 + v) ** 2, 1.0 - 0.5 * (1.0 - v) ** 2)
+
+    k = np.diff(area(edges))
+    k = k[k > 0.0]  # symmetric: the same number of frames drop from either side
     out = convolve1d(x, k, axis=0, mode="constant", cval=0.0)
     ones = convolve1d(np.ones(x.shape[0]), k, mode="constant", cval=0.0)
     return out / ones.reshape((-1,) + (1,) * (x.ndim - 1))
@@ -747,8 +784,9 @@ def analyze(
         default contact joints.
     min_separation : float, optional
         Maxima of ``P`` closer than this (seconds) merge into the higher one
-        (:func:`candidate_poses`); default half the filter width, the
-        tent filter's own half-width (0.075 s).  0 keeps every maximum.
+        (:func:`candidate_poses`; rounded up to whole frames, so no two
+        poses are closer at any frame rate); default half the filter width,
+        the tent filter's own half-width (0.075 s).  0 keeps every maximum.
     min_prominence : float
         Least prominence of a candidate maximum, as a fraction of its value
         (0.1; 0 keeps every maximum).  See "Sparse poses" in the module notes.
@@ -806,11 +844,12 @@ def analyze(
         raise ValueError(f"Expected `event_weight` >= 0, got {event_weight!r}")
     P = pose_probability(signals, weights, fps, events=events, event_weight=ew, width=filter_width)
     if min_separation is None:
-        sep = max(1, int(round(0.5 * filter_width * fps)))  # the tent filter's half-width
-    elif np.isfinite(min_separation) and min_separation >= 0:
-        sep = int(round(float(min_separation) * fps))
-    else:
+        min_separation = 0.5 * filter_width  # the tent filter's half-width
+    elif not (np.isfinite(min_separation) and min_separation >= 0):
         raise ValueError(f"Expected `min_separation` >= 0 seconds, got {min_separation!r}")
+    # whole frames, rounded up: no two maxima closer than `min_separation` seconds at any rate
+    # (rounding to nearest made 75 ms two frames at 30 fps, 66.7 ms)
+    sep = int(np.ceil(float(min_separation) * fps - 1e-9))
     cand = candidate_poses(P, separation=sep, min_prominence=min_prominence)
     return PoseAnalysis(
         fps=fps,

@@ -34,6 +34,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import kinematics
 from .motion import Motion, readonly
 from .roles import resolve_roles
 
@@ -341,17 +342,69 @@ def foot_contacts(
         raise ValueError(f"Expected `floor` to be 'clip' or 'ground', got {floor!r}")
     if not 0.0 <= floor_percentile <= 100.0:
         raise ValueError(f"Expected `floor_percentile` in [0, 100], got {floor_percentile!r}")
-    y = motion.global_positions()[:, idx, 1]
+    pos = motion.global_positions()[:, idx]
+    v = _speeds(pos, motion.fps)
+    balls = _balls(motion, names, roles)
+    if balls:
+        # a foot without a toe joint is also planted while it rolls over its ball (toe-off)
+        ball_pos = np.stack([balls[n] for n in names if n in balls], axis=1)
+        pos = np.concatenate([pos, ball_pos], axis=1)
+        v = np.concatenate([v, _speeds(ball_pos, motion.fps)], axis=1)
+    y = pos[..., 1]
     if floor == "clip":
+        slope = _slope(pos, v < speed)
+        y = y - pos[..., [0, 2]] @ slope
         y = y - np.percentile(y, floor_percentile, axis=0)
-    v = motion.joint_speeds()[:, idx]
     raw = (y < height) & (v < speed)
+    if balls:
+        n = len(names)
+        cols = [k for k, name in enumerate(names) if name in balls]
+        raw[:, cols] |= raw[:, n:]
+        raw = raw[:, :n]
     mask = clean_mask(
         raw,
         min_length=max(1, _frames(min_duration, motion.fps, "min_duration")),
         max_gap=_frames(max_gap, motion.fps, "max_gap"),
     )
     return Contacts(names, mask, motion.fps)
+
+
+#: Floors inclined by less than this (degrees) are taken as level by
+#: :func:`foot_contacts`: capture floors tilt by a few centimetres over a
+#: volume, which the per-joint floor level absorbs.
+LEVEL_FLOOR_ANGLE = 2.0
+
+
+def _speeds(pos: NDArray[np.float64], fps: float) -> NDArray[np.float64]:
+    """World speeds of points (F, n, 3) by central differences (as :meth:`Motion.joint_speeds`), m/s, shape (F, n)."""
+    return np.linalg.norm(kinematics.velocities(pos, fps), axis=-1)
+
+
+def _balls(motion: Motion, names: tuple[str, ...], roles: Mapping[str, Any] | None) -> dict[str, NDArray[np.float64]]:
+    """Ball positions of the tested ankles whose feet have no toe joint (see :func:`mocaplab.physics.body.foot_balls`)."""
+    from .roles import RolesError
+
+    try:
+        feet = resolve_roles(motion, roles).feet()
+    except RolesError:
+        return {}
+    if not any(toe is None and ankle in names for ankle, toe in feet):
+        return {}
+    from .physics.body import foot_balls
+
+    try:
+        balls = foot_balls(motion, roles=roles)
+    except RolesError:
+        return {}  # no geometry to estimate the toe from: the ankle alone
+    return {name: p for name, p in balls.items() if name in names}
+
+
+def _slope(pos: NDArray[np.float64], slow: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """Slope of the floor under slow points (F, n, 3), (0, 0) when within :data:`LEVEL_FLOOR_ANGLE` of level."""
+    if not slow.any():
+        return np.zeros(2)
+    found = _fit_slope(pos, slow)
+    return found if np.degrees(np.arctan(np.linalg.norm(found))) >= LEVEL_FLOOR_ANGLE else np.zeros(2)
 
 
 # --------------------------------------------------------------------------
@@ -520,16 +573,22 @@ class Floor:
         Rise of the floor per metre along x and along z (0 for a level floor).
     levels : ndarray, shape (n,)
         Height of each joint above ``slope . (x, z)`` when planted, metres.
+    ground : float
+        Height of the ground surface above ``slope . (x, z)``, metres: where
+        the soles are (the ZMP's plane in :func:`mocaplab.physics.balance`,
+        which fills it in from the feet's support points); 0 by default.
     """
 
     joints: tuple[str, ...]
     slope: NDArray[np.float64]
     levels: NDArray[np.float64]
+    ground: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joints", tuple(self.joints))
         object.__setattr__(self, "slope", readonly(np.array(self.slope, dtype=float)))
         object.__setattr__(self, "levels", readonly(np.array(self.levels, dtype=float)))
+        object.__setattr__(self, "ground", float(self.ground))
 
     @property
     def angle(self) -> float:
@@ -546,6 +605,27 @@ class Floor:
         """One line: the slope and the planted heights."""
         levels = ", ".join(f"{j} {1000 * h:.0f} mm" for j, h in zip(self.joints, self.levels, strict=True))
         return f"floor inclined {self.angle:.1f} deg; planted heights {levels}"
+
+
+def _fit_slope(pos: NDArray[np.float64], mask: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """Least-squares slope (2,) of a plane with one height per column through ``pos[mask]`` ((F, n, 3), (F, n)).
+
+    Only along the horizontal directions the samples spread over by at least
+    :data:`FLOOR_SLOPE_SPREAD` (see :func:`estimate_floor`).
+    """
+    frames, cols = np.nonzero(mask)
+    samples = pos[frames, cols]
+    onehot = np.zeros((len(frames), pos.shape[1]))
+    onehot[np.arange(len(frames)), cols] = 1.0
+    # the slope only along horizontal directions the planted samples spread over
+    # (a straight walk says nothing about the floor's tilt across its path)
+    xz = samples[:, [0, 2]] - samples[:, [0, 2]].mean(axis=0)
+    var, vecs = np.linalg.eigh(xz.T @ xz / len(xz))
+    dirs = vecs[:, np.sqrt(np.maximum(var, 0.0)) >= FLOOR_SLOPE_SPREAD]  # (2, d), d in 0..2
+    used = onehot.any(axis=0)
+    design = np.column_stack([xz @ dirs, onehot[:, used]])
+    coef = np.linalg.lstsq(design, samples[:, 1], rcond=None)[0]
+    return dirs @ coef[: dirs.shape[1]]
 
 
 def estimate_floor(
@@ -594,20 +674,8 @@ def estimate_floor(
         return None
     idx = [motion.skeleton.index(j) for j in contacts.joints]
     pos = motion.global_positions()[:, idx]
-    frames, cols = np.nonzero(contacts.mask)
-    samples = pos[frames, cols]
     n = len(contacts.joints)
-    onehot = np.zeros((len(frames), n))
-    onehot[np.arange(len(frames)), cols] = 1.0
-    # the slope only along horizontal directions the planted samples spread over
-    # (a straight walk says nothing about the floor's tilt across its path)
-    xz = samples[:, [0, 2]] - samples[:, [0, 2]].mean(axis=0)
-    var, vecs = np.linalg.eigh(xz.T @ xz / len(xz))
-    dirs = vecs[:, np.sqrt(np.maximum(var, 0.0)) >= FLOOR_SLOPE_SPREAD]  # (2, d), d in 0..2
-    used = onehot.any(axis=0)
-    design = np.column_stack([xz @ dirs, onehot[:, used]])
-    coef = np.linalg.lstsq(design, samples[:, 1], rcond=None)[0]
-    slope = dirs @ coef[: dirs.shape[1]]
+    slope = _fit_slope(pos, contacts.mask)
     above = pos[..., 1] - pos[..., [0, 2]] @ slope  # (F, n) heights above the tilted plane
     levels = np.empty(n)
     for k in range(n):

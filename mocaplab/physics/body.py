@@ -664,6 +664,15 @@ def _foot_points(
         return pa, ball, tip
     if tip is None:
         tip = _beyond(skeleton, pose, ankle)
+        if tip is not None:
+            # an end site at the ball (where a toe joint was dropped) would cut the
+            # foot short: the tip reaches at least the estimated toe tip's distance ahead
+            f = frame() if callable(frame) else frame
+            ahead = (tip - pa) * [1.0, 0.0, 1.0]
+            reach = float(np.linalg.norm(ahead))
+            if reach < FOOT_TIP[0] * f.leg:
+                unit = ahead / reach if reach > 0 else f.forward
+                tip = tip + (FOOT_TIP[0] * f.leg - reach) * unit
     if tip is None:
         f = frame() if callable(frame) else frame
         tip = pa + f.leg * (FOOT_TIP[0] * f.forward - FOOT_TIP[1] * _UP)
@@ -692,6 +701,12 @@ class Body:
     point_owners : array_like of int, shape (P,)
     point_offsets : array_like, shape (P, 3)
         Support point in its owner's local frame.
+    point_heights : array_like, shape (P,), optional
+        Height of each support point above its foot's lowest point in the
+        reference pose, metres, for feet without a toe joint (their heel and
+        toe points all belong to the ankle); NaN elsewhere.  The support
+        polygon leaves out a lifted heel or toe of such a foot
+        (:func:`mocaplab.physics.balance`).
 
     Use :meth:`from_skeleton` to build one from any humanoid skeleton (by its joint roles).
     Its arrays are copies, read-only for good (views of read-only owners).
@@ -712,6 +727,7 @@ class Body:
     point_joints: tuple[str, ...] = ()
     point_owners: NDArray[np.int64] = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     point_offsets: Array = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
+    point_heights: Array | None = None
 
     def __post_init__(self) -> None:
         jn = tuple(str(n) for n in self.joint_names)
@@ -735,6 +751,10 @@ class Body:
             raise ValueError(
                 f"Expected `point_owners` ({len(pj)},) and `point_offsets` ({len(pj)}, 3), got {po.shape} and {pof.shape}"
             )
+        ph = np.full(len(pj), np.nan) if self.point_heights is None else np.asarray(self.point_heights, dtype=float).reshape(-1)
+        if ph.shape != (len(pj),):
+            raise ValueError(f"Expected `point_heights` of shape ({len(pj)},), got {ph.shape}")
+        object.__setattr__(self, "point_heights", readonly(np.array(ph, copy=True)))
         for name, arr in (("owners", owners), ("offsets", offsets), ("masses", masses), ("point_owners", po), ("point_offsets", pof)):
             object.__setattr__(self, name, readonly(np.array(arr, copy=True)))
         object.__setattr__(self, "joint_names", jn)
@@ -916,6 +936,7 @@ class Body:
         pj: list[str] = []
         po: list[int] = []
         pof: list[Array] = []
+        heights: list[float] = []
         for foot in feet:
             ankle, toe = foot[0], foot[1]
             tip_spec = foot[2] if len(foot) > 2 else None
@@ -943,12 +964,16 @@ class Body:
             pj.append(skeleton.names[owner])
             po.append(owner)
             pof.append(ptip - base)
+            # a foot without a toe joint rolls over its heel and toe points, all the ankle's
+            ys = np.array([base[1] + o[1] for o in pof[len(heights):]])
+            heights.extend(ys - ys.min() if jt is None else np.full(len(ys), np.nan))
         point_owners = np.array(po, dtype=np.int64)
         return dataclasses.replace(
             self,
             point_joints=tuple(pj),
             point_owners=point_owners,
             point_offsets=_local(pose, point_owners, np.array(pof).reshape(-1, 3)),
+            point_heights=np.array(heights),
         )
 
     def with_masses(self, masses: ArrayLike) -> Body:
@@ -1012,12 +1037,15 @@ class Body:
             without foot geometry contributes its own position.
         """
         self.check(motion)
-        o, offsets, column = self._support_layout(motion.skeleton, tuple(joints))
+        o, offsets, column, _ = self._support_layout(motion.skeleton, tuple(joints))
         grot, gpos = (motion.global_rotations(), motion.global_positions()) if fk is None else fk
         pts = gpos[:, o] + quat.rotate(grot[:, o], offsets)
         return pts, column
 
-    def _support_layout(self, skeleton: Skeleton, joints: tuple[str, ...]) -> tuple[NDArray[np.int64], Array, NDArray[np.int64]]:
+    def _support_layout(
+        self, skeleton: Skeleton, joints: tuple[str, ...]
+    ) -> tuple[NDArray[np.int64], Array, NDArray[np.int64], Array]:
+        """Owners, local offsets, contact columns and reference heights (NaN: not rolling) of the support points."""
         key = (id(skeleton), joints)
         cache = self.__dict__.setdefault("_layout_cache", {})
         if key in cache:
@@ -1025,26 +1053,70 @@ class Body:
         owners: list[int] = []
         offsets: list[Array] = []
         column: list[int] = []
+        heights: list[float] = []
         for k, name in enumerate(joints):
             hits = [i for i, pj in enumerate(self.point_joints) if pj == name]
             if hits:
                 owners.extend(int(self.point_owners[i]) for i in hits)
                 offsets.extend(self.point_offsets[i] for i in hits)
+                heights.extend(float(self.point_heights[i]) for i in hits)
                 column.extend([k] * len(hits))
             else:
                 owners.append(skeleton.index(name))
                 offsets.append(np.zeros(3))
+                heights.append(np.nan)
                 column.append(k)
         out = (
             readonly(np.array(owners, dtype=np.int64)),
             readonly(np.array(offsets).reshape(-1, 3)),
             readonly(np.array(column, dtype=np.int64)),
+            readonly(np.array(heights, dtype=float)),
         )
         cache[key] = out
         return out
 
 
 # ---------------------------------------------------------------- kinematics
+def foot_balls(motion: Motion, *, roles: Mapping[str, Any] | None = None) -> dict[str, Array]:
+    """World positions of the ball of each foot that has no toe joint.
+
+    The ball is where such a foot pivots at toe-off; it lies :data:`BALL` of
+    the way from the ankle to the toe tip (the ankle's end site, else
+    estimated from the leg's length and the body's facing, see the module
+    notes), measured in the body's reference pose and carried by the ankle.
+
+    Parameters
+    ----------
+    motion : Motion
+    roles : mapping, optional
+        Joint-role overrides (:func:`mocaplab.roles.resolve_roles`).
+
+    Returns
+    -------
+    dict of str to ndarray, shape (F, 3)
+        Keyed by ankle joint name; empty when every foot has a toe joint.
+    """
+    sk = motion.skeleton
+    r = resolve_roles(sk, roles)
+    ankles = [ankle for ankle, toe in r.feet() if toe is None]
+    if not ankles:
+        return {}
+    pose = _reference(motion, r, None)
+
+    def frame() -> _Frame:
+        r.require(*_NEEDED[:6], purpose="estimating the toe tips of feet without toe joints or end sites")
+        return _body_frame(r, pose.joints)
+
+    grot, gpos = motion.global_rotations(), motion.global_positions()
+    out = {}
+    for ankle in ankles:
+        ja = sk.index(ankle)
+        pa, ball, _ = _foot_points(sk, pose, ja, None, None, frame)
+        offset = _local(pose, ja, ball - pa)
+        out[ankle] = gpos[:, ja] + quat.rotate(grot[:, ja], offset)
+    return out
+
+
 def link_positions(motion: Motion, body: Body, *, fk: tuple[Array, Array] | None = None) -> Array:
     """World positions of the link centres, shape (F, L, 3).
 

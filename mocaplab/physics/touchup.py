@@ -210,7 +210,7 @@ from ..motion import Motion, Skeleton, _owned, readonly
 from ..refinement import Goal, _solve_goals, blend_weights, foot_goals, refine
 from ..roles import Roles, RolesError, resolve_roles
 from .body import GRAVITY, Body, angular_momentum, center_of_mass, link_positions, paper_width, smoothed_derivatives
-from .zmp import Balance, _check_contacts, _rebalance, balance, default_contacts
+from .zmp import _LEVEL, Balance, _check_contacts, _rebalance, balance, default_contacts
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..contacts import Contacts
@@ -904,8 +904,11 @@ def _ground_rotation(
     """
     n = motion.n_frames
     gpos = motion.global_positions() if gpos is None else gpos
-    z = bal.zmp
-    target = bal.projection
+    # equations 6 and 7 are written for the ground y = 0: work in the frame of
+    # the ground the balance measured on (the estimated floor), then turn back
+    ground = bal.__dict__.get("_ground", _LEVEL)
+    z = ground.to_plane(bal.zmp)
+    target = ground.to_plane(bal.projection)
     todo = (bal.distance > 0) & (weight > 0)  # NaN (flight) compares False
     omega = np.zeros((n, 3))
     root_centre = np.zeros((n, 3))
@@ -918,25 +921,27 @@ def _ground_rotation(
     h = np.hypot(dx, dz)
     cx, cz = (dx / h)[:, None], (dz / h)[:, None]
 
-    r = bal.positions[idx]  # (f, L, 3) smoothed link centres
+    r = ground.to_plane(bal.positions[idx])  # (f, L, 3) smoothed link centres
     acc = bal.accelerations[idx]
+    acc = acc - GRAVITY if ground.identity else acc @ ground.rotation.T - ground.rotation @ GRAVITY  # a - g
     m = body.masses
-    alpha = m * (acc[..., 1] - GRAVITY[1])  # (f, L)
+    alpha = m * acc[..., 1]  # (f, L)
     beta = m * (acc[..., 0] * cx + acc[..., 2] * cz)
     total = alpha * (r[..., 0] * cx + r[..., 2] * cz) - beta * r[..., 1]
 
     # rotation centres of the S2 parts: the boundary joint, or the ZMP's
     # projection on the ground for a part holding the root
     tops = sets.s2_tops
-    centres = gpos[idx][:, list(tops)]  # (f, parts, 3)
+    local = ground.to_plane(gpos[idx])
+    centres = local[:, list(tops)]  # (f, parts, 3)
     if tops[0] == 0:
         centres[:, 0] = target[idx]
         centres[:, 0, 1] = 0.0
-        root_centre[idx] = centres[:, 0]
+        root_centre[idx] = ground.to_world(centres[:, 0])
     moving, part, slots, carried_tops = _lever_layout(sets, body)
     lever = r[:, moving]
     if slots.size:
-        lever[:, slots] = gpos[idx][:, carried_tops]
+        lever[:, slots] = local[:, carried_tops]
     d = lever - centres[:, part]
     ddx = d[..., 0] * cx + d[..., 2] * cz
     ddy = d[..., 1]
@@ -959,6 +964,8 @@ def _ground_rotation(
     # z' = x' x y = (-cz, 0, cx): +theta turns x' into y
     omega[idx, 0] = -cz[:, 0] * theta
     omega[idx, 2] = cx[:, 0] * theta
+    if not ground.identity:
+        omega = omega @ ground.rotation  # back to world axes
     return omega, root_centre, exact
 
 

@@ -36,7 +36,7 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 from functools import cached_property, lru_cache
 from itertools import combinations, combinations_with_replacement
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -48,7 +48,7 @@ from ..roles import resolve_roles
 from .body import GRAVITY, Body, _positions_and_accelerations, paper_width
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..contacts import Contacts
+    from ..contacts import Contacts, Floor
 
 __all__ = [
     "zmp_from_links",
@@ -388,7 +388,9 @@ class Balance:
     @cached_property
     def signed_distance(self) -> Array:
         """Signed ZMP distance: positive outside, minus the depth inside, NaN in flight, shape (F,)."""
-        signed, _ = polygon_distance(self.zmp[:, [0, 2]], self.support[..., [0, 2]], self.active)
+        ground = self.__dict__.get("_ground", _LEVEL)
+        z, sup = ground.to_plane(self.zmp), ground.to_plane(self.support)
+        signed, _ = polygon_distance(z[:, [0, 2]], sup[..., [0, 2]], self.active)
         return readonly(signed)
 
     @property
@@ -414,10 +416,11 @@ class Balance:
         return float("inf") if self.ground.any() else 0.0
 
     def polygon(self, frame: int) -> Array:
-        """Support polygon of one frame as ground points ``(V, 3)`` (``y = 0``), via ConvexHull."""
-        pts = self.support[frame, self.active[frame]][:, [0, 2]]
+        """Support polygon of one frame as points ``(V, 3)`` on the ground (``y = 0``, or the estimated floor), via ConvexHull."""
+        ground = self.__dict__.get("_ground", _LEVEL)
+        pts = ground.to_plane(self.support[frame, self.active[frame]])[:, [0, 2]]
         hull = support_polygon(pts)
-        return np.column_stack([hull[:, 0], np.zeros(len(hull)), hull[:, 1]])
+        return ground.to_world(np.column_stack([hull[:, 0], np.zeros(len(hull)), hull[:, 1]]))
 
 
 def balance(
@@ -428,6 +431,7 @@ def balance(
     width: float | None = None,
     fk: tuple[Array, Array] | None = None,
     roles: Mapping[str, Any] | None = None,
+    floor: Floor | Literal["estimate", "y=0"] = "estimate",
 ) -> Balance:
     """ZMP (equation 4), support polygons and distances of a clip.
 
@@ -447,10 +451,26 @@ def balance(
     roles : mapping of role names to joint names, optional
         Role overrides (:func:`mocaplab.roles.resolve_roles`) for the
         default body and contacts.
+    floor : Floor, "estimate" or "y=0"
+        The ground equation 4 is written for.  ``"estimate"`` (default):
+        the plane the planted feet stand on
+        (:func:`mocaplab.contacts.estimate_floor`), at the height of their
+        lowest support points; a :class:`~mocaplab.contacts.Floor` gives
+        the slope and its :attr:`~mocaplab.contacts.Floor.ground` the
+        height; ``"y=0"`` the paper's level ground at ``y = 0``.  The ZMP
+        lies on that plane and the support polygon is taken in it, so a
+        walk lifted off ``y = 0`` or walked up a slope is judged as on the
+        level floor.
 
     Returns
     -------
     Balance
+
+    Examples
+    --------
+    >>> from mocaplab.data import cmu                      # doctest: +SKIP
+    >>> round(1000 * balance(cmu("16_15")).mean_distance)  # doctest: +SKIP
+    13
     """
     if body is None or contacts is None:
         known = resolve_roles(motion, roles)
@@ -460,13 +480,14 @@ def balance(
     w = paper_width(5.0, motion.fps) if width is None else float(width)
     body.check(motion)
     # link centres and support points in one rotation pass
-    owners, offsets, column = body._support_layout(motion.skeleton, tuple(contacts.joints))
+    owners, offsets, column, heights = body._support_layout(motion.skeleton, tuple(contacts.joints))
     idx, all_offsets = _point_layout(body, owners, offsets)
     grot, gpos = (motion.global_rotations(), motion.global_positions()) if fk is None else fk
     pts = gpos[:, idx] + quat.rotate(grot[:, idx], all_offsets)
     raw, support = pts[:, : body.n_links], pts[:, body.n_links :]
     r, acc = _positions_and_accelerations(raw, motion.fps, width=w)
-    return _finish(motion, body, contacts, column, raw, r, acc, support)
+    ground = _ground_of(floor, motion, contacts, support, column)
+    return _finish(motion, body, contacts, column, raw, r, acc, support, ground=ground, heights=heights)
 
 
 def _rebalance(
@@ -484,9 +505,10 @@ def _rebalance(
     a full :func:`balance`); the ZMP and the distances are redone.
     """
     raw_prev = previous.__dict__.get("_raw")
+    ground = previous.__dict__.get("_ground", _LEVEL)
     if raw_prev is None or raw_prev.shape[0] != motion.n_frames:
-        return balance(motion, body, contacts=contacts, fk=fk)
-    owners, offsets, column = body._support_layout(motion.skeleton, tuple(contacts.joints))
+        return balance(motion, body, contacts=contacts, fk=fk, floor=ground.floor)
+    owners, offsets, column, heights = body._support_layout(motion.skeleton, tuple(contacts.joints))
     grot, gpos = fk
     links = np.flatnonzero(moved[body.owners])
     raw, r, acc = raw_prev, previous.positions, previous.accelerations
@@ -498,7 +520,95 @@ def _rebalance(
     support, segments = previous.support, previous.__dict__.get("_segments")
     if np.any(moved[owners]):
         support, segments = gpos[:, owners] + quat.rotate(grot[:, owners], offsets), None
-    return _finish(motion, body, contacts, column, raw, r, acc, support, segments)
+    return _finish(motion, body, contacts, column, raw, r, acc, support, segments, ground=ground, heights=heights)
+
+
+#: How far (metres) the heel or the toe of a foot without a toe joint may rise
+#: above the rest of the foot, beyond its height in the reference pose, and
+#: still bear weight: above it the foot is rolling onto its other end
+#: (toe-off, heel strike) and that end leaves the support polygon.
+ROLL_LIFT = 0.05
+
+
+class _Ground(NamedTuple):
+    """The plane equation 4 is written for: ``rotation`` takes world vectors to the plane's frame (normal +Y)."""
+
+    rotation: Array  # (3, 3)
+    origin: Array  # (3,) a point of the plane
+    floor: Floor | str  # what balance(floor=...) was given, or the Floor estimated
+
+    def to_plane(self, p: Array) -> Array:
+        return p if self.identity else (p - self.origin) @ self.rotation.T
+
+    def to_world(self, p: Array) -> Array:
+        return p if self.identity else p @ self.rotation + self.origin
+
+    @property
+    def identity(self) -> bool:
+        return not self.origin.any() and bool(np.all(self.rotation == np.eye(3)))
+
+
+_LEVEL = _Ground(np.eye(3), np.zeros(3), "y=0")
+
+
+def _plane(slope: Array, height: float, floor: Floor | str) -> _Ground:
+    """The ground ``y = slope . (x, z) + height``."""
+    s = np.asarray(slope, dtype=float)
+    normal = np.array([-s[0], 1.0, -s[1]]) / np.sqrt(1.0 + s @ s)
+    rotation = np.eye(3) if not s.any() else quat.to_matrix(quat.between(normal, [0.0, 1.0, 0.0]))
+    return _Ground(np.asarray(rotation, dtype=float), np.array([0.0, float(height), 0.0]), floor)
+
+
+def _ground_of(
+    floor: Floor | str, motion: Motion, contacts: Contacts, support: Array, column: NDArray[np.int64]
+) -> _Ground:
+    """The ground of :func:`balance`'s ``floor`` option (see there)."""
+    from ..contacts import LEVEL_FLOOR_ANGLE, Floor, estimate_floor
+
+    if isinstance(floor, Floor):
+        return _plane(floor.slope, floor.ground, floor)
+    if floor == "y=0":
+        return _LEVEL
+    if floor != "estimate":
+        raise ValueError(f"Expected `floor` to be a Floor, 'estimate' or 'y=0', got {floor!r}")
+    found = estimate_floor(motion, contacts)
+    if found is None:
+        return _LEVEL
+    planted = np.asarray(contacts.mask, dtype=bool)[:, column]
+    if not planted.any():
+        return _LEVEL
+    slope = found.slope if found.angle >= LEVEL_FLOOR_ANGLE else np.zeros(2)
+    above = support[..., 1] - support[..., [0, 2]] @ slope
+    height = float(np.percentile(above[planted], GROUND_PERCENTILE))
+    if abs(height) <= GROUND_TOLERANCE and not slope.any():
+        return _LEVEL  # feet on y = 0: the paper's ground exactly
+    return _plane(slope, height, dataclasses.replace(found, slope=slope, ground=height))
+
+
+#: Percentile of the planted support points' heights taken as the ground's height.
+GROUND_PERCENTILE = 5.0
+#: A level ground within this many metres of ``y = 0`` is ``y = 0``, the paper's ground (the lowest
+#: support points of CMU walks stand 0.4-1.7 cm above it).
+GROUND_TOLERANCE = 0.03
+
+
+def _rolling(active: NDArray[np.bool_], column: NDArray[np.int64], heights: Array, up: Array) -> NDArray[np.bool_]:
+    """``active`` without the lifted end of planted feet that have no toe joint.
+
+    ``up`` (F, P) are the support points' heights above the ground and
+    ``heights`` (P,) their heights above the foot's lowest point in the
+    reference pose (NaN for points of other feet).
+    """
+    rolling = np.isfinite(heights)
+    if not rolling.any():
+        return active
+    active = active.copy()
+    lift = up - np.where(rolling, heights, 0.0)
+    for k in np.unique(column[rolling]):
+        pts = np.flatnonzero((column == k) & rolling)
+        low = lift[:, pts].min(axis=1, keepdims=True)
+        active[:, pts] &= lift[:, pts] - low <= ROLL_LIFT
+    return active
 
 
 def _finish(
@@ -511,30 +621,49 @@ def _finish(
     acc: Array,
     support: Array,
     segments: tuple[Array, ...] | None = None,
+    *,
+    ground: _Ground = _LEVEL,
+    heights: Array | None = None,
 ) -> Balance:
-    """ZMP, distances and the Balance record from link centres (raw and smoothed) and support points."""
+    """ZMP, distances and the Balance record from link centres (raw and smoothed) and support points.
+
+    Equation 4 and the polygon distances are computed in the frame of the
+    ground plane (the world's when the ground is ``y = 0``), the ZMP and its
+    projection returned on the plane in world coordinates.
+    """
     mask = np.asarray(contacts.mask, dtype=bool)
-    ground: NDArray[np.bool_] = np.asarray(mask.any(axis=1), dtype=bool)
+    planted: NDArray[np.bool_] = np.asarray(mask.any(axis=1), dtype=bool)
     m = body.masses
-    zx, zz, ok = _zmp_xz(r, acc - GRAVITY, m, float(m.sum() * np.linalg.norm(GRAVITY)))
-    has = ground & ok
+    flat = ground.identity
+    r_g = ground.to_plane(r)
+    acc_g = acc if flat else acc @ ground.rotation.T
+    gravity = GRAVITY if flat else ground.rotation @ GRAVITY
+    zx, zz, ok = _zmp_xz(r_g, acc_g - gravity, m, float(m.sum() * np.linalg.norm(GRAVITY)))
+    has = planted & ok
     active = mask[:, column]
-    vx, vz = support[..., 0], support[..., 2]
+    sup_g = ground.to_plane(support)
+    if heights is not None:
+        rolled = _rolling(active, column, heights, sup_g[..., 1])
+        if rolled is not active:
+            active, segments = rolled, None
+    vx, vz = sup_g[..., 0], sup_g[..., 2]
     if segments is None:
         segments = _segments(vx, vz, active)
     dist, px, pz = _polygon_xz(zx, zz, has, vx, vz, active, False, segments)
     z = np.zeros((motion.n_frames, 3))
     z[:, 0], z[:, 2] = zx, zz
-    z[~has] = np.nan
     proj = np.zeros((motion.n_frames, 3))
     proj[:, 0], proj[:, 2] = px, pz
+    z, proj = ground.to_world(z), ground.to_world(proj)
+    z[~has] = np.nan
     proj[np.isnan(px)] = np.nan
     com = (m @ raw) / body.total_mass
     # every array is new here or read-only already (shared with the Balance _rebalance started from)
-    out = Balance(*(_owned(a) for a in (z, proj, dist, com, ground, support, active, r, acc)))
-    # for _rebalance: the unsmoothed link centres and the support segments
+    out = Balance(*(_owned(a) for a in (z, proj, dist, com, planted, support, active, r, acc)))
+    # for _rebalance: the unsmoothed link centres, the support segments and the ground
     object.__setattr__(out, "_raw", readonly(raw))
     object.__setattr__(out, "_segments", tuple(readonly(s) for s in segments))
+    object.__setattr__(out, "_ground", ground)
     return out
 
 

@@ -687,3 +687,28 @@ def test_reset_at_the_start_and_selection_beyond_a_smaller_pose_count(jump16_05)
     assert ed.selected == 4 and ed.overlay()[1].n_frames == 1  # the last pose stays selected
     ed.undo()
     assert ed.selected == 7 and ed.current.n_poses == 8
+
+
+def test_editor_plants_the_feet_by_default(cmu) -> None:
+    """The editor plays the constraint layer unless turned off (an undoable edit); the feet skate less with it."""
+    from mocaplab import quality
+
+    walk = cmu("16_15")
+    ed = StaggeredEditor(walk, max_poses=10, optimize=False)
+    assert ed.constraints and ed.current.constraints is not None
+    ed.set_succession(s=0.02)
+    ed.checkpoint()
+    held = ed.evaluate()
+    ed.set_constraints(False)
+    ed.checkpoint()
+    assert not ed.constraints and ed.current.constraints is not None  # still built: only not played
+    free = ed.evaluate()
+    assert max_diff(held, free)[0] > 1e-3
+    skate_held = quality.compare(walk, held)["skate"].after
+    skate_free = quality.compare(walk, free)["skate"].after
+    assert skate_held < 0.6 * skate_free, (skate_held, skate_free)  # 1.57 against 3.13 mm/frame
+    ed.undo()
+    assert ed.constraints and max_diff(ed.evaluate(), held)[0] < 1e-12
+    off = StaggeredEditor(walk, max_poses=10, optimize=False, constraints=False)
+    off.set_succession(s=0.02)
+    assert not off.constraints and max_diff(off.evaluate(), free)[0] < 1e-12

@@ -125,7 +125,8 @@ def test_defaults_come_from_the_roles_below_a_static_root(cmu, monkeypatch) -> N
         assert m.skeleton.names[0] != pelvis
         assert ed.joint == pelvis and x.succession_dropdown.value == pelvis
         assert x.editor.curve_joint in m.skeleton.names  # a joint rotation, never a translation
-        assert ed.current.constraints is None and ed.analysis.event_joints == m.skeleton.roles.foot_joints()
+        assert ed.constraints and ed.current.constraints is not None  # feet planted by default
+        assert ed.analysis.event_joints == m.skeleton.roles.foot_joints()
         x.joint_dropdown.value = pelvis + ".position"
         assert info(x)["variable"] == pelvis + ".position" and x.ax.get_ylabel() == "m"
         c = ed.curves()
@@ -308,3 +309,17 @@ def test_edits_on_the_editor_show_when_the_widget_is_displayed(explorer) -> None
     assert x.widget is not None  # displaying it (reading the box) draws the edits
     assert (x.s_slider.value, x.l_slider.value, x.toggle.value) == (0.02, 2.0, False)
     assert info(x)["staggered"] is False and not x.history.undo.disabled
+
+
+def test_feet_planted_box_turns_the_constraint_layer_off_and_on(explorer) -> None:
+    x = explorer
+    assert "mocaplab-staggered-constraints" in x.constraints_check._dom_classes
+    assert x.constraints_check.value is True and x.editor.constraints
+    x.s_slider.value = 0.02
+    held = x.editor.evaluate()
+    x.constraints_check.value = False
+    assert no_error(x) and x.editor.constraints is False
+    free = x.editor.evaluate()
+    assert np.abs(held.global_positions() - free.global_positions()).max() > 1e-3
+    x.history.undo.click()
+    assert x.editor.constraints and x.constraints_check.value is True

@@ -11,6 +11,9 @@ skeleton: the defaults come from its joint roles, ``roles=`` overrides them):
   and the refined knots (dots) drawn on them;
 * a **toggle** (CSS class ``mocaplab-staggered-toggle``) between staggered
   playback and non-staggered playback (every refinement zeroed);
+* a **feet planted** box (class ``mocaplab-staggered-constraints``), on by
+  default: the contact constraint layer holds the feet where the clip
+  planted them; unticked, the edit plays without it;
 * sliders for the **succession** offset ``s`` and exponent ``l``
   (``r + s d(i)^l``, depth measured from a chosen joint, by default the
   pelvis of the skeleton's joint roles), the **random**
@@ -173,6 +176,8 @@ class StaggeredExplorer:
             value=ed.tau, min=0.0, max=0.1, step=0.005, readout_format=".3f", description="random tau", **slider
         )
         self.limb_check = W.Checkbox(value=ed.random_by == "limb", description="random per limb", indent=False)
+        self.constraints_check = W.Checkbox(value=ed.constraints, description="feet planted", indent=False)
+        self.constraints_check.add_class("mocaplab-staggered-constraints")
         self.wr_slider = W.FloatSlider(
             value=ed.w_r, min=-0.5, max=1.0, step=0.05, description="exaggerate w_r", **slider
         )
@@ -195,6 +200,7 @@ class StaggeredExplorer:
         self.l_slider.observe(edit(lambda v: self.editor.set_succession(l=v)), names="value")
         self.tau_slider.observe(edit(lambda v: self.editor.set_random(tau=v)), names="value")
         self.limb_check.observe(edit(lambda v: self.editor.set_random(by="limb" if v else "variable")), names="value")
+        self.constraints_check.observe(edit(lambda v: self.editor.set_constraints(v)), names="value")
         self.wr_slider.observe(edit(lambda v: self.editor.set_exaggeration(v)), names="value")
         self.count_slider.observe(edit(lambda v: self.editor.set_pose_count(v)), names="value")
         self.succession_dropdown.observe(edit(lambda v: self.editor.set_succession(joint=v)), names="value")
@@ -269,6 +275,7 @@ class StaggeredExplorer:
         self._syncing = True
         try:
             self._put(self.toggle, ed.staggered)
+            self._put(self.constraints_check, ed.constraints)
             self._put(self.s_slider, ed.s)
             self._put(self.l_slider, ed.l)
             self._put(self.tau_slider, ed.tau)
@@ -395,7 +402,7 @@ class StaggeredExplorer:
             canvas = self.canvas if self.interactive else self.image
             controls = W.VBox(
                 [
-                    W.HBox([self.toggle, self.joint_dropdown]),
+                    W.HBox([self.toggle, self.constraints_check, self.joint_dropdown]),
                     self.s_slider,
                     self.l_slider,
                     self.succession_dropdown,

@@ -1372,7 +1372,9 @@ class EditorParams:
     ``exaggerate(w_r, joints=exaggerate_joints)``,
     ``succession(s, l, joint=joint)`` and
     ``randomize(tau, seed=seed, by=random_by)``, each skipped when neutral;
-    ``staggered`` chooses the playback and ``selected`` the pose overlaid.
+    ``staggered`` chooses the playback, ``constraints`` whether the contact
+    constraint layer holds the feet where they were planted, and
+    ``selected`` the pose overlaid.
     """
 
     max_poses: int | None
@@ -1385,6 +1387,7 @@ class EditorParams:
     w_r: float = 0.0
     exaggerate_joints: tuple[str, ...] | None = None
     staggered: bool = True
+    constraints: bool = True
     selected: int = 0
 
 
@@ -1429,6 +1432,13 @@ class StaggeredEditor(Undoable):
     roles : mapping, optional
         Joint-role overrides (:func:`mocaplab.roles.resolve_roles`) for the
         defaults: the pelvis, the contact joints, the constraint layer.
+    constraints : bool
+        Play the contact constraint layer (feet held where the clip planted
+        them; :class:`ConstraintLayer`): on by default, and
+        :meth:`set_constraints` turns it off and on (an undoable edit).  The
+        layer is built whenever the clip has contacts (``contacts`` of
+        ``extract_options``, default ``"auto"``), so turning it on later
+        costs nothing.
     **extract_options
         Passed to :func:`~mocaplab.staggered.extract`.
 
@@ -1453,6 +1463,7 @@ class StaggeredEditor(Undoable):
         random_by: Literal["variable", "limb"] = "variable",
         curve_joint: str | None = None,
         roles: Mapping[str, Any] | None = None,
+        constraints: bool = True,
         **extract_options: Any,
     ) -> None:
         from .features import analyze
@@ -1468,6 +1479,10 @@ class StaggeredEditor(Undoable):
         self._options = dict(extract_options)
         contacts = self._options.pop("contacts", "auto")
         self.analysis = analyze(motion, contacts=contacts)
+        # the layer is built once with every base (it needs contacts); `constraints` only chooses whether it plays
+        # (analyze has already warned when the clip has no contact to hold)
+        found = self.analysis.contacts
+        self._options["constraints"] = found is not None and bool(np.any(found.mask))
         self.random_joints = None if random_joints is None else tuple(random_joints)
         if random_by not in ("variable", "limb"):
             raise ValueError(f"Expected `random_by` in ('variable', 'limb'), got {random_by!r}")
@@ -1476,7 +1491,12 @@ class StaggeredEditor(Undoable):
         self.curve_joint = curve_joint or default_joint(motion.skeleton)
         self._bases: dict[int | None, StaggeredMotion] = {}
         self.message = ""
-        params = EditorParams(max_poses=None if max_poses is None else int(max_poses), joint=joint, random_by=random_by)
+        params = EditorParams(
+            max_poses=None if max_poses is None else int(max_poses),
+            joint=joint,
+            random_by=random_by,
+            constraints=bool(constraints),
+        )
         self._params = params
         if not self._apply(params):
             raise ValueError(f"Expected a clip the editor can represent: {self.message}")
@@ -1537,6 +1557,11 @@ class StaggeredEditor(Undoable):
     def staggered(self) -> bool:
         """Staggered (True) or non-staggered playback."""
         return self._params.staggered
+
+    @property
+    def constraints(self) -> bool:
+        """The contact constraint layer plays (feet planted; on by default)."""
+        return self._params.constraints
 
     @property
     def selected(self) -> int:
@@ -1652,6 +1677,10 @@ class StaggeredEditor(Undoable):
         """Staggered (True) or non-staggered (refinements zeroed) playback."""
         self._edit("staggered", staggered=bool(on))
 
+    def set_constraints(self, on: bool) -> None:
+        """Play the contact constraint layer (True: feet held where the clip planted them) or not."""
+        self._edit("constraints", constraints=bool(on))
+
     def select(self, k: int) -> None:
         """Select pose ``k`` (for the 3D overlay); successive selections are one undo step."""
         self._edit("select", selected=self.current._pose_index(int(k)))
@@ -1668,8 +1697,8 @@ class StaggeredEditor(Undoable):
         return self.current if self.staggered else self.current.zero_refinements()
 
     def evaluate(self) -> Motion:
-        """The dense motion being played."""
-        return self.current.evaluate(staggered=self.staggered)
+        """The dense motion being played (with the constraint layer when :attr:`constraints`)."""
+        return self.current.evaluate(staggered=self.staggered, constraints=self.constraints)
 
     def curves(self, name: str | None = None) -> dict[str, Any]:
         """Curves of one variable for plotting.

@@ -9,10 +9,20 @@ lessons themselves are (``lessons/conftest.py``, ``tests/lesson_data.py``).
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import settings
+from hypothesis.configuration import set_hypothesis_home_dir
+from hypothesis.database import DirectoryBasedExampleDatabase
+
+# Hypothesis keeps its examples and caches outside the checkout (the test run writes nothing into it).
+_HYPOTHESIS_HOME = Path(tempfile.gettempdir()) / "mocaplab-hypothesis"
+set_hypothesis_home_dir(str(_HYPOTHESIS_HOME))
+settings.register_profile("mocaplab", database=DirectoryBasedExampleDatabase(str(_HYPOTHESIS_HOME / "examples")))
+settings.load_profile("mocaplab")
 
 DATA = Path(__file__).parent / "data"
 LESSON_DIR = Path(__file__).resolve().parent.parent / "lessons"

@@ -387,6 +387,14 @@ def _html_table(header: Sequence[str], rows: Sequence[Sequence[str]], title: str
     return f"<div><b>{html.escape(title)}</b><table><tr>{head}</tr>{body}</table></div>"
 
 
+def _by_name(entries: Sequence[Any], name: str) -> Any:
+    """The entry of a report called ``name`` (KeyError listing the measures)."""
+    for entry in entries:
+        if entry.name == name:
+            return entry
+    raise KeyError(f"No measure {name!r}; measures are {[e.name for e in entries]}")
+
+
 def _fmt(value: float) -> str:
     if not np.isfinite(value):
         return "nan" if np.isnan(value) else ("inf" if value > 0 else "-inf")
@@ -411,10 +419,7 @@ class Quality:
     measures: tuple[Measure, ...]
 
     def __getitem__(self, name: str) -> Measure:
-        for m in self.measures:
-            if m.name == name:
-                return m
-        raise KeyError(f"No measure {name!r}; measures are {[m.name for m in self.measures]}")
+        return _by_name(self.measures, name)
 
     def __iter__(self) -> Iterator[Measure]:
         return iter(self.measures)
@@ -634,10 +639,7 @@ class Comparison:
     rows: tuple[Row, ...]
 
     def __getitem__(self, name: str) -> Row:
-        for r in self.rows:
-            if r.name == name:
-                return r
-        raise KeyError(f"No measure {name!r}; measures are {[r.name for r in self.rows]}")
+        return _by_name(self.rows, name)
 
     def __iter__(self) -> Iterator[Row]:
         return iter(self.rows)

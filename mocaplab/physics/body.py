@@ -1059,7 +1059,7 @@ class Body:
             if hits:
                 owners.extend(int(self.point_owners[i]) for i in hits)
                 offsets.extend(self.point_offsets[i] for i in hits)
-                heights.extend(float(self.point_heights[i]) for i in hits)
+                heights.extend(float(self.point_heights[i]) for i in hits)  # type: ignore[index]  # an array after __post_init__
                 column.extend([k] * len(hits))
             else:
                 owners.append(skeleton.index(name))

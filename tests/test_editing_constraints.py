@@ -310,3 +310,42 @@ def test_hard_pins_over_constraining_a_rigid_segment_are_named(walks):
         edit([w], bent, **opts)
     assert info.value.indices == (0, 1, 3)  # a minimal dependent set, with the segment
     assert edit([w], cons[:2], **opts).hard_residual_space < 1e-6
+
+
+def _pins_in_long_segment(motion, middle_shift):
+    p = motion.pelvis_positions[:, [0, 2]]
+    n = motion.n_frames
+    return [
+        PinPosition(0, 0, p[0], hard=True),
+        PinPosition(0, n // 2, p[n // 2] + np.asarray(middle_shift, float), hard=True),
+        PinPosition(0, n - 1, p[-1], hard=True),
+    ]
+
+
+@pytest.mark.timeout(120)  # the diagnosis by dense rank tests took minutes; bench_laplacian times it
+def test_hard_pins_fighting_a_long_rigid_segment_are_named_quickly(cmu):
+    # 02_06 stands still for 2021 frames (one rigid stationary segment): a hard pin dragged 0.3 m inside it
+    # cannot hold with the hard pin at frame 0 on the same rigid segment.  The diagnosis is made on the
+    # segment's few free modes (bench_laplacian times it; dense rank tests on its rows took minutes)
+    motion = cmu("02_06")
+    result = edit([motion], [])
+    segment = next((a, b) for a, b in result.stationary[0] if a <= motion.n_frames // 2 < b)
+    assert segment[0] == 0 and segment[1] - segment[0] > 2000
+    pins = _pins_in_long_segment(motion, (0.3, 0.0))
+    with pytest.raises(ConstraintError) as info:
+        edit([motion], pins)
+    message = str(info.value)
+    assert f"frames {segment[0]}-{segment[1] - 1}" in message and "rigid stationary segment" in message
+    assert "#1" in message and "#0" in message and "soft" in message
+    assert set(info.value.indices) == {0, 1}
+    assert pins[1] in info.value.constraints and pins[0] in info.value.constraints
+
+
+def test_consistent_hard_pins_on_a_long_rigid_segment_are_redundant_not_conflicting(cmu):
+    motion = cmu("02_06")
+    pins = _pins_in_long_segment(motion, (0.0, 0.0))
+    result = edit([motion], pins)
+    assert any("#1" in note and "redundant" in note for note in result.notes)
+    assert result.hard_residual_space < 1e-6
+    for pin in pins:
+        np.testing.assert_allclose(result.paths[0][pin.frame], pin.position, atol=1e-6)

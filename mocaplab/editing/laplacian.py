@@ -907,7 +907,12 @@ class HardRows:
                     f"Conflicting hard {self.what} constraints: {_label_text(r.label)} is determined by "
                     + " and ".join(_label_text(b) for b in r.implied_by)
                     + f", and its target is {miss:.3g} {unit} away from what they give (they cannot all hold "
-                    "exactly). Make one of them soft (hard=False), move it back, or remove it.",
+                    "exactly). Make one of them soft (hard=False), move it back, or remove it"
+                    + (
+                        "; or let the segment deform (stationary=None, or segments that leave these frames out)."
+                        if any(isinstance(b, str) and "rigid stationary segment" in b for b in r.implied_by)
+                        else "."
+                    ),
                     [lab[1] if isinstance(lab, tuple) else lab for lab in labels],
                     [lab[0] for lab in labels if isinstance(lab, tuple)],
                 )
@@ -937,14 +942,22 @@ class HardRows:
         )
 
 
-def independent_hard_rows(H: sp.spmatrix, groups: Sequence[tuple[Any, NDArray[np.int64]]], what: str) -> HardRows:
+def independent_hard_rows(
+    H: sp.spmatrix,
+    groups: Sequence[tuple[Any, NDArray[np.int64]]],
+    what: str,
+    *,
+    known: Sequence[Redundancy] = (),
+) -> HardRows:
     """Split hard rows into an independent set to factorise and redundant rows to check (:class:`HardRows`).
 
     ``groups`` are ``(label, rows)`` pairs in order of preference: when rows
     depend on each other, the rows of the *later* group are the ones left
     out (put automatic rows such as rigid segments first, then the user's
-    constraints in index order).  A sparse Cholesky screen
-    (:func:`full_row_rank_screen`) clears the usual case with one sparse
+    constraints in index order).  ``known``: redundancies found beforehand
+    by structure (pins inside a rigid segment, :func:`segment_redundancy`);
+    their rows are left out from the start.  A sparse Cholesky screen
+    (:func:`full_row_rank_screen`) then clears the usual case with one sparse
     factorisation; otherwise a minimal dependent set of groups is found
     (dense rank tests on the groups that share unknowns), the redundant
     rows of its last group are left out, and the screen runs again.
@@ -952,10 +965,12 @@ def independent_hard_rows(H: sp.spmatrix, groups: Sequence[tuple[Any, NDArray[np
     H = sp.csr_matrix(H)
     m = H.shape[0]
     keep = np.ones(m, bool)
-    redundant: list[Redundancy] = []
+    redundant: list[Redundancy] = list(known)
+    for r in known:
+        keep[r.rows] = False
     labelled = tuple((lab, np.asarray(rows, np.int64)) for lab, rows in groups)
-    if m == 0 or full_row_rank_screen(H):
-        return HardRows(H, keep, (), what, labelled)
+    if m == 0 or full_row_rank_screen(H[np.flatnonzero(keep)] if known else H):
+        return HardRows(H, keep, tuple(redundant), what, labelled)
     for _ in range(m):
         live = [(lab, rows[keep[rows]]) for lab, rows in groups]
         index = [i for i, (_, rows) in enumerate(live) if len(rows)]
@@ -983,6 +998,73 @@ def independent_hard_rows(H: sp.spmatrix, groups: Sequence[tuple[Any, NDArray[np
         if full_row_rank_screen(H[np.flatnonzero(keep)]):
             break
     return HardRows(H, keep, tuple(redundant), what, labelled)
+
+
+def segment_redundancy(
+    H: sp.csr_matrix,
+    user: Sequence[tuple[Any, NDArray[np.int64]]],
+    segments: Sequence[tuple[Any, NDArray[np.int64], Array]],
+) -> list[Redundancy]:
+    """Pins that a rigid segment and earlier pins already determine, found from the segment's few free modes.
+
+    A rigid stationary segment leaves its frames only a few degrees of
+    freedom: a similarity in phase 1 (4), a translation in phase 2 (2).  On
+    the segment, the positions are ``p = B c`` (plus a fixed particular
+    solution) with ``B`` the basis of those modes, so a hard row fixing one
+    unknown of the segment (a position pin) is a row of ``B``, and whether
+    it is implied by the rigid rows and the earlier pins is a rank test on a
+    matrix of at most a handful of columns, instead of dense rank tests on
+    the thousands of rows of a long segment (:func:`_dependent_groups`).
+
+    Parameters
+    ----------
+    H : sparse (m, n)
+        Every hard row.
+    user : sequence of (label, rows)
+        The user's hard constraints in order of preference (later ones are
+        left out first).
+    segments : sequence of (label, unknowns, basis)
+        Per rigid segment: its label, the unknowns of its frames (shape
+        (u,)) and the basis of its free modes on them (shape (u, d)).
+
+    Returns
+    -------
+    list of Redundancy
+        Per constraint and segment, the rows left out and what implies them
+        (the segment and the pins kept before them).
+    """
+    if not segments or not user:
+        return []
+    H = sp.csr_matrix(H)
+    nnz = np.diff(H.indptr)
+    out: list[Redundancy] = []
+    for seg_label, unknowns, basis in segments:
+        where = np.full(H.shape[1], -1, dtype=np.int64)
+        where[unknowns] = np.arange(len(unknowns))
+        scale = max(float(np.abs(basis).max(initial=0.0)), 1e-300)
+        kept_rows: list[Array] = []
+        kept_labels: list[Any] = []
+        for label, rows in user:
+            dropped = []
+            for r in np.asarray(rows, np.int64):
+                if nnz[r] != 1:
+                    continue
+                col = int(H.indices[H.indptr[r]])
+                if where[col] < 0:
+                    continue
+                row = basis[where[col]] * float(H.data[H.indptr[r]])
+                trial = np.vstack([*kept_rows, row])
+                tol = 1e-9 * scale * max(1.0, float(np.abs(H.data[H.indptr[r]])))
+                if len(kept_rows) >= basis.shape[1] or np.linalg.matrix_rank(trial, tol=tol) <= len(kept_rows):
+                    dropped.append(int(r))
+                else:
+                    kept_rows.append(row)
+                    if not any(lab is label for lab in kept_labels):
+                        kept_labels.append(label)
+            if dropped:
+                by = (seg_label, *[lab for lab in kept_labels if lab is not label])
+                out.append(Redundancy(label, np.asarray(dropped, np.int64), by))
+    return out
 
 
 class KKT:
@@ -1168,6 +1250,45 @@ class SpatialSolver:
         self._L0full = np.zeros(max(self.layout.total - 1, 0))
         self._L0full[steps] = self._L0
         self._interior = self.layout.interior()
+        self._segment_modes = self._rigid_segment_modes()
+
+    def _rigid_segment_modes(self) -> tuple[list[tuple[str, NDArray[np.int64], Array]], ...]:
+        """Per phase, each rigid segment's label, unknowns and the basis of the motions its rigid rows leave free.
+
+        Phase 1: the similarities of the segment's undeformed positions (its
+        Laplacian coordinates are similarity invariant), kept only where the
+        rigid rows verifiably vanish on them (a segment of coincident frames
+        has other free modes: left to the generic test).  Phase 2: the two
+        translations (the steps are held).
+        """
+        phase1: list[tuple[str, NDArray[np.int64], Array]] = []
+        phase2: list[tuple[str, NDArray[np.int64], Array]] = []
+        P = self.p0.reshape(-1, 2)
+        n = 2 * self.layout.total
+        groups1 = dict(self.rigid_groups)
+        for k, segs in enumerate(self.segments):
+            for a, b in segs:
+                label = f"rigid stationary segment of character {k}, frames {a}-{b - 1}"
+                frames = self.layout.frame(k, 0) + np.arange(a, b)
+                unknowns = np.stack([2 * frames, 2 * frames + 1], axis=1).reshape(-1)
+                F = len(frames)
+                tx = np.tile([1.0, 0.0], F)
+                tz = np.tile([0.0, 1.0], F)
+                if b - a >= 2:
+                    phase2.append((label, unknowns, np.stack([tx, tz], axis=1)))
+                rows = groups1.get(label)
+                u = P[frames] - P[frames].mean(axis=0)
+                size = float(np.linalg.norm(u))
+                if rows is None or size < 1e-6:
+                    continue
+                basis = np.stack([tx, tz, u.reshape(-1) / size, rot90(u).reshape(-1) / size], axis=1)
+                full = np.zeros((n, 4))
+                full[unknowns] = basis
+                Rs = self.R[rows]
+                residual = float(np.abs(Rs @ full).max(initial=0.0))
+                if residual <= 1e-9 * max(1.0, float(abs(Rs).max())):
+                    phase1.append((label, unknowns, basis))
+        return phase1, phase2
 
     def factorize(
         self, soft: Sequence[Rows], weights: Sequence[float], hard: Sequence[Rows], labels: Sequence[Any]
@@ -1189,7 +1310,9 @@ class SpatialSolver:
             user.append((lab, np.arange(r, r + block.n)))
             r += block.n
         rigid = [(lab, rows + r) for lab, rows in self.rigid_groups]
-        hard1 = independent_hard_rows(H, rigid + user, "spatial")  # rigid rows kept first
+        # pins inside a rigid segment: which are implied is decided on the segment's few free modes
+        known1 = segment_redundancy(H, user, self._segment_modes[0])
+        hard1 = independent_hard_rows(H, rigid + user, "spatial", known=known1)  # rigid rows kept first
         BwT = Bw.T.tocsr()
         BtB = (BwT @ Bw).tocsr()
         C = sp.vstack([Bw, H], format="csr")
@@ -1201,7 +1324,8 @@ class SpatialSolver:
         if self.scale_compensation:
             H2 = sp.vstack([Hu, self.R2], format="csr")
             rigid2 = [(lab, rows + Hu.shape[0]) for lab, rows in self.rigid_groups2]
-            hard2 = independent_hard_rows(H2, rigid2 + user, "spatial")
+            known2 = segment_redundancy(H2, user, self._segment_modes[1])
+            hard2 = independent_hard_rows(H2, rigid2 + user, "spatial", known=known2)
             G2 = gauge_rows(self.Q2, self.owner2, sp.vstack([Bw, H2], format="csr"), K, self._primary2)
             scale = KKT(self.AhtAh + BtB, sp.vstack([hard2.kept, G2], format="csr"))
         metric = metric_targets(soft, weights, hard, n)

@@ -67,23 +67,24 @@ def _pins(motion: Motion, *, bend: float, squeeze: float) -> list[PinPosition]:
     """Pins a user would set: a bend drags the middle of the path sideways, a squeeze pulls the end in.
 
     ``bend`` moves the middle frame sideways by that fraction of the chord (at
-    least 0.3 m, so a clip on the spot is bent too), with the first frame
-    pinned hard and the last one soft (a standing clip's path is one rigid
-    stationary segment, in which a hard middle and a hard end would
-    conflict); ``squeeze`` pins the first frame and pulls the last one
-    towards it by that fraction of the chord, both hard.
+    least 0.3 m, so a clip on the spot is bent too); ``squeeze`` pulls the
+    last frame towards the first by that fraction of the chord.  The first
+    frame is pinned hard, the dragged ones soft: a clip that stands still
+    for a while has rigid stationary segments (Kim et al. §4.1), in which two
+    hard pins that disagree conflict, and the diagnosis of such a conflict
+    is slow on long segments.
     """
     p = motion.pelvis_positions[:, [0, 2]]
     n = len(p)
     chord = p[-1] - p[0]
     length = float(np.linalg.norm(chord))
     if squeeze:
-        return [PinPosition(0, 0, p[0], hard=True), PinPosition(0, n - 1, p[-1] - squeeze * chord, hard=True)]
+        return [PinPosition(0, 0, p[0], hard=True), PinPosition(0, n - 1, p[-1] - squeeze * chord, hard=False)]
     along = chord / length if length > 1e-6 else np.array([1.0, 0.0])
     side = np.array([-along[1], along[0]])
     return [
         PinPosition(0, 0, p[0], hard=True),
-        PinPosition(0, n // 2, p[n // 2] + side * max(bend * length, 0.3), hard=True),
+        PinPosition(0, n // 2, p[n // 2] + side * max(bend * length, 0.3), hard=False),
         PinPosition(0, n - 1, p[-1], hard=False),
     ]
 

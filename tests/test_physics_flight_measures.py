@@ -67,3 +67,18 @@ def test_touch_up_states_carry_their_flight_measures(cmu) -> None:
     assert again.gravity == pytest.approx(f.gravity, rel=1e-12) and again.momentum_spread == f.momentum_spread
     s.forward()
     assert s.current.flights != s.input.flights  # a flight step changes the flight
+
+
+def test_a_flight_too_short_for_a_parabola_says_so(cmu) -> None:
+    walk = cmu("16_15").resample(30)
+    body = Body.from_skeleton(walk)
+    m, contacts = _thrown(walk, 9.81)
+    mask = np.ones((m.n_frames, 1), dtype=bool)
+    mask[10:12] = False  # two frames in the air
+    (two,) = flight_measures(m, body, Contacts(("LeftFoot",), mask, 30.0))
+    assert (two.frames, two.fitted) == (2, False) and np.isnan(two.gravity)
+    assert two.gravity_text() == "too short to fit (2 frames)"
+    mask[12] = False  # three frames fix a parabola exactly
+    (three,) = flight_measures(m, body, Contacts(("LeftFoot",), mask, 30.0))
+    assert three.fitted and three.gravity == pytest.approx(9.81, rel=1e-6)
+    assert three.gravity_text() == "9.81 m/s²"

@@ -777,3 +777,34 @@ def test_frames_without_a_zmp_are_counted_never_hidden(walk30):
     nothing = Balance(**{**fields, "ground": np.zeros_like(b.ground), "distance": np.full_like(b.distance, np.nan)})
     lost = Balance(**{**fields, "distance": np.full_like(b.distance, np.nan)})
     assert nothing.mean_distance == 0.0 and lost.mean_distance == float("inf") and lost.dropped == int(b.ground.sum())
+
+
+def test_clips_with_no_frame_between_their_ends_are_refused(walk30, cmu):
+    """Each end's 0.1 s is never corrected: a clip with nothing between gets a clear error, not a silent no-op."""
+    for n in (3, 4, 5, 6):
+        clip = walk30[40 : 40 + n]
+        assert np.isfinite(balance(clip).mean_distance)  # the analysis itself has an answer
+        with pytest.raises(ValueError, match=rf"`motion` of at least 7 frames \(0.23 s at 30 fps\), got {n}: the first"):
+            touch_up(clip)
+    assert start(walk30[40:47]).edge_frames == 3
+    walk120 = cmu("16_15")
+    with pytest.raises(ValueError, match=r"at least 21 frames \(0.17 s at 120 fps\), got 20"):
+        start(walk120[160:180])
+    assert start(walk120[160:181]).edge_frames == 10  # the same 0.1 s at each end at any rate
+
+
+def test_the_error_without_the_uncorrected_ends_is_reported_beside_it(walk30):
+    from mocaplab.refinement import refine
+
+    c = foot_contacts(walk30)
+    h = touch_up(refine(issue_bend(walk30, 0.4), contacts=c, reference=walk30), contacts=c, iterations=2)
+    n = walk30.n_frames
+    for k, st in enumerate(h.states):
+        e = st.edge_frames
+        assert e == 3 and st.interior.sum() == n - 6 and not st.interior[:3].any() and not st.interior[-3:].any()
+        assert st.interior_error == pytest.approx(np.nanmean(st.violation[e : n - e]), rel=1e-12)
+        assert st.mean_zmp_distance_interior == pytest.approx(np.nanmean(st.zmp_distance[e : n - e]), rel=1e-12)
+        assert h.interior_errors[k] == st.interior_error
+        assert h.mean_zmp_distance_interior[k] == st.mean_zmp_distance_interior
+    # the ends keep what the input had there, so the whole and the interior tell different stories
+    assert h.interior_errors[h.best] != h.errors[h.best]

@@ -125,14 +125,19 @@ def jump(mocap_dir):
 
 
 def _bold(text: str) -> list[float]:
-    return [float(part.split("</b>")[0]) for part in text.split("<b>")[1:]]
+    """The numbers shown in bold (a unit after the number is dropped)."""
+    return [float(part.split("</b>")[0].split()[0]) for part in text.split("<b>")[1:]]
 
 
 def test_header_shows_ground_and_flight_measures(jump, bent):
     j, contacts = jump
     w = TouchUpStepper(j, viewer=False, contacts=contacts, footplants="ik")
     assert "mocaplab-touchup-flight" in w.flight_label._dom_classes and w.flight_label.layout.display is None
-    assert w.mean_label.value.startswith("ground: mean ZMP distance")
+    assert w.mean_label.value.startswith("mean ZMP distance over ground frames")
+    # beside the whole, the mean without the end frames no step corrects
+    cur = w.session.current
+    assert f"{1000 * cur.mean_zmp_distance_interior:.2f} mm without the {cur.edge_frames} frames" in w.mean_label.value
+    assert cur.mean_zmp_distance_interior != cur.mean_zmp_distance
 
     def shown() -> tuple[float, float, float]:
         (f,) = w.session.current.flights
@@ -152,6 +157,23 @@ def test_header_shows_ground_and_flight_measures(jump, bent):
     # a clip without flights: no flight line
     walk = TouchUpStepper(bent, viewer=False, footplants="ik")
     assert walk.session.current.flights == () and walk.flight_label.layout.display == "none"
+
+
+def test_a_two_frame_flight_says_it_is_too_short_to_fit(jump):
+    from mocaplab.contacts import Contacts
+    from mocaplab.physics import flight_stages
+
+    j, contacts = jump
+    ((a, b),) = flight_stages(contacts)
+    mask = np.array(contacts.mask, copy=True)
+    mask[a + 2 : b] = mask[b]  # the flight ends after two frames
+    short = Contacts(contacts.joints, mask, contacts.fps)
+    with pytest.warns(UserWarning):  # the feet planted in the air slide
+        w = TouchUpStepper(j, viewer=False, contacts=short, footplants="ik")
+    (f,) = w.session.current.flights
+    assert (f.stop - f.start, f.fitted) == (2, False)
+    assert "fitted gravity <b>too short to fit (2 frames)</b> (input too short to fit (2 frames)" in w.flight_label.value
+    assert "nan" not in w.flight_label.value
 
 
 def test_adjustment_labels_are_escaped(bent):

@@ -12,9 +12,12 @@ The widget is a thin view over :class:`mocaplab.physics.TouchUpSession`:
 * a header with the measures of the step shown: on the **ground**, the mean
   ZMP distance over the ground frames (class ``mocaplab-touchup-mean``; a
   flight step may raise it: the frames next to a flight take the flight's
-  change of velocity); for each **flight** (class
+  change of velocity), and the same without the frames at each end of the
+  clip that no step corrects (:attr:`~mocaplab.physics.TouchUpState.edge_frames`);
+  for each **flight** (class
   ``mocaplab-touchup-flight``), the gravity fitted to the centre of mass
-  (9.81 m/s^2 when it flies a parabola) and the spread of the angular
+  (9.81 m/s^2 when it flies a parabola; "too short to fit" for a flight of
+  fewer than 3 frames) and the spread of the angular
   momentum about its mean (0 when constant), computed by the core
   (:attr:`mocaplab.physics.TouchUpState.flights`);
 * a **schedule table** edits each adjustment's link sets (joint names or
@@ -264,7 +267,7 @@ class TouchUpStepper:
         The core stepper every control forwards to.
     step_button, back_button, reset_button : ipywidgets.Button
     mean_label : ipywidgets.HTML
-        "ground: mean ZMP distance ... mm" of the current step (ground frames only).
+        "mean ZMP distance over ground frames ... mm" of the current step, whole and without the end frames.
     flight_label : ipywidgets.HTML
         Fitted gravity and angular-momentum spread of each flight (hidden without flights).
     export : ExportControl
@@ -426,8 +429,9 @@ class TouchUpStepper:
         for k, (f, f0) in enumerate(zip(self.session.current.flights, self.session.input.flights, strict=True)):
             fps = self.session.input.motion.fps
             lines.append(
-                f"flight {k + 1} ({f.start / fps:.2f}-{f.stop / fps:.2f} s): fitted gravity <b>{f.gravity:.2f}</b> "
-                f"m/s² (input {f0.gravity:.2f}, ballistic 9.81) &nbsp;|&nbsp; angular momentum spread "
+                f"flight {k + 1} ({f.start / fps:.2f}-{f.stop / fps:.2f} s): fitted gravity "
+                f"<b>{html.escape(f.gravity_text())}</b> (input {html.escape(f0.gravity_text())}, ballistic 9.81 m/s²)"
+                " &nbsp;|&nbsp; angular momentum spread "
                 f"<b>{f.momentum_spread:.3f}</b> kg m²/s (input {f0.momentum_spread:.3f}, ballistic 0)"
             )
         return "<br>".join(lines)
@@ -465,9 +469,11 @@ class TouchUpStepper:
         history = s.history
         best = history.best
         dropped = f"; {cur.dropped} ground frames without a ZMP left out" if cur.dropped else ""
+        inner = 1000.0 * cur.mean_zmp_distance_interior
         self.mean_label.value = (
-            f"ground: mean ZMP distance <b>{mm:.2f}</b> mm (input {mm0:.2f} mm{dropped}) &nbsp;|&nbsp; "
-            f"best so far: step {best}, error {1000.0 * history.states[best].error:.2f} mm"
+            f"mean ZMP distance over ground frames <b>{mm:.2f}</b> mm (input {mm0:.2f} mm{dropped}; "
+            f"{inner:.2f} mm without the {cur.edge_frames} frames at each end, which no step corrects) "
+            f"&nbsp;|&nbsp; best so far: step {best}, error {1000.0 * history.states[best].error:.2f} mm"
         )
         self.flight_label.value = self._flight_text()
         self.flight_label.layout.display = None if cur.flights else "none"

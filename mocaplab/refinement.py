@@ -295,7 +295,10 @@ def _plant_goal_targets(
     Notes
     -----
     Each interval's bump ``b_k`` (:func:`interval_weights`) carries its own
-    field extended over the blending windows (:func:`_window_targets`); a
+    field: the plant inside the interval, and around it the joint's own
+    position plus the correction it needs at the interval's nearest frame
+    (so a landing foot is not pulled toward its plant before it gets there:
+    the correction is ``b_k (T(b) - p(b))``, as smooth as the ramp); a
     joint's goal is the bump-weighted mean of its fields with weight
     ``min(1, sum_k b_k)``, so the blended goal ``cur + w (T - cur) = cur +
     sum_k b_k (T_k - cur)`` stays continuous even where the ramps of two
@@ -320,9 +323,11 @@ def _plant_goal_targets(
     if heights is not None:
         own[:, 1] = heights[frames, col]
         held[:, 1] = heights[nearest, col]
-    carried = positions[frames, col] + (held - positions[nearest, col])
+    # around the interval the joint keeps its own motion plus the correction it needs at the
+    # interval's nearest frame, faded in by the bump: it is never pulled toward the plant before it
+    # gets there (a foot in the air just before heel strike), so the correction is as smooth as the ramp
+    field = positions[frames, col] + (held - positions[nearest, col])
     w = bump[:, None]
-    field = (1.0 - w) * carried + w * own
     inside = (frames >= fa) & (frames < fb)
     field[inside] = own[inside]
     slot = frames * n_cols + col  # flat (frame, column) index

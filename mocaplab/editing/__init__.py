@@ -169,7 +169,7 @@ from .constraints import (
 )
 from .energy import Energies, deformation_energy
 from .paths import MotionPath, stationary_segments
-from .scene import EditResult, SceneEditor
+from .scene import EditResult, PathJumpWarning, SceneEditor
 from .scene import edit as _continuous_edit
 
 if TYPE_CHECKING:
@@ -192,6 +192,7 @@ __all__ = [
     "Box",
     "Constraint",
     "ConstraintError",
+    "PathJumpWarning",
     "DiscreteEditor",
     "DiscreteOptions",
     "Disk",

@@ -113,6 +113,8 @@ __all__ = [
     "flip_step",
     "detect_tangent_flips",
     "heading_changes",
+    "TURN_RATE",
+    "STEADY_SPEED",
 ]
 
 Array = NDArray[np.float64]
@@ -1655,6 +1657,52 @@ def _procrustes_angle(orig: Array, new: Array) -> float:
     return float(np.arctan2(np.sum(y * rot90(x)), np.sum(y * x)))
 
 
+#: Default fastest turn (degrees per second) a path edit adds to a character's heading where the heading is
+#: not the deformed tangent's own: across stationary segments, gaps and jitter (:func:`heading_changes`).
+TURN_RATE = 60.0
+
+
+#: Speed (m/s) above which a frame's deformed tangent sets the heading unblended (both before and after the edit):
+#: slower, the direction of a central difference is mostly sway and capture noise.
+STEADY_SPEED = 0.5
+
+
+def _rate_limited(d: Array, step: float, movable: NDArray[np.bool_]) -> tuple[Array, NDArray[np.bool_]]:
+    """``d`` with movable frames around each step larger than ``step`` re-interpolated until none is (held at the ends).
+
+    Each pass flags, on each side of every step still too large, the
+    nearest movable frame not yet flagged (never past an unmovable one), and
+    interpolates the flagged frames from the others: a blend widens one
+    frame per side per pass, so it ends as narrow as the rate allows.  A
+    step between unmovable frames (the tangents of a steady walk) is kept.
+    Returns the smoothed values and the frames that were interpolated.
+    """
+    F = len(d)
+    flag = np.zeros(F, bool)
+    out = d
+    stuck = np.zeros(max(F - 1, 0), bool)
+    for _ in range(F):
+        bad = np.flatnonzero((np.abs(np.diff(out)) > step + 1e-12) & ~stuck)
+        if not len(bad):
+            break
+        for i in bad:
+            grew = False
+            for j, side in ((int(i), -1), (int(i) + 1, 1)):
+                while 0 <= j < F and flag[j]:
+                    j += side
+                if 0 <= j < F and movable[j]:
+                    flag[j] = grew = True
+            if not grew:
+                stuck[i] = True
+        good = ~flag
+        idx = np.flatnonzero(good)
+        if len(idx) < 2:
+            out = np.full(F, float(np.mean(d[idx])) if len(idx) else float(np.mean(d)))
+            break
+        out = np.interp(np.arange(F), idx, d[idx])
+    return out, flag
+
+
 def heading_changes(
     path: MotionPath,
     new_positions: Array,
@@ -1662,6 +1710,7 @@ def heading_changes(
     segments: Sequence[tuple[int, int]] = (),
     flip_rate: float | None = FLIP_RATE,
     flip_window: float = 1.0,
+    turn_rate: float | None = TURN_RATE,
 ) -> tuple[Array, NDArray[np.bool_], Array]:
     """Turn of the tangent direction per frame after a deformation.
 
@@ -1672,42 +1721,76 @@ def heading_changes(
     new_positions : ndarray, shape (F, 2)
         The deformed positions.
     segments : sequence of (start, stop)
-        Rigid stationary segments (half-open): they take their best-fit rotation.
+        Rigid stationary segments (half-open): each turns as one (a constant
+        heading change, so planted feet stay planted).
     flip_rate : float or None
-        Degrees per second (:func:`detect_tangent_flips`); ``None``: no repair.
+        Degrees per second (:func:`detect_tangent_flips`); ``None``: no
+        repair (neither of flips nor of the turn rate).
     flip_window : float
         Seconds: the longest reversed stretch repaired as one.
+    turn_rate : float or None
+        Degrees per second (default :data:`TURN_RATE`): the heading change
+        never turns faster than this between two frames; where it would (a
+        stationary segment meeting the moving path, the noisy tangents of a
+        slow stretch), the frames around the step are interpolated from
+        their neighbours until it does not.  ``None``: no limit.
 
     Returns
     -------
     dtheta : ndarray, shape (F,)
         Yaw change (radians) of the path direction at each frame, continuous
-        (unwrapped).  Degenerate (stationary) and flipped frames take the
-        value interpolated from their neighbours; rigid stationary segments
-        take their best-fit rotation.
+        (unwrapped).
     flipped : ndarray of bool, shape (F,)
         Frames whose tangent flipped and was repaired.
     tangents : ndarray, shape (F, 2)
-        Repaired unit tangent directions of the deformed path.
+        Unit directions of the deformed path the heading follows.
+
+    Notes
+    -----
+    Where the heading comes from, per frame:
+
+    * moving frames (tangent not degenerate, not flipped, outside the
+      stationary segments): the turn of the deformed tangent against the
+      undeformed one (section 4.1);
+    * degenerate and flipped frames: interpolated from the moving ones;
+    * a stationary segment: one constant, the mean of the interpolated
+      values at the moving frames on either side of it.  A standing
+      character's path is millimetres of sway: the rotation the solver gives
+      its rigid segment (and the direction of its tangents) is set by that
+      noise, and followed it turned a standing person round in one frame.
+      A clip with no moving frame keeps the best-fit rotation of its whole
+      path;
+    * then the turn-rate limit blends every step faster than ``turn_rate``
+      (segment boundaries, gaps, jitter), moving only frames whose heading
+      is not a steady tangent's: frames in segments, degenerate, flipped,
+      or slower than :data:`STEADY_SPEED` before or after the edit (a
+      walk's own sharp turn is followed as it is).
     """
     new_positions = np.asarray(new_positions, dtype=float)
     t0 = path.tangents
     t1 = central_tangents(new_positions)
     valid = ~path.degenerate
     flipped = detect_tangent_flips(t0, t1, fps=path.fps, rate=flip_rate, window=flip_window, valid=valid)
-    good = valid & ~flipped
     F = path.n_frames
+    inside = np.zeros(F, bool)
+    segs = [(int(a), int(b)) for a, b in segments if b - a >= 2]
+    for a, b in segs:
+        inside[a:b] = True
+    good = valid & ~flipped & ~inside
     if good.any():
         idx = np.flatnonzero(good)
         d = np.unwrap(wrap_angle(ground_angle(t1[idx]) - ground_angle(t0[idx])))
         dtheta = np.interp(np.arange(F), idx, d)
+        for a, b in segs:
+            ends = [dtheta[i] for i in (a - 1, b) if 0 <= i < F]
+            dtheta[a:b] = float(np.mean(ends)) if ends else float(np.mean(dtheta[a:b]))
     else:
         dtheta = np.full(F, _procrustes_angle(path.positions, new_positions))
-    for a, b in segments:
-        if b - a >= 2:
-            ang = _procrustes_angle(path.positions[a:b], new_positions[a:b])
-            ref = dtheta[a:b].mean()
-            dtheta[a:b] = ang + 2 * np.pi * np.round((ref - ang) / (2 * np.pi))
+    if turn_rate is not None and flip_rate is not None:
+        step = flip_step(turn_rate, path.fps, name="turn_rate")
+        steady = 2.0 * STEADY_SPEED / path.fps
+        fast = np.minimum(np.linalg.norm(t0, axis=1), np.linalg.norm(t1, axis=1)) >= steady
+        dtheta, _ = _rate_limited(dtheta, step, ~(good & fast))
     c, s = np.cos(dtheta), np.sin(dtheta)
     u = t0 / np.linalg.norm(t0, axis=1, keepdims=True)
     tang = c[:, None] * u + s[:, None] * rot90(u)

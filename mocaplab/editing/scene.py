@@ -102,6 +102,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._warnings import warn
 from ..motion import FPS_RANGE, Motion
 from ..refinement import EndEffector
 from ..undo import Undoable, UndoStack
@@ -120,7 +121,7 @@ from .laplacian import (
 from .paths import MotionPath, apply_path, contact_joints, laplacian_coordinates, stationary_segments, with_roles
 from .timewarp import TimeFactors, TimeSolver, temporal_rows
 
-__all__ = ["edit", "SceneEditor", "EditResult", "RefineCache", "MAX_CLOCK_FPS", "MAX_CLOCK_FRAMES"]
+__all__ = ["edit", "SceneEditor", "EditResult", "RefineCache", "PathJumpWarning", "MAX_CLOCK_FPS", "MAX_CLOCK_FRAMES"]
 
 Array = NDArray[np.float64]
 
@@ -828,6 +829,47 @@ def _check_clock_fps(fps: Any) -> None:
         )
 
 
+class PathJumpWarning(UserWarning):
+    """A path edit moves a character's path joint much further in one frame than the input ever did.
+
+    It happens where the constraints force it: a rigid stationary segment
+    dragged away from a hard pin a few frames before it (or two rigid
+    segments pulled apart across a short gap).  The message names the
+    frames, the jump and what holds them.
+    """
+
+
+#: A path step is a jump when longer than this factor of the input's longest step plus :data:`_JUMP_SLACK` m.
+_JUMP_FACTOR = 1.5
+_JUMP_SLACK = 0.002
+
+
+def _path_jumps(result: EditResult) -> list[str]:
+    """Messages for each character whose edited path makes a one-frame jump (see :class:`PathJumpWarning`)."""
+    out = []
+    for k, (before, after) in enumerate(zip(result.original_paths, result.paths, strict=True)):
+        old = np.linalg.norm(np.diff(before.positions, axis=0), axis=1)
+        new = np.linalg.norm(np.diff(after, axis=0), axis=1)
+        limit = _JUMP_FACTOR * float(old.max(initial=0.0)) + _JUMP_SLACK
+        if not len(new) or float(new.max()) <= limit:
+            continue
+        i = int(np.argmax(new))
+        near = range(i - 3, i + 5)
+        segs = [f"frames {a}-{b - 1} are a rigid stationary segment" for a, b in result.stationary[k]
+                if a in near or b in near]
+        pins = [f"#{n} holds frame {f} hard" for n, c in enumerate(result.constraints)
+                if getattr(c, "hard", False) and hasattr(c, "frame_refs")
+                for kk, f in c.frame_refs() if kk == k and f in near]
+        cause = "; ".join(segs + pins) or "the constraints pull these frames apart"
+        out.append(
+            f"character {k}: the path edit moves the path joint {1000 * float(new[i]):.0f} mm between frames {i} and "
+            f"{i + 1} (the input's longest one-frame step is {1000 * float(old.max()):.0f} mm): {cause}. The body "
+            "pops there; make the pin soft (hard=False), move the targets closer, or let the segment deform "
+            "(stationary=None or shorter segments)."
+        )
+    return out
+
+
 def edit(characters: Any, constraints: Sequence[Any] = (), **options: Any) -> EditResult:
     """Edit the paths and timing of ``characters`` under ``constraints``.
 
@@ -848,8 +890,17 @@ def edit(characters: Any, constraints: Sequence[Any] = (), **options: Any) -> Ed
     >>> res = edit([walk], [PinPosition(0, 0, (0, 0), hard=True), PinPosition(0, 200, (1.0, 3.0))])  # doctest: +SKIP
     >>> res.paths[0].shape  # doctest: +SKIP
     (471, 2)
+
+    Warns
+    -----
+    PathJumpWarning
+        Where the constraints force a one-frame jump of a path (a rigid
+        segment dragged from a hard pin next to it), naming the frames.
     """
-    return SceneEditor(characters, constraints, **options).result
+    result = SceneEditor(characters, constraints, **options).result
+    for message in _path_jumps(result):
+        warn(message, PathJumpWarning)
+    return result
 
 
 class _Lazy(Sequence):

@@ -85,8 +85,6 @@ c.Spawner.environment = {
     "OMP_NUM_THREADS": THREADS,
     "OPENBLAS_NUM_THREADS": THREADS,
     "MKL_NUM_THREADS": THREADS,
-    # no display on a server: VTK renders off screen
-    "PYVISTA_OFF_SCREEN": "true",
 }
 if env("MOCAPLAB_DATA_DIR"):
     c.Spawner.environment["MOCAPLAB_DATA_DIR"] = env("MOCAPLAB_DATA_DIR")

@@ -746,7 +746,39 @@ print("@@json@@" + _j.dumps({{"frame": _v.frame, "time": _v.time, "playing": _v.
 del _j, _n, _v, _l
 """
 
-def play_viewer(lesson: LessonPage, var: str, *, seconds: float = 3.0, settle: float = 2.0) -> dict[str, Any]:
+
+def kernel_pid(lesson: LessonPage) -> int:
+    """Process id of the lesson's kernel."""
+    out = lesson.kernel_eval("import os as _os; print('@@pid@@', _os.getpid()); del _os")
+    return int([x for x in out.splitlines() if x.startswith("@@pid@@")][-1].split()[1])
+
+
+def process_cpu_seconds(pid: int) -> float:
+    """User plus system CPU seconds used so far by process ``pid`` (psutil, or ``/proc`` without it)."""
+    try:
+        import psutil
+    except ImportError:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    times = psutil.Process(pid).cpu_times()
+    return float(times.user + times.system)
+
+
+def process_rss_mb(pid: int) -> float:
+    """Resident memory of process ``pid`` in MB (psutil, or ``/proc`` without it)."""
+    try:
+        import psutil
+    except ImportError:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+        return float("nan")
+    return psutil.Process(pid).memory_info().rss / 2**20
+
+
+def play_viewer(
+    lesson: LessonPage, var: str, *, seconds: float = 3.0, settle: float = 2.0, pid: int | None = None
+) -> dict[str, Any]:
     """Play the lesson's ``MotionViewer`` called ``var`` for ``seconds`` and measure it as a person sees it.
 
     The viewer (found by a class the kernel adds to its box) is scrolled into
@@ -756,6 +788,8 @@ def play_viewer(lesson: LessonPage, var: str, *, seconds: float = 3.0, settle: f
     pictures per second, the kernel's own count and median cost per picture
     (``play_log``), the label/slider pairs, the largest lag of the label's
     time behind the wall clock since the click, and the viewer's state after.
+    With the kernel's process id ``pid``, also the CPU it used from the click
+    to the end of the count, in percent of one core (``kernel_cpu_percent``).
     """
     page = lesson.page
     marker = f"mocaplab-measured-{secrets.token_hex(3)}"
@@ -775,7 +809,18 @@ def play_viewer(lesson: LessonPage, var: str, *, seconds: float = 3.0, settle: f
             "(el) => [el.querySelector('.widget-label').textContent, el.querySelector('.widget-readout').textContent]"
         )
 
-    rate, counter, samples = count_pictures(page, view_box, seconds, play.click, sample=both, skip_top=0.18)
+    clicked: list[tuple[float, float]] = []
+
+    def click() -> None:
+        if pid is not None:
+            clicked.append((time.monotonic(), process_cpu_seconds(pid)))
+        play.click()
+
+    rate, counter, samples = count_pictures(page, view_box, seconds, click, sample=both, skip_top=0.18)
+    cpu = None
+    if clicked:
+        (t0, c0), t1, c1 = clicked[0], time.monotonic(), process_cpu_seconds(pid)
+        cpu = 100.0 * (c1 - c0) / max(t1 - t0, 1e-9)
     state = json.loads(
         [x for x in lesson.kernel_eval(_VIEWER_STATE.format(var=var)).splitlines() if x.startswith("@@json@@")][-1][8:]
     )
@@ -797,4 +842,5 @@ def play_viewer(lesson: LessonPage, var: str, *, seconds: float = 3.0, settle: f
         "max_lag_s": max(lags) if lags else None,
         "state": state,
         "box": box,
+        "kernel_cpu_percent": cpu,
     }

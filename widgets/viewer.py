@@ -75,9 +75,25 @@ reaches the notebook:
   never the geometry: pyvista's own ``"trame"`` mode also serialises the whole
   scene for its client-side toggle on every update (60-90 ms per frame for
   eight characters), which is the cost this viewer avoids.
-* ``"client"``: pyvista's vtk.js view, rendered in the browser; the kernel
-  serialises and sends the changed geometry on every frame (slower to play,
-  see ``benchmarks/bench_viewer.py``).
+* ``"client"``: the browser draws the 3D view (vtk.js, bundled with
+  trame-vtk: nothing is fetched from the internet).  The kernel sends the
+  scene once, into the trame state of a page of its own on the same trame
+  server (same secret, same proxy route): each character's drawn points on
+  every one of its frames (float32), its bone pairs and its frame on each
+  clock frame, the overlays sampled once (a callable on every clock frame),
+  the ground grid and the fitted camera.  The page draws the whole crowd as
+  two glyph sets (bones as 6-sided cylinders placed by one 3x3 matrix each,
+  joints as low-poly spheres, a colour per glyph), overlays as their own
+  meshes, and plays on its own clock (``requestAnimationFrame``), writing
+  each frame's few arrays straight into vtk.js.  The kernel only sends
+  where to start and whether to play (on play, pause, a slider move or a
+  step) and moves the slider :attr:`~MotionViewer.slider_rate` times per
+  second from its own clock while the page plays: it draws no picture.  The
+  mouse rotates and zooms (vtk.js's interactor); a camera reset goes back
+  to the fitted camera.  :meth:`~MotionViewer.set_motions` and the overlay
+  methods send the changed part again.  The page's WebGL contexts are made
+  without multisampling (in a browser without a GPU it costs several times
+  the picture).  ``follow=True`` does not move this view's camera.
 * ``"static"`` renders off-screen and shows a PNG image that is re-rendered
   when the slider moves (used by the tests and by nbval);
 * ``"none"`` builds the controls without any 3D view.
@@ -199,7 +215,7 @@ SLIDER_RATE = 8.0
 # Bottom edge (px) of the open toolbar: the camera keeps the characters below it.
 _TOOLBAR_BOTTOM = 64
 # pyvista's trame modes behind the viewer's backends.
-_TRAME_MODES = {"trame": "server", "server": "server", "client": "client"}
+_TRAME_MODES = {"trame": "server", "server": "server"}
 # The explicit proxy setting (see trame_proxy_prefix) and the values that turn the proxy off.
 PROXY_ENV_VAR = "MOCAPLAB_TRAME_PROXY"
 _PROXY_OFF = ("off", "direct", "none", "0", "false", "no")
@@ -401,6 +417,218 @@ def _secure_trame_server() -> Any:
         if protocol is not None:
             protocol.updateSecret(_TRAME_SECRET)
     return server
+
+
+# The page side of the "client" backend (see "Backends" in the module notes): decodes the clip sent once,
+# steps through it on the browser's clock and hands each frame's small arrays to vtk.js.  Registered as
+# ``trame.utils.mocaplab`` (``utils.mocaplab`` in the page's template expressions).
+_CLIENT_JS = r"""
+(function () {
+  const trame = window.trame;
+  if (trame.utils.mocaplab) { return; }
+  const M = { decoded: {}, players: {} };
+  // WebGL contexts of this page without multisampling: in a browser without a GPU (software WebGL) it
+  // costs several times the picture, as in the kernel's renders (see the module notes).
+  const getContext = HTMLCanvasElement.prototype.getContext;
+  HTMLCanvasElement.prototype.getContext = function (kind, options) {
+    if (typeof kind === "string" && kind.indexOf("webgl") === 0) {
+      options = Object.assign({}, options || {}, { antialias: false });
+    }
+    return getContext.call(this, kind, options);
+  };
+  function bytes(b64) {
+    const bin = atob(b64), out = new Uint8Array(bin.length);
+    for (let i = 0; i < bin.length; i++) { out[i] = bin.charCodeAt(i); }
+    return out.buffer;
+  }
+  function decoded(s) {
+    if (!s) { return null; }
+    let d = M.decoded[s.id];
+    if (d) { return d; }
+    d = { chars: [], overlays: [] };
+    for (const c of s.chars || []) {
+      d.chars.push({ pos: new Float32Array(bytes(c.pos)), index: new Int32Array(bytes(c.index)),
+                     segs: c.segs, n: c.n_points, radius: c.radius, frame: -1, bones: null,
+                     color: c.color, jointRadius: c.joint_radius });
+    }
+    for (const o of s.overlays || []) {
+      d.overlays.push({ pts: new Float32Array(bytes(o.pts)), offsets: new Int32Array(bytes(o.offsets)),
+                        index: new Int32Array(bytes(o.index)), kind: o.kind, closed: o.closed, fill: o.fill });
+    }
+    for (const key of Object.keys(M.decoded)) {
+      if (key.split("/")[0] === s.id.split("/")[0]) { delete M.decoded[key]; }
+    }
+    M.decoded[s.id] = d;
+    return d;
+  }
+  M.joints = function (s, k, f) {
+    const d = decoded(s), c = d && d.chars[k];
+    if (!c) { return new Float32Array(0); }
+    const i = c.index[Math.min(Math.max(f, 0), c.index.length - 1)];
+    return c.pos.subarray(i * c.n * 3, (i + 1) * c.n * 3);
+  };
+  M.bones = function (s, k, f) {
+    const d = decoded(s), c = d && d.chars[k];
+    if (!c) { return { centres: new Float32Array(0), frames: new Float32Array(0) }; }
+    if (c.frame === f && c.bones) { return c.bones; }
+    // each bone: its centre, and the columns of the matrix taking the unit cylinder (axis x) onto it:
+    // the bone itself, then two perpendicular radii
+    const p = M.joints(s, k, f), segs = c.segs, nb = segs.length / 2, r = c.radius;
+    const centres = new Float32Array(nb * 3), frames = new Float32Array(nb * 9);
+    for (let b = 0; b < nb; b++) {
+      const a = 3 * segs[2 * b], e = 3 * segs[2 * b + 1];
+      let dx = p[e] - p[a], dy = p[e + 1] - p[a + 1], dz = p[e + 2] - p[a + 2];
+      const len = Math.hypot(dx, dy, dz);
+      centres[3 * b] = 0.5 * (p[a] + p[e]);
+      centres[3 * b + 1] = 0.5 * (p[a + 1] + p[e + 1]);
+      centres[3 * b + 2] = 0.5 * (p[a + 2] + p[e + 2]);
+      let ax = 0, ay = 1, az = 0;
+      if (len > 1e-9) { ax = dx / len; ay = dy / len; az = dz / len; } else { dx = 0; dy = 1e-6; dz = 0; }
+      const hx = Math.abs(ax) < 0.9 ? 1 : 0, hz = 1 - hx;  // a helper axis not along the bone
+      let ux = ay * hz, uy = az * hx - ax * hz, uz = -ay * hx;  // axis x helper
+      const ul = Math.hypot(ux, uy, uz);
+      ux /= ul; uy /= ul; uz /= ul;
+      const vx = ay * uz - az * uy, vy = az * ux - ax * uz, vz = ax * uy - ay * ux;
+      frames.set([dx, dy, dz, r * ux, r * uy, r * uz, r * vx, r * vy, r * vz], 9 * b);
+    }
+    c.frame = f;
+    c.bones = { centres: centres, frames: frames };
+    return c.bones;
+  };
+  // All characters in two glyph sets (bones, joints) with a colour per glyph: two actors for any crowd.
+  M.crowd = function (s, f) {
+    const d = decoded(s);
+    if (!d) { return null; }
+    if (d.frame === f && d.crowd) { return d.crowd; }
+    let nb = 0, nj = 0;
+    for (const c of d.chars) { nb += c.segs.length / 2; nj += c.n; }
+    const out = { centres: new Float32Array(3 * nb), frames: new Float32Array(9 * nb), joints: new Float32Array(3 * nj) };
+    if (!d.colors) {
+      d.colors = { bones: new Uint8Array(3 * nb), joints: new Uint8Array(3 * nj) };
+      let b = 0, j = 0;
+      for (const c of d.chars) {
+        const rgb = c.color.map(function (x) { return Math.round(255 * x); });
+        for (let i = 0; i < c.segs.length / 2; i++, b++) { d.colors.bones.set(rgb, 3 * b); }
+        for (let i = 0; i < c.n; i++, j++) { d.colors.joints.set(rgb, 3 * j); }
+      }
+    }
+    let b = 0, j = 0;
+    d.chars.forEach(function (c, k) {
+      const bones = M.bones(s, k, f);
+      out.centres.set(bones.centres, 3 * b);
+      out.frames.set(bones.frames, 9 * b);
+      out.joints.set(M.joints(s, k, f), 3 * j);
+      b += c.segs.length / 2;
+      j += c.n;
+    });
+    out.boneColors = d.colors.bones;
+    out.jointColors = d.colors.joints;
+    out.jointRadius = d.chars.length ? d.chars[0].jointRadius : 0;
+    d.frame = f;
+    d.crowd = out;
+    return out;
+  };
+  M.overlay = function (s, k, f) {
+    const d = decoded(s), o = d && d.overlays[k];
+    if (!o) { return { points: new Float32Array(0), lines: null, polys: null }; }
+    const i = o.index[Math.min(Math.max(f, 0), o.index.length - 1)];
+    const a = o.offsets[i], b = o.offsets[i + 1], n = b - a;
+    const points = o.pts.subarray(3 * a, 3 * b);
+    let lines = null, polys = null;
+    if (o.kind !== "points" && n >= 2) {
+      const closed = o.closed && n > 2;
+      lines = new Uint32Array(n + 1 + (closed ? 1 : 0));
+      lines[0] = n + (closed ? 1 : 0);
+      for (let j = 0; j < n; j++) { lines[j + 1] = j; }
+      if (closed) { lines[n + 1] = 0; }
+      if (o.fill && n >= 3) {
+        polys = new Uint32Array(4 * (n - 2));
+        for (let j = 0; j < n - 2; j++) { polys.set([3, 0, j + 1, j + 2], 4 * j); }
+      }
+    }
+    return { points: points, lines: lines || new Uint32Array(0), polys: polys || new Uint32Array(0) };
+  };
+  // The frame each view shows (set by control and by the clock; the template reads it, unwatched).
+  M.frames = {};
+  M.at = function (key, initial) { return key in M.frames ? M.frames[key] : initial; };
+  // Draw frame f of the viewer `key` straight into its vtk.js data (no template update): the glyph
+  // sets and overlays are found by their representation ids.
+  M.draw = function (key, f) {
+    M.frames[key] = f;
+    const comp = trame.refs[key + "_view"];
+    const view = comp && comp.$ && comp.$.provides && comp.$.provides.view;
+    const chars = trame.state.get(key + "_chars"), ovl = trame.state.get(key + "_overlays");
+    if (!view || !chars) { return false; }
+    const crowd = M.crowd(chars, f);
+    for (const actor of view.renderer.getActors()) {
+      const id = String(actor.get("representationId").representationId || "");
+      if (id.indexOf("mocaplab-") !== 0 || !actor.getMapper()) { continue; }
+      const data = actor.getMapper().getInputData(0);
+      if (!data) { continue; }
+      if (id === "mocaplab-bones") {
+        data.getPoints().setData(crowd.centres, 3);
+        const frames = data.getPointData().getArrayByName("frame");
+        if (frames) { frames.setData(crowd.frames, 9); }
+      } else if (id === "mocaplab-joints") {
+        data.getPoints().setData(crowd.joints, 3);
+      } else if (id.indexOf("mocaplab-overlay-") === 0) {
+        const shape = M.overlay(ovl, Number(id.slice(17)), f);
+        data.getPoints().setData(shape.points, 3);
+        data.getLines().setData(shape.lines);
+        data.getPolys().setData(shape.polys);
+      }
+      data.modified();
+    }
+    view.renderer.resetCameraClippingRange();
+    view.renderWindow.render();
+    return true;
+  };
+  // Playback on the page's clock: ctl = {playing, frame, fps, n_frames} from the kernel.
+  M.control = function (key, ctl) {
+    if (!ctl) { return; }
+    const player = M.players[key] || (M.players[key] = { token: 0 });
+    player.token += 1;
+    const token = player.token;
+    M.draw(key, ctl.frame);
+    if (!ctl.playing) { return; }
+    const start = performance.now(), last = ctl.n_frames - 1;
+    function tick(now) {
+      if (player.token !== token) { return; }
+      const f = Math.min(ctl.frame + Math.floor(((now - start) / 1000) * ctl.fps + 1e-9), last);
+      if (M.frames[key] !== f) { M.draw(key, f); }
+      if (f < last) { requestAnimationFrame(tick); }
+    }
+    requestAnimationFrame(tick);
+  };
+  // The fitted camera, set again whenever the view resets its camera (after it mounts, and on request).
+  M.views = {};
+  M.camera = function (ref, view, cam) {
+    view = view || M.views[ref];
+    if (!view || !cam) { return; }
+    M.views[ref] = view;
+    view.getCamera();  // makes the camera the active one, which setCamera changes
+    view.setCamera(cam);
+  };
+  trame.utils.mocaplab = M;
+  // set once the template that loaded this script has rendered (a change during its own render is lost)
+  setTimeout(function () { trame.state.set("mocaplab_ready", true); }, 0);
+})();
+"""
+_CLIENT_COUNTER = iter(range(1, 1 << 62))
+
+
+def _rgb(color: str) -> list[float]:
+    """A colour name or ``#rrggbb`` as three floats in [0, 1]."""
+    import pyvista as pv
+
+    return [float(x) for x in pv.Color(color).float_rgb]
+
+
+def _b64(array: ArrayLike, dtype: str) -> str:
+    """An array's bytes (C order, the given dtype) as base64 text, for the page to decode."""
+    import base64
+
+    return base64.b64encode(np.ascontiguousarray(array, dtype=dtype).tobytes()).decode("ascii")
 
 
 def _main_thread_loop() -> asyncio.AbstractEventLoop | None:
@@ -853,6 +1081,8 @@ class MotionViewer:
         self._play_clock = PlayClock(self.fps, self.n_frames)
         self._playing = False
         self._play_task: asyncio.Task[None] | None = None
+        self._client: dict[str, Any] | None = None  # the "client" backend's page: server, state keys
+        self._client_seq = 0
         self._build_scene(window_size, ground)
         self._apply_frame(self._frame)
 
@@ -1030,7 +1260,7 @@ class MotionViewer:
     def _toolbar_band(self) -> float:
         """Share of the view's height under the open trame toolbar (0 when collapsed or without trame)."""
         width, height = self.plotter.window_size
-        if self.backend not in _TRAME_MODES or width < TOOLBAR_WIDTH:
+        if self.backend not in _TRAME_MODES or width < TOOLBAR_WIDTH:  # the "client" page has no toolbar
             return 0.0
         return min(_TOOLBAR_BOTTOM / max(height, 1), 0.3)
 
@@ -1155,11 +1385,13 @@ class MotionViewer:
         self._bounds = self._scene_bounds()
         if self._ground_mesh is not None:
             self._update_ground(*self._bounds)
-        if reset_camera or (reset_camera is None and not self.camera_moved()):
+        refit = bool(reset_camera or (reset_camera is None and not self.camera_moved()))
+        if refit:
             self._frame = frame
             self._frame_camera(frame)
         if self.slider is not None:
             self._sync_controls(frame)
+        self._client_send(chars=True, overlays=True, ground=True, camera=refit)
         self._apply_frame(frame)
 
     def _sync_controls(self, frame: int) -> None:
@@ -1263,6 +1495,7 @@ class MotionViewer:
         self._set_picture_quality(self.play_quality)
         if start != self._frame:
             self._apply_frame(start)
+        self._client_control()  # the page plays on its own clock from here
         self._play_task = loop.create_task(self._play_loop())
 
     @_on_main_thread
@@ -1273,7 +1506,9 @@ class MotionViewer:
         if task is not None and not task.done() and task is not _current_task():
             task.cancel()
         self._update_play_button()
-        if was_playing:
+        if was_playing and self._client is not None:
+            self._apply_frame(self._frame)  # the kernel's meshes and the page pause on the slider's frame
+        elif was_playing:
             self._show_on_controls(self._frame)
         if was_playing and self._set_picture_quality(100):
             self._render_view()  # the paused picture at full quality
@@ -1302,7 +1537,15 @@ class MotionViewer:
     async def _play_loop(self) -> None:
         """Draw the wall clock's frame, rest, repeat; stop on the last frame or on an error."""
         try:
-            while self._playing:
+            while self._playing and self._client is not None:  # the page draws: follow its clock on the controls
+                frame = self._play_clock.frame_at(self._now())
+                if frame != self._frame:
+                    self._frame = frame
+                    self._show_on_controls(frame)
+                if frame >= self.n_frames - 1:
+                    break
+                await self._sleep(1.0 / self.slider_rate)
+            while self._playing and self._client is None:
                 began = self._now()
                 frame = self._play_clock.frame_at(began)
                 if frame != self._frame:
@@ -1391,6 +1634,8 @@ class MotionViewer:
             return
         if self.backend == "static":
             self._view.value = self._png()
+        elif self._client is not None:
+            self._client_control()
         elif hasattr(self._view, "viewer"):
             # the view renders the window itself while making the picture: no render here
             self._view.viewer.update()
@@ -1495,6 +1740,7 @@ class MotionViewer:
         if ov is None:
             raise KeyError(f"No overlay named {name!r}; overlays are {list(self.overlays)}")
         self.plotter.remove_actor(ov.actor, render=False)
+        self._client_send(overlays=True)
         self._refresh()
 
     def overlay_points(self, name: str) -> NDArray[np.float64]:
@@ -1532,6 +1778,7 @@ class MotionViewer:
         if kind == "points":
             ov.actor.prop.interpolation = "gouraud"
         self.overlays[ov.name] = ov
+        self._client_send(overlays=True)
         self._refresh()
 
     def _fill_overlay(self, ov: _Overlay, pts: NDArray[np.float64]) -> None:
@@ -1630,6 +1877,8 @@ class MotionViewer:
             self._view = w.Image(value=self._png(), format="png")
         elif self.backend == "none":
             self._view = None
+        elif self.backend == "client":
+            self._view = self._client_view()
         else:
             self._view = self._trame_view()
         controls = w.HBox(
@@ -1672,6 +1921,273 @@ class MotionViewer:
                 auto_close=False,
                 jupyter_kwargs=options,
             )
+
+    # ------------------------------------------------------- client backend
+    def _client_view(self) -> Any:
+        """The "client" backend's view: a trame page drawing the scene with vtk.js in the browser.
+
+        The page gets the whole clip once (each character's drawn points on
+        every frame, float32) with the bone pairs, overlays sampled on the
+        clock, the ground and the fitted camera; it then draws each frame
+        itself (bones as cylinder glyphs, joints as sphere glyphs) and plays
+        on its own clock, told only where to start and whether to play.
+        """
+        from trame.ui.html import DivLayout
+        from trame.widgets import client, html
+        from trame.widgets import vtk as vtkw
+        from trame_pyvista.jupyter import build_url, elegantly_launch
+
+        server = _secure_trame_server()
+        if not server.running:
+            with _without_vtklocal():
+                elegantly_launch(server, wslink_backend="aiohttp")
+        names = self._client_attach(server)
+        key = names["key"]
+        chars, ovl, ref = names["chars"], names["overlays"], f"{key}_view"
+        ml = "utils.mocaplab"
+        frame = f"{ml}.at('{key}', {names['start']})"  # not watched: playing never re-renders the template
+        with DivLayout(server, template_name=key, style="position:absolute;inset:0;margin:0;overflow:hidden"):
+            client.Script(_CLIENT_JS)
+            client.ClientStateChange(
+                value=names["ctl"], change=f"{ml} && {ml}.control('{key}', {names['ctl']})", trigger_on_create=True
+            )
+            client.ClientStateChange(
+                value="mocaplab_ready", change=f"mocaplab_ready && {ml}.control('{key}', {names['ctl']})"
+            )
+            client.ClientStateChange(
+                value=names["camera"], change=f"{ml} && {ml}.camera('{ref}', trame.refs['{ref}'], {names['camera']})"
+            )
+            with vtkw.VtkView(
+                ref=ref,
+                v_if="mocaplab_ready",
+                background=("[1, 1, 1]",),
+                __events=[("reset", "resetCamera")],
+                reset=f"{ml}.camera('{ref}', trame.refs['{ref}'], {names['camera']})",
+                style="position:absolute;inset:0",
+            ):
+                ground = names["ground"]
+                with vtkw.VtkGeometryRepresentation(
+                    v_if=ground,
+                    property=(
+                        "{color: [0.949, 0.949, 0.949], ambient: 1, diffuse: 0, "
+                        "edgeVisibility: true, edgeColor: [0.733, 0.733, 0.733]}",
+                    ),
+                ):
+                    vtkw.VtkPolyData("ground", points=(f"{ground}.points",), polys=(f"{ground}.polys",))
+                crowd = f"{ml}.crowd({chars}, {frame})"
+                with html.Div(v_if=f"{chars} && {chars}.chars.length", key=f"{chars}.id"):
+                    with vtkw.VtkGlyphRepresentation(
+                        id="mocaplab-bones",
+                        property=("{interpolation: 1}",),
+                        # a 3x3 matrix per bone; its colour from the uint8 RGB scalars
+                        mapper=(
+                            "{orientationArray: 'frame', orientationMode: 2, "
+                            "colorMode: 0, scalarVisibility: true, scaling: false}",
+                        ),
+                    ):
+                        with vtkw.VtkPolyData("bones", points=(f"{crowd}.centres",)):
+                            with vtkw.VtkPointData():
+                                vtkw.VtkDataArray(
+                                    name="frame", values=(f"{crowd}.frames",), number_of_components=("9",)
+                                )
+                                vtkw.VtkDataArray(
+                                    name="colors",
+                                    registration="setScalars",
+                                    type="Uint8Array",
+                                    values=(f"{crowd}.boneColors",),
+                                    number_of_components=("3",),
+                                )
+                        vtkw.VtkAlgorithm(
+                            vtk_class="vtkCylinderSource",
+                            state=("{height: 1, radius: 1, resolution: 6, capping: false, direction: [1, 0, 0]}",),
+                            port=1,
+                        )
+                    with vtkw.VtkGlyphRepresentation(
+                        id="mocaplab-joints", mapper=("{colorMode: 0, scalarVisibility: true, scaling: false}",)
+                    ):
+                        with vtkw.VtkPolyData("joints", points=(f"{crowd}.joints",)):
+                            with vtkw.VtkPointData():
+                                vtkw.VtkDataArray(
+                                    name="colors",
+                                    registration="setScalars",
+                                    type="Uint8Array",
+                                    values=(f"{crowd}.jointColors",),
+                                    number_of_components=("3",),
+                                )
+                        vtkw.VtkAlgorithm(
+                            vtk_class="vtkSphereSource",
+                            state=(f"{{radius: {self.joint_radius}, thetaResolution: 6, phiResolution: 4}}",),
+                            port=1,
+                        )
+                with html.Div(v_for=f"(o, k) in {ovl}.overlays", key=f"{ovl}.id + '/' + k"):
+                    shape = f"{ml}.overlay({ovl}, k, {frame})"
+                    with vtkw.VtkGlyphRepresentation(
+                        v_if="o.kind === 'points'", id=("'mocaplab-overlay-' + k",), property=("{color: o.color}",)
+                    ):
+                        vtkw.VtkPolyData("points", points=(f"{shape}.points",))
+                        vtkw.VtkAlgorithm(
+                            vtk_class="vtkSphereSource",
+                            state=("{radius: o.radius, thetaResolution: 6, phiResolution: 4}",),
+                            port=1,
+                        )
+                    with vtkw.VtkGeometryRepresentation(
+                        v_else=True,
+                        id=("'mocaplab-overlay-' + k",),
+                        property=("{color: o.color, lineWidth: o.width, opacity: o.opacity, ambient: 0.3}",),
+                    ):
+                        vtkw.VtkPolyData(
+                            "lines",
+                            points=(f"{shape}.points",),
+                            lines=(f"{shape}.lines",),
+                            polys=(f"{shape}.polys",),
+                        )
+        prefix = trame_proxy_prefix()
+        if prefix is not None:
+            enabled: bool | None = True
+        elif os.environ.get(PROXY_ENV_VAR, "").strip().lower() in _PROXY_OFF:
+            enabled = False
+        else:
+            enabled = None  # pyvista's theme decides, as for the server view
+        src = build_url(server, ui=key, server_proxy_enabled=enabled, server_proxy_prefix=prefix)
+        width, height = self.plotter.window_size
+        return _iframe_widget(None, src, width=f"{int(width)}px", height=f"{int(height)}px")
+
+    def _client_attach(self, server: Any) -> dict[str, Any]:
+        """Give this viewer its state variables on the trame ``server`` and fill them: the whole scene once.
+
+        Returns the names: ``key`` (the viewer's prefix) and one per part
+        (``chars``, ``overlays``, ``ground``, ``camera``, ``ctl``, ``start``).
+        """
+        key = f"mocaplab_v{next(_CLIENT_COUNTER)}"
+        names = {part: f"{key}_{part}" for part in ("chars", "overlays", "ground", "camera", "ctl", "start")}
+        self._client = {"server": server, "key": key, **names}
+        state = server.state
+        state.client_only("mocaplab_ready")
+        state.setdefault("mocaplab_ready", False)
+        state[names["start"]] = self._frame  # the frame drawn before the page's first control
+        self._client_send(chars=True, overlays=True, ground=True, camera=True, flush=False)
+        state[names["ctl"]] = self._client_ctl()
+        return self._client
+
+    def _client_ctl(self) -> dict[str, Any]:
+        """What the page plays: from which frame, whether it runs, at which rate (``seq`` makes each one new)."""
+        self._client_seq += 1
+        return {
+            "playing": bool(self._playing),
+            "frame": int(self._frame),
+            "fps": float(self.fps),
+            "n_frames": int(self.n_frames),
+            "seq": self._client_seq,
+        }
+
+    def _client_control(self) -> None:
+        """Tell the page the frame to show (and, while playing, to play on from)."""
+        if self._client is None:
+            return
+        state = self._client["server"].state
+        with state:
+            state[self._client["ctl"]] = self._client_ctl()
+
+    def _client_send(
+        self,
+        *,
+        chars: bool = False,
+        overlays: bool = False,
+        ground: bool = False,
+        camera: bool = False,
+        flush: bool = True,
+    ) -> None:
+        """Send the parts of the scene that changed to the page (each part a new state value)."""
+        if self._client is None:
+            return
+        self._client_seq += 1
+        state = self._client["server"].state
+        values: dict[str, Any] = {}
+        if chars:
+            values[self._client["chars"]] = self._client_characters()
+        if overlays:
+            values[self._client["overlays"]] = self._client_overlays()
+        if ground:
+            values[self._client["ground"]] = self._client_ground()
+        if camera:
+            cam = self.plotter.camera
+            values[self._client["camera"]] = {
+                "position": [float(x) for x in cam.position],
+                "focalPoint": [float(x) for x in cam.focal_point],
+                "viewUp": [float(x) for x in cam.up],
+                "centerOfRotation": [float(x) for x in cam.focal_point],
+                "seq": self._client_seq,
+            }
+        if flush:
+            with state:
+                state.update(values)
+        else:
+            state.update(values)
+
+    def _client_characters(self) -> dict[str, Any]:
+        """Every character's drawn points on each of its frames, its bones and its frame on each clock frame."""
+        clock = np.arange(self.n_frames) / self.fps
+        out = []
+        for c in self.characters:
+            index = [c.frame_at(t) for t in clock]
+            out.append(
+                {
+                    "pos": _b64(c.positions, "<f4"),
+                    "n_points": int(c.positions.shape[1]),
+                    "segs": [int(x) for x in c.segments.reshape(-1)],
+                    "index": _b64(index, "<i4"),
+                    "color": _rgb(c.color),
+                    "radius": self.bone_radius,
+                    "joint_radius": self.joint_radius,
+                    "sides": self._sides,
+                }
+            )
+        return {"id": f"{self._client['key']}_chars/{self._client_seq}", "chars": out}
+
+    def _client_overlays(self) -> dict[str, Any]:
+        """Each overlay's points sampled once (its own frames, or the clock's for a callable), NaN rows left out."""
+        clock = np.arange(self.n_frames) / self.fps
+        out = []
+        for ov in self.overlays.values():
+            if callable(ov.data):
+                samples, index = [ov.at(t) for t in clock], np.arange(self.n_frames)
+            elif isinstance(ov.data, np.ndarray) and ov.data.ndim == 2:
+                samples, index = [ov.at(0.0)], np.zeros(self.n_frames, dtype=np.int64)
+            else:
+                n = len(ov.data)
+                samples = [ov.at(i / ov.fps) for i in range(n)]
+                index = np.clip(np.round(clock * ov.fps), 0, n - 1).astype(np.int64)
+            offsets = np.concatenate([[0], np.cumsum([len(p) for p in samples])])
+            pts = np.concatenate(samples) if samples else np.zeros((0, 3))
+            out.append(
+                {
+                    "kind": ov.kind,
+                    "pts": _b64(pts, "<f4"),
+                    "offsets": _b64(offsets, "<i4"),
+                    "index": _b64(index, "<i4"),
+                    "color": _rgb(ov.color),
+                    "radius": ov.style.get("radius", 0.0),
+                    "width": ov.style.get("width", 1.0),
+                    "opacity": ov.style.get("opacity", 1.0) if ov.style.get("fill") else 1.0,
+                    "closed": bool(ov.style.get("closed", False)),
+                    "fill": bool(ov.style.get("fill", False)),
+                }
+            )
+        return {"id": f"{self._client['key']}_overlays/{self._client_seq}", "overlays": out}
+
+    def _client_ground(self) -> dict[str, Any] | None:
+        """The ground grid (the plotter's mesh) as points and quads, or None without one."""
+        if self._ground_mesh is None:
+            return None
+        grid = self._ground_mesh
+        nx, nz = int(grid.dimensions[0]), int(grid.dimensions[1])
+        ids = np.arange(nx * nz).reshape(nz, nx)  # VTK's point order: x fastest
+        quads = np.stack([ids[:-1, :-1], ids[:-1, 1:], ids[1:, 1:], ids[1:, :-1]], axis=-1).reshape(-1, 4)
+        cells = np.concatenate([np.full((len(quads), 1), 4), quads], axis=1)
+        return {
+            "points": [round(float(x), 6) for x in np.asarray(grid.points).reshape(-1)],
+            "polys": [int(x) for x in cells.reshape(-1)],
+        }
 
     # plain-value callbacks: each forwards one event to the viewer, its error shown in the status line
     def _on_play(self, _button: Any) -> None:

@@ -688,6 +688,32 @@ def solve_goals(
     )[0]
 
 
+def _keep_free_feet(
+    targets: Sequence[Array], held: Array, ankles: Sequence[int], drop: Array
+) -> tuple[list[Array], Array]:
+    """Ankle targets and leg weights with the free part of each foot kept up when the root is lowered.
+
+    A leg no goal holds (a swing leg) would go down with a lowered root, a
+    swinging foot a few centimetres above the floor then passing through it
+    (30 mm on a bent CMU walk).  On the frames where the root is lowered,
+    the part of each ankle target that no goal holds (``1 - w`` of it: all
+    of a swing foot, the ramp before a landing) is lifted back by the drop,
+    and the leg solved with full weight there: the knee bends by what the
+    drop needs, as smooth as the drop.  (Lifting only as far as the foot
+    would sink below its planted height left 15 mm of the 30.)
+    """
+    lowered = drop < 0.0
+    if not lowered.any():
+        return list(targets), held
+    out = [np.array(t, copy=True) for t in targets]
+    held = np.array(held, copy=True)
+    for k in range(len(ankles)):
+        free = np.where(lowered, 1.0 - np.clip(held[:, k], 0.0, 1.0), 0.0)
+        out[k][:, 1] -= free * drop  # back up by the part of the drop no goal asks for
+        held[:, k] = np.where(lowered, 1.0, held[:, k])
+    return out, held
+
+
 def _solve_goals(
     motion: Motion,
     goals: Sequence[Goal],
@@ -722,8 +748,8 @@ def _solve_goals(
     root = np.array(motion.root_positions, copy=True)
     grot, gpos = (motion.global_rotations(), motion.global_positions()) if fk is None else fk
     root_moved = False
+    drop = np.zeros(n)
     if adjust_root and foot_joints:
-        drop = np.zeros(n)
         for ankle in foot_joints:
             target = _foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle))
             u, m, e = limb_joints(sk, ankle)
@@ -781,6 +807,7 @@ def _solve_goals(
             hinge = quat.rotate(grot[:, jm], local)
             # a leg's goal weight: its ankle's or its toe's, whichever holds more
             held = np.stack([_leg_weight(foot_of.get(ankle), toes.get(ankle), n) for ankle in foot_joints], axis=1)
+            targets, held = _keep_free_feet(targets, held, foot_joints, drop)
             q_up, q_mid = two_bone_deltas(a, b, c, np.stack(targets, axis=1), hinge=hinge, weight=held)
             # legs no goal holds on a frame stay exactly as they were
             free = held <= 0.0
@@ -798,8 +825,10 @@ def _solve_goals(
                 g_parent = end_parent_rotations(grot, sk.parents, je, q_up, q_mid)[:, col]
                 g_ankle = grot[:, ankles]
         else:
-            for ankle, target in zip(foot_joints, targets, strict=True):
-                held = _leg_weight(foot_of.get(ankle), toes.get(ankle), n)
+            weights = np.stack([_leg_weight(foot_of.get(ankle), toes.get(ankle), n) for ankle in foot_joints], axis=1)
+            targets, weights = _keep_free_feet(targets, weights, foot_joints, drop)
+            for k, (ankle, target) in enumerate(zip(foot_joints, targets, strict=True)):
+                held = weights[:, k]
                 solved = two_bone_ik(
                     rot, root, sk, ankle, target, end_rotation=grot[:, ankle], fk=(grot, gpos),
                     bend_axis=given.get(ankle), warn_unreachable=False, weight=held,

@@ -47,6 +47,7 @@ from browser_support import (
     copy_lessons,
     image_change,
     image_std,
+    kernel_pid,
     launch_chromium,
     play_viewer,
     png_to_grey,
@@ -391,6 +392,55 @@ def test_lesson_05_relay_plays_in_real_time(open_lesson: Any) -> None:
     assert legend.is_visible() and text_of(legend).count("16_15") == 4, f"legend: {text_of(legend)!r}"
     assert_plays_in_real_time(played, PLAY_TARGETS["05"])
     assert_no_console_errors(lesson)
+
+
+def test_lesson_01_viewer_drawn_by_the_browser(open_lesson: Any) -> None:
+    """The "client" backend: the page draws and plays; rotating, the slider and play change the picture."""
+    lesson = open_lesson("01", "MotionViewer")
+    lesson.run_all()
+    page = lesson.page
+    lesson.run_cell(
+        "client_viewer = MotionViewer(walk, backend='client')\n"
+        "client_viewer.add_lines('root path', walk.root_positions * [1, 0, 1], color='gray')\n"
+        "client_viewer.widget.add_class('mocaplab-client-viewer')\n"
+        "client_viewer"
+    )
+    box = page.locator(".mocaplab-client-viewer").first
+    box.scroll_into_view_if_needed()
+    iframe = trame_frame(box)
+    assert "secret=" in (iframe.get_attribute("src") or ""), "the page gets the kernel's trame secret"
+    surface, first = rendered_view(lesson, iframe)
+    assert surface.evaluate("(el) => el.tagName") == "CANVAS", "the browser draws the view (no picture from the kernel)"
+    lesson.screenshot("client-viewer", box)
+    assert image_std(first) > MIN_VIEW_STD
+
+    rect = surface.bounding_box()
+    cx, cy = rect["x"] + rect["width"] / 2, rect["y"] + rect["height"] * 0.6
+    mouse_drag(page, (cx, cy), (cx + 0.3 * rect["width"], cy - 0.1 * rect["height"]))
+    rotated, change = wait_view_change(lesson, lambda: _largest_surface(iframe.content_frame), first)
+    lesson.screenshot("client-viewer-rotated", box)
+    assert change > MIN_CHANGE, f"dragging in the browser-drawn view did not change it (mean change {change:.3f})"
+
+    slider = box.locator(".mocaplab-viewer-slider").first
+    set_slider(slider, 200)
+    moved, change = wait_view_change(lesson, lambda: _largest_surface(iframe.content_frame), rotated)
+    lesson.screenshot("client-viewer-frame-200", box)
+    assert change > MIN_CHANGE, f"moving the frame slider did not change the browser-drawn view ({change:.3f})"
+
+    pid = kernel_pid(lesson)
+    played = play_viewer(lesson, "client_viewer", seconds=PLAY_SECONDS, pid=pid)
+    print(
+        f"client_viewer: {played['pictures_per_s']:.1f} pictures/s, kernel {played['kernel_cpu_percent']:.1f} % "
+        f"of a core, {played['kernel_pictures_per_s']:.1f} kernel pictures/s"
+    )
+    assert played["pictures_per_s"] >= 3, f"the picture hardly changed while playing: {played['pictures_per_s']:.1f}/s"
+    assert played["kernel_pictures_per_s"] == 0, "the kernel drew pictures while the browser played"
+    pairs = played["label_slider"]
+    assert len(pairs) >= 3 and all(a == b for a, b in pairs), f"slider time and frame during play: {pairs}"
+    assert len({b for _, b in pairs}) >= 3, f"the slider did not follow the play: {pairs}"
+    assert played["max_lag_s"] < 0.6, f"the time shown lagged the wall clock by {played['max_lag_s']:.2f} s"
+    assert_no_console_errors(lesson)
+    lesson.kernel_eval("client_viewer.close()")
 
 
 # Distinct pictures per second of play the 3D view must show in headless Chromium with software GL.

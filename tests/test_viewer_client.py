@@ -133,20 +133,26 @@ def test_overlays_are_sampled_once_without_nan_rows(walk):
     v.close()
 
 
-def test_the_ground_is_the_plotters_grid_as_quads(walk):
+def test_the_ground_is_the_plotters_grid_as_lines(walk):
     v, state, names = _attached(walk)
     ground = state[names["ground"]]
     grid = v._ground_mesh
     points = np.reshape(ground["points"], (-1, 3))
     np.testing.assert_allclose(points, grid.points, atol=1e-6)
-    cells = np.reshape(ground["polys"], (-1, 5))
     nx, nz = grid.dimensions[0], grid.dimensions[1]
-    assert len(cells) == (nx - 1) * (nz - 1) and np.all(cells[:, 0] == 4)
-    # each quad's corners are one grid step apart in x and z, at the ground's height
-    corners = points[cells[:, 1:]]
-    spans = corners.max(axis=1) - corners.min(axis=1)
-    np.testing.assert_allclose(spans[:, [0, 2]], 0.5, atol=1e-6)
-    assert np.all(spans[:, 1] == 0)
+    cells, lines = list(ground["lines"]), []
+    while cells:
+        n = cells[0]
+        lines.append(points[cells[1 : 1 + n]])
+        cells = cells[1 + n :]
+    assert sorted(len(p) for p in lines) == sorted([nx] * nz + [nz] * nx)
+    lo, hi = np.asarray(grid.bounds[::2]), np.asarray(grid.bounds[1::2])
+    for p in lines:  # each a straight row or column across the whole grid, at the ground's height
+        span = np.ptp(p, axis=0)
+        assert np.count_nonzero(span > 1e-9) == 1 and np.all(p[:, 1] == p[0, 1])
+        axis = int(np.argmax(span))
+        assert span[axis] == pytest.approx(hi[axis] - lo[axis])
+        assert np.allclose(np.diff(p[:, axis]), 0.5), "0.5 m apart, in order"
     v.close()
 
 

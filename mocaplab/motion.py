@@ -21,6 +21,8 @@ new one.
 from __future__ import annotations
 
 import dataclasses
+import io
+import sys
 from collections.abc import Sequence
 from functools import cached_property
 from typing import TYPE_CHECKING, Any
@@ -49,26 +51,94 @@ VALID_CHANNELS = frozenset(
 )
 
 
-def readonly(arr: NDArray[Any]) -> NDArray[Any]:
-    """A read-only view of ``arr`` that cannot be made writeable again.
+def readonly(arr: ArrayLike) -> NDArray[Any]:
+    """A read-only array with the values of ``arr`` that can never be made writeable.
 
-    The array and the array that owns its memory are made read-only in
-    place and a view is returned: numpy refuses ``flags.writeable = True``
-    on a view whose memory owner is read-only, so data handed out by a
-    frozen object stays frozen (a read-only array that owns its memory
-    could be switched back).  Use it only on fresh arrays nobody else
-    writes to.
+    The values are copied once into an immutable ``bytes`` object and the
+    array returned is a view of it: numpy refuses ``flags.writeable = True``
+    on it and on every array reachable through ``.base`` (a read-only array
+    that owned its memory could be switched back).  An array frozen this way
+    already is returned as a new read-only view, without a copy, so frozen
+    objects share frozen data freely.  ``arr`` itself is left as it is.
+
+    Parameters
+    ----------
+    arr : array_like
+        Any array (object arrays are copied and flagged read-only only).
+
+    Returns
+    -------
+    ndarray
+        Same shape and dtype as ``arr``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> a = readonly(np.zeros(3))
+    >>> a.base.flags.writeable = True
+    Traceback (most recent call last):
+    ...
+    ValueError: cannot set WRITEABLE flag to True of this array
     """
+    arr = np.asarray(arr)
     owner = arr
     while isinstance(owner.base, np.ndarray):
         owner = owner.base
-    if owner.base is not None:  # memory owned by another kind of object: copy it
-        arr = owner = np.array(arr, copy=True)
-    owner.flags.writeable = False
-    arr.flags.writeable = False
-    view = arr.view()
-    view.flags.writeable = False
-    return view
+    if isinstance(owner.base, bytes):  # frozen for good already: share it
+        view = arr.view()
+        view.flags.writeable = False
+        return view
+    if arr.dtype.hasobject:  # no buffer to freeze: a private copy, flagged read-only
+        copy = np.array(arr, copy=True)
+        copy.flags.writeable = False
+        view = copy.view()
+        view.flags.writeable = False
+        return view
+    frozen = np.frombuffer(arr.tobytes(order="C"), dtype=arr.dtype).reshape(arr.shape)
+    frozen.flags.writeable = False
+    return frozen
+
+
+class _Fresh:
+    """A new writable array whose memory becomes immutable, without a copy, when frozen.
+
+    For readers that fill a large array in place: ``buf = _Fresh(shape)``,
+    write ``buf.array``, drop every other reference to it, then
+    ``buf.freeze()`` returns the same memory as a read-only array that can
+    never be made writeable (a ``bytes`` object owns it, as with
+    :func:`readonly`), so the result is not copied.  If views of
+    ``buf.array`` are still alive when it is frozen, the values are copied
+    instead (those views must not see the frozen data change).
+    """
+
+    __slots__ = ("array", "_buffer", "_view")
+
+    def __init__(self, shape: tuple[int, ...], dtype: Any = float):
+        dtype = np.dtype(dtype)
+        size = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+        self._buffer = io.BytesIO()
+        if size:
+            self._buffer.seek(size - 1)
+            self._buffer.write(b"\0")
+        self._view: memoryview | None = self._buffer.getbuffer()
+        self.array: NDArray[Any] | None = np.frombuffer(self._view, dtype=dtype).reshape(shape)
+
+    def freeze(self) -> NDArray[Any]:
+        """The values, read-only for good (no copy when nothing else sees ``array``)."""
+        array = self.array
+        if array is None or self._view is None:
+            raise RuntimeError("This array was frozen already")
+        shape, dtype = array.shape, array.dtype
+        self.array = None
+        del array
+        view, self._view = self._view, None
+        if sys.getrefcount(view) <= 2:  # this name and the call's argument: no array left on the buffer
+            view.release()  # the buffer is then handed over as it is, not copied
+        data = self._buffer.getvalue()
+        del view
+        frozen = np.frombuffer(data, dtype=dtype).reshape(shape)
+        frozen.flags.writeable = False
+        return frozen
 
 
 def _check_fps(fps: Any) -> float:
@@ -84,7 +154,7 @@ def _check_fps(fps: Any) -> float:
 
 
 def _frozen(a: ArrayLike, dtype: Any = float) -> NDArray[Any]:
-    return readonly(np.array(a, dtype=dtype, copy=True))
+    return readonly(np.asarray(a, dtype=dtype))
 
 
 class _Owned:
@@ -92,7 +162,8 @@ class _Owned:
 
     Only for code inside mocaplab that builds an array, passes it as
     ``_owned(array)`` and keeps no other reference to it: the constructor
-    validates it as usual and makes it read-only in place instead of copying.
+    validates it as usual and freezes it (:func:`readonly`, one copy into
+    immutable memory) without a defensive copy first.
     """
 
     __slots__ = ("array",)
@@ -120,8 +191,7 @@ def _take(value: Any, dtype: Any = float) -> tuple[NDArray[Any], bool]:
 
 
 def _freeze(arr: NDArray[Any], fresh: bool) -> NDArray[Any]:
-    if not fresh or not arr.flags.c_contiguous and not arr.flags.f_contiguous:
-        arr = np.array(arr, copy=True)
+    del fresh  # readonly copies into immutable memory once, fresh or not
     return readonly(arr)
 
 

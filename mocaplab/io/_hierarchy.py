@@ -32,7 +32,7 @@ from .. import quat
 from ..motion import Motion, Skeleton, _owned
 from .errors import MocapFormatError
 
-__all__ = ["motion_from_transforms", "world_matrices", "OFFSET_TOLERANCE"]
+__all__ = ["motion_from_transforms", "world_matrices", "check_reach", "OFFSET_TOLERANCE"]
 
 #: Metres a joint's offset from its parent may wander over the clip (float32
 #: rounding of the file's values) and still be one constant skeleton offset.
@@ -171,7 +171,7 @@ def _motion(
         _channels(order, position=j == 0 or bool(moving[j])) for j, order in enumerate(orders)
     ]
     skeleton = Skeleton(names=tuple(_unique(names)), parents=parents, offsets=offsets, channels=tuple(channels))
-    return Motion(
+    motion = Motion(
         skeleton=skeleton,
         rotations=_owned(local),
         root_positions=_owned(np.ascontiguousarray(positions[:, 0])),
@@ -179,6 +179,8 @@ def _motion(
         translations=None if translations is None else _owned(translations),
         name=name if name is not None else os.path.splitext(os.path.basename(path))[0],
     )
+    check_reach(path, motion)
+    return motion
 
 
 def _rotations(path: str, matrices: NDArray[np.float64], names: list[str], when: str) -> NDArray[np.float64]:
@@ -217,3 +219,53 @@ def _unique(names: list[str]) -> list[str]:
         seen.add(cand)
         out.append(cand)
     return out
+
+
+def check_reach(path: str, motion: Motion, *, skeleton_path: str | None = None) -> None:
+    """Raise :class:`MocapFormatError` naming ``path`` when the joint positions of ``motion`` overflow.
+
+    Values finite in a file (an offset of ``1e300`` file units, a root at
+    ``1.5e308``) can still add up to infinity in forward kinematics and fail
+    far from the file.  Every world position is the root position plus
+    rotated offsets (or animated translations) along a chain, so its size is
+    at most the sum of their largest components times the square root of 3;
+    when that sum (with room for rounding in the rotations) is finite, nothing
+    can overflow and nothing is computed.  Otherwise the joint and end-site
+    positions are computed and checked.
+
+    Parameters
+    ----------
+    path : str
+        The file, named in the error.
+    motion : Motion
+        The clip just read (metres).
+    skeleton_path : str, optional
+        The file that gave the skeleton when it is another one (an ASF for
+        an AMC clip): named instead when the skeleton alone overflows.
+    """
+    sk = motion.skeleton
+    with np.errstate(over="ignore", invalid="ignore"):
+        reach = np.abs(sk.offsets).max(axis=1)
+        if motion.translations is not None:
+            reach = np.maximum(reach, np.abs(motion.translations).max(axis=(0, 2)))
+        ends = np.abs(sk.end_site_offsets).max(initial=0.0)
+        body = (float(reach[1:].sum()) + float(ends)) * 16.0
+        bound = body + float(np.abs(motion.root_positions).max()) * 16.0
+    if np.isfinite(bound):
+        return
+    if skeleton_path is not None and not np.isfinite(body):
+        path = skeleton_path
+    with np.errstate(over="ignore", invalid="ignore"):
+        positions = motion.global_positions()
+        ends_at = motion.end_site_positions()
+    for what, arr, names in (
+        ("joint", positions, sk.names),
+        ("end site of joint", ends_at, [sk.names[p] for p in sk.end_site_parents]),
+    ):
+        bad = ~np.isfinite(arr).all(axis=-1)
+        if bad.any():
+            frame, j = (int(i) for i in np.argwhere(bad)[0])
+            raise MocapFormatError(
+                path, 0, "joint positions that stay finite in metres (forward kinematics)",
+                f"an overflow at frame {frame}, {what} {names[j]!r}",
+            )

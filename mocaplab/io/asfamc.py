@@ -80,6 +80,7 @@ from numpy.typing import NDArray
 from .. import quat
 from ..motion import Motion, Skeleton, _owned
 from . import euler
+from ._hierarchy import check_reach
 from .bvh import FPS_RANGE, MAX_INTEGER_DIGITS, _to_float, as_path, decode_text, header_integer, read_text, split_lines
 from .errors import MocapFormatError
 
@@ -774,13 +775,15 @@ def _motion_from_acclaim(
         end_site_parents=np.array(leaves, dtype=np.int64),
         end_site_offsets=end_offsets.reshape(-1, 3),
     )
-    return Motion(
+    motion = Motion(
         skeleton=skeleton,
         rotations=_owned(rotations),
         root_positions=_owned(root),
         fps=float(fps),
         name=name if name is not None else os.path.splitext(os.path.basename(amc_path))[0],
     )
+    check_reach(amc_path, motion, skeleton_path=asf.path)
+    return motion
 
 
 def _report_overflow(

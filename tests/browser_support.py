@@ -291,14 +291,15 @@ def stop_process_tree(
 def server_env(data_dir: str | None) -> dict[str, str]:
     """The environment of a student's JupyterLab: interactive backends, fast lessons.
 
-    ``MOCAPLAB_JUPYTER_BACKEND=trame`` makes the pyvista view interactive;
+    ``MOCAPLAB_JUPYTER_BACKEND=client`` (the default a student gets: the
+    browser draws the 3D view) replaces the static images of the test runs;
     the Agg matplotlib backend and pyvista's forced off-screen mode set for
     headless runs are removed, as a student would not have them.
     """
     env = dict(os.environ)
     for name in ("MPLBACKEND", "PYVISTA_OFF_SCREEN", "JUPYTER_PLATFORM_DIRS", "PYTEST_CURRENT_TEST"):
         env.pop(name, None)
-    env["MOCAPLAB_JUPYTER_BACKEND"] = "trame"
+    env["MOCAPLAB_JUPYTER_BACKEND"] = "client"
     env["MOCAPLAB_FAST"] = "1"
     if data_dir:
         env["MOCAPLAB_DATA_DIR"] = data_dir

@@ -65,11 +65,12 @@ caller from Python).
 
 Backends
 --------
-``MOCAPLAB_JUPYTER_BACKEND`` (default ``"trame"``) selects how the 3D view
+``MOCAPLAB_JUPYTER_BACKEND`` (default ``"client"``) selects how the 3D view
 reaches the notebook:
 
 * ``"trame"`` and ``"server"`` (the same): pyvista's trame view in its
-  server-rendering mode.  The kernel renders (no multisampling: on Mesa's
+  server-rendering mode, the fallback where the browser cannot draw
+  (no WebGL).  The kernel renders (no multisampling: on Mesa's
   software rasteriser it costs five times the picture) and sends each picture
   as a JPEG; the mouse rotates and zooms.  Only the picture crosses the wire,
   never the geometry: pyvista's own ``"trame"`` mode also serialises the whole
@@ -192,6 +193,7 @@ __all__ = [
     "MotionViewer",
     "PlayClock",
     "BACKENDS",
+    "DEFAULT_BACKEND",
     "TOOLBAR_WIDTH",
     "PROXY_ENV_VAR",
     "default_backend",
@@ -228,9 +230,12 @@ _log = logging.getLogger(__name__)
 _MAIN_LOOP: asyncio.AbstractEventLoop | None = None  # the loop last seen running in the main thread
 
 
+DEFAULT_BACKEND = "client"
+
+
 def default_backend() -> str:
-    """The backend named by ``MOCAPLAB_JUPYTER_BACKEND`` (default ``"trame"``)."""
-    return os.environ.get(ENV_VAR, "trame").strip().lower() or "trame"
+    """The backend named by ``MOCAPLAB_JUPYTER_BACKEND`` (default :data:`DEFAULT_BACKEND`, the browser draws)."""
+    return os.environ.get(ENV_VAR, DEFAULT_BACKEND).strip().lower() or DEFAULT_BACKEND
 
 
 @contextlib.contextmanager
@@ -965,7 +970,7 @@ class MotionViewer:
         Pixels of the 3D view (views narrower than :data:`TOOLBAR_WIDTH`
         start with the trame toolbar collapsed).
     backend : str, optional
-        One of :data:`BACKENDS`; default ``MOCAPLAB_JUPYTER_BACKEND`` or ``"trame"``.
+        One of :data:`BACKENDS`; default ``MOCAPLAB_JUPYTER_BACKEND`` or ``"client"`` (drawn by the browser).
     frame : int
         Initial slider frame.
     play_rate : float
@@ -1972,7 +1977,10 @@ class MotionViewer:
                 ):
                     vtkw.VtkPolyData("ground", points=(f"{ground}.points",), lines=(f"{ground}.lines",))
                 crowd = f"{ml}.crowd({chars}, {frame})"
-                with html.Div(v_if=f"{chars} && {chars}.chars.length", key=f"{chars}.id"):
+                # kept mounted when new motions come (new arrays, same components): a vtk-polydata with
+                # vtk-data-array children that unmounts logs "instance deleted" (trame-vtk deletes the
+                # dataset before its arrays let go of it)
+                with html.Div(v_if=f"{chars} && {chars}.chars.length"):
                     with vtkw.VtkGlyphRepresentation(
                         id="mocaplab-bones",
                         property=("{interpolation: 1}",),
@@ -2016,7 +2024,7 @@ class MotionViewer:
                             state=(f"{{radius: {self.joint_radius}, thetaResolution: 6, phiResolution: 4}}",),
                             port=1,
                         )
-                with html.Div(v_for=f"(o, k) in {ovl}.overlays", key=f"{ovl}.id + '/' + k"):
+                with html.Div(v_for=f"(o, k) in {ovl}.overlays", key=("k + '/' + o.kind",)):
                     shape = f"{ml}.overlay({ovl}, k, {frame})"
                     with vtkw.VtkGlyphRepresentation(
                         v_if="o.kind === 'points'", id=("'mocaplab-overlay-' + k",), property=("{color: o.color}",)

@@ -142,10 +142,10 @@ class _Fresh:
 
 
 def _check_fps(fps: Any) -> float:
-    try:
-        value = float(fps)
-    except (TypeError, ValueError):
-        raise ValueError(f"Expected `fps` to be a number of frames per second, got {fps!r}") from None
+    # a real number: not a string ("30" reads, "3O" fails far away), not a bool
+    if isinstance(fps, (bool, np.bool_)) or not isinstance(fps, (int, float, np.integer, np.floating)):
+        raise ValueError(f"Expected `fps` to be a number of frames per second, got {type(fps).__name__} {fps!r}")
+    value = float(fps)
     if not FPS_RANGE[0] <= value <= FPS_RANGE[1]:
         raise ValueError(
             f"Expected `fps` from {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} frames per second, got {fps!r}"

@@ -11,6 +11,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
+import mocaplab as ml
 from mocaplab.io import MocapFormatError, load_bvh, save_bvh
 from mocaplab.motion import Motion, Skeleton, readonly
 
@@ -271,3 +272,32 @@ def test_asf_length_unit_that_overflows_is_blamed_on_the_asf(tmp_path):
     line = data.split("\n").index("  length 1.0") + 1
     with pytest.raises(MocapFormatError, match=rf"tiny\.asf, line {line}: expected a length unit whose scale"):
         load_asf_amc(asf, amc)
+
+
+# ---------------------------------------------------------------- options
+def test_motion_fps_must_be_a_number_not_a_string_or_bool():
+    m = _tiny()
+    for bad in ("30", b"30", True, None):
+        with pytest.raises(ValueError, match=r"Expected `fps` to be a number of frames per second"):
+            Motion(m.skeleton, m.rotations, m.root_positions, bad)
+    assert Motion(m.skeleton, m.rotations, m.root_positions, np.int32(30)).fps == 30.0
+
+
+@pytest.mark.parametrize("bad", [True, False, "0.01", float("nan"), float("inf"), 0, -1.0, [0.01]])
+def test_load_scale_is_checked_before_reading(tmp_path, bad):
+    path = tmp_path / "n.bvh"
+    path.write_text(_NAMED.format(name="knee"))
+    for reader in (ml.load, load_bvh):
+        with pytest.raises(ValueError, match=r"Expected `scale` > 0 \(metres per file unit\), got"):
+            reader(path, scale=bad)
+
+
+def test_save_bvh_names_what_it_was_given_instead_of_a_motion(tmp_path):
+    class EditResult:  # what edit() returns: motions, not a motion
+        motions = (_tiny(),)
+
+    with pytest.raises(TypeError, match=r"Expected `motion` to be a Motion, got EditResult \(pass one of its `motions`"):
+        save_bvh(EditResult(), tmp_path / "x.bvh")
+    with pytest.raises(TypeError, match=r"Expected `motion` to be a Motion, got list$"):
+        save_bvh([_tiny()], tmp_path / "x.bvh")
+    assert not (tmp_path / "x.bvh").exists()

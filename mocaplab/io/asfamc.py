@@ -81,7 +81,17 @@ from .. import quat
 from ..motion import Motion, Skeleton, _owned
 from . import euler
 from ._hierarchy import check_reach
-from .bvh import FPS_RANGE, MAX_INTEGER_DIGITS, _to_float, as_path, decode_text, header_integer, read_text, split_lines
+from .bvh import (
+    FPS_RANGE,
+    MAX_INTEGER_DIGITS,
+    _to_float,
+    as_path,
+    check_scale,
+    decode_text,
+    header_integer,
+    read_text,
+    split_lines,
+)
 from .errors import MocapFormatError
 
 __all__ = ["load_asf_amc", "parse_asf", "parse_amc", "Asf", "AsfBone", "CMU_BVH_NAMES", "INCH_M"]
@@ -701,10 +711,7 @@ def _check_options(fps: object, scale: object) -> None:
         and FPS_RANGE[0] <= fps <= FPS_RANGE[1]  # type: ignore[operator]
     ):
         raise ValueError(f"Expected `fps` from {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} frames per second, got {fps!r}")
-    if scale is not None and not (
-        isinstance(scale, (int, float, np.floating)) and math.isfinite(scale) and scale > 0  # type: ignore[arg-type]
-    ):
-        raise ValueError(f"Expected `scale` > 0 (metres per ASF unit), got {scale!r}")
+    check_scale(scale, "metres per ASF unit")
 
 
 def _motion_from_acclaim(

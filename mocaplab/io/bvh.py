@@ -763,11 +763,21 @@ def load_bvh(path: str | bytes | PathLike[str], *, scale: float | None = None, n
     return _motion_from_text(path, read_text(path, "a BVH file"), scale=scale, name=name)
 
 
-def _check_scale(scale: object) -> None:
+def check_scale(scale: object, what: str = "metres per file unit") -> None:
+    """ValueError unless ``scale`` is None or a positive finite real number (not a bool or a string).
+
+    The one check of the readers' ``scale`` option (BVH, ASF/AMC, FBX and :func:`~mocaplab.io.load`).
+    """
     if scale is not None and not (
-        isinstance(scale, (int, float, np.floating)) and math.isfinite(scale) and scale > 0  # type: ignore[arg-type]
+        isinstance(scale, (int, float, np.integer, np.floating))
+        and not isinstance(scale, (bool, np.bool_))
+        and math.isfinite(scale)  # type: ignore[arg-type]
+        and scale > 0  # type: ignore[operator]
     ):
-        raise ValueError(f"Expected `scale` > 0 (metres per file unit), got {scale!r}")
+        raise ValueError(f"Expected `scale` > 0 ({what}), got {scale!r}")
+
+
+_check_scale = check_scale
 
 
 def load_bvh_bytes(raw: bytes, path: str, *, scale: float | None = None, name: str | None = None) -> Motion:
@@ -1002,9 +1012,13 @@ def save_bvh(
     --------
     >>> save_bvh(walk, "walk.bvh", scale=0.01)  # doctest: +SKIP
     """
+    if not isinstance(motion, Motion):
+        hint = " (pass one of its `motions`, e.g. result.motions[0])" if hasattr(motion, "motions") else ""
+        raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}{hint}")
     path = as_path(path)
-    if not (math.isfinite(scale) and scale > 0):
+    if scale is None:
         raise ValueError(f"Expected `scale` > 0 (metres per file unit), got {scale!r}")
+    check_scale(scale)
     if isinstance(precision, bool) or not isinstance(precision, (int, np.integer)) or not 0 <= precision <= 17:
         raise ValueError(f"Expected `precision` to be an integer from 0 to 17 (decimals), got {precision!r}")
     precision = int(precision)

@@ -95,7 +95,7 @@ import numpy as np
 
 from ..motion import FPS_RANGE, Motion
 from ._hierarchy import OFFSET_TOLERANCE, motion_from_transforms
-from .bvh import as_path, read_bytes
+from .bvh import as_path, check_scale, read_bytes
 from .errors import MocapFormatError
 
 __all__ = ["load_fbx", "OFFSET_TOLERANCE", "MAX_DEFLATE_RATIO", "MAX_UNKEYED_FRAMES"]
@@ -172,8 +172,7 @@ def load_fbx(
         isinstance(fps, (int, float, np.number)) and FPS_RANGE[0] <= float(fps) <= FPS_RANGE[1]
     ):
         raise ValueError(f"Expected `fps` from {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g} frames per second, got {fps!r}")
-    if scale is not None and not (isinstance(scale, (int, float, np.number)) and math.isfinite(scale) and scale > 0):
-        raise ValueError(f"Expected `scale` > 0 (metres per file unit), got {scale!r}")
+    check_scale(scale)
     if take is not None and (isinstance(take, bool) or not isinstance(take, (str, int))):
         raise TypeError(f"Expected `take` to be a stack name or index, got {type(take).__name__}")
     raw = read_bytes(file, "an FBX file")

@@ -42,7 +42,7 @@ from .. import quat
 from .._warnings import warn
 from ..motion import Motion
 from ..roles import RolesError
-from .bvh import as_path, load_bvh
+from .bvh import as_path, check_scale, load_bvh
 from .errors import MocapFormatError
 
 __all__ = [
@@ -177,6 +177,7 @@ def load(
         raise TypeError(
             f"Expected `roles` to be a mapping of role name to joint name (or None), got {type(roles).__name__}"
         )
+    check_scale(scale)
     ext = os.path.splitext(file)[1].lower()
     if asf is not None and ext != ".amc":
         raise ValueError(f"Expected `asf` only with an .amc motion (it names that motion's skeleton), got {file!r}")

@@ -488,12 +488,14 @@ def test_relative_offsets_stay_metres_when_the_path_is_squeezed_or_stretched(tie
     assert np.abs(gaps - 0.8).max() < 0.05 * 0.8  # the issue's bound; in fact:
     assert np.abs(gaps - 0.8).max() < 1e-3
     assert res.residuals()[2] < 1e-3 and res.hard_residual_space < 1e-9
-    # switched off (the linear rows of eqs. 1-2 only, one solve), the gap follows the tangent's stretch
+    # one solve (the rows linearised about the undeformed path, no correction measured on the result):
+    # a stretch along the tangent is already metric to first order, the turn it causes is not
     plain = edit(tied, cons, relative_iterations=1)
     off = np.abs(np.linalg.norm(plain.paths[1][frames] - plain.paths[0][frames], axis=1) - 0.8).max()
     if factor != 1.0:
-        assert off > 0.1, "the linear form alone is off by more than 10 cm"
-        assert plain.residuals()[2] == pytest.approx(off, rel=0.2), "and residuals() reports it in metres"
+        assert 2e-3 < off < 0.02, off
+        # residuals() reports the metric error in metres: the offset vector's miss, at least the gap's
+        assert off <= plain.residuals()[2] < 0.1
         assert any("still changing" in n for n in plain.notes)
 
 
@@ -531,7 +533,7 @@ def test_relative_iteration_is_deterministic_and_the_editor_agrees(tied):
     assert ref.notes == () and res.notes == ()
     for k in (0, 1):
         np.testing.assert_allclose(res.paths[k], ref.paths[k], atol=10 * tol)
-    assert res.relative_iterations < ref.relative_iterations, "warm starts need fewer solves"
+    assert res.relative_iterations <= ref.relative_iterations <= 4, "warm starts need no more solves"
 
 
 def test_relative_iteration_stops_when_it_stops_improving(tied):
@@ -609,3 +611,76 @@ def test_range_errors_name_the_dragged_target(walk):
     k = [c for c in err.value.constraints if not isinstance(c, str)][list(err.value.indices).index(1)]
     assert k.position == (1e150, 1.0)
     assert ed.constraints[1].position == (3.5, 1.0)  # the editor kept its last good edit
+
+
+def _pinned_apart(tied, gap, *, hard):
+    """Hard pins on both characters at frame 40, ``gap`` metres apart, and a Relative asking for 0.8 m."""
+    a = ground(tied[0])
+    n = ground(tied[1])[40] - a[40]
+    n = n / np.linalg.norm(n)
+    return [
+        PinPosition(0, 40, a[40], hard=True),
+        PinPosition(1, 40, a[40] + gap * n, hard=True),
+        Relative(1, 40, 0, 40, (0.0, 0.8), hard=hard),
+    ]
+
+
+@pytest.mark.parametrize("gap", [1.5, 3.0])
+def test_a_soft_relative_between_hard_pins_is_a_compromise_with_a_warning(tied, gap):
+    from mocaplab.editing import RelativeConflictWarning
+
+    cons = _pinned_apart(tied, gap, hard=False)
+    with pytest.warns(RelativeConflictWarning, match=r"#2 is missed by .* hard constraints #0, #1"):
+        res = edit(tied, cons)
+    assert res.hard_residual_space < 1e-9
+    # the pins hold, so the gap stays; the offset is missed by its difference from 0.8 m (a compromise)
+    assert np.linalg.norm(res.paths[1][40] - res.paths[0][40]) == pytest.approx(gap, abs=1e-9)
+    assert res.residuals()[2] == pytest.approx(gap - 0.8, abs=0.1)
+    ((i, err, pins),) = res.conflicts
+    assert (i, pins) == (2, (0, 1)) and err == pytest.approx(res.residuals()[2], rel=1e-6)
+    # the relative met where the pins allow it: no conflict, no note
+    fine = edit(tied, _pinned_apart(tied, 0.8, hard=False))
+    assert fine.conflicts == () and fine.residuals()[2] < 1e-3
+
+
+@pytest.mark.parametrize("gap", [1.5, 3.0])
+def test_a_hard_relative_between_hard_pins_names_itself_and_the_pins(tied, gap):
+    from mocaplab.editing import ConstraintError
+
+    with pytest.raises(ConstraintError, match=r"Relative.*PinPosition") as err:
+        edit(tied, _pinned_apart(tied, gap, hard=True))
+    assert set(err.value.indices) == {0, 1, 2}
+    assert "out of numeric range" not in str(err.value)
+
+
+def test_a_formation_drag_settles_in_few_solves_whatever_the_drag_history(walk):
+    """Twelve characters tied in rows by soft Relatives follow a dragged leader (issue 23, item 4)."""
+    from mocaplab.editing import MotionPath
+
+    path = MotionPath.from_motion(walk)
+    F = walk.n_frames
+    t = path.tangents[0] / np.linalg.norm(path.tangents[0])
+    left = np.array([-t[1], t[0]])
+    chars = []
+    for k in range(12):
+        r, c = divmod(k, 4)
+        d = 0.8 * c * left - 1.2 * r * t
+        chars.append(walk.transformed(translation=[d[0], 0.0, d[1]]))
+    paths = [MotionPath.from_motion(m) for m in chars]
+    cons = [PinPosition(0, 0, paths[0].positions[0], hard=True), PinPosition(0, F - 1, paths[0].positions[-1])]
+    for k in range(1, 12):
+        b = k - 1 if k % 4 else k - 4
+        cons.append(PinPosition(k, 0, paths[k].positions[0], hard=True))
+        for f in (10, F // 2, F - 10):
+            cons.append(Relative(k, f, b, f, paths[b].local_offset(f, paths[k].positions[f])))
+    ed = SceneEditor(chars, cons)
+    end = np.asarray(cons[1].position)
+    solves = []
+    for a in np.linspace(0.05, 0.6, 12):
+        res = ed.drag(1, end + 0.8 * np.array([np.cos(a) - 1.0, np.sin(a)]))
+        solves.append(res.relative_iterations)
+    rel = [i for i, c in enumerate(cons) if isinstance(c, Relative)]
+    assert max(res.residuals()[i] for i in rel) < 2e-3 and res.notes == ()
+    assert np.median(solves) <= 2, solves
+    scratch = edit(chars, list(ed.constraints))
+    assert max(float(np.abs(p - q).max()) for p, q in zip(scratch.paths, res.paths, strict=True)) < 3e-3

@@ -169,7 +169,7 @@ from .constraints import (
 )
 from .energy import Energies, deformation_energy
 from .paths import MotionPath, stationary_segments
-from .scene import EditResult, PathJumpWarning, SceneEditor
+from .scene import EditResult, PathJumpWarning, RelativeConflictWarning, SceneEditor
 from .scene import edit as _continuous_edit
 
 if TYPE_CHECKING:
@@ -193,6 +193,7 @@ __all__ = [
     "Constraint",
     "ConstraintError",
     "PathJumpWarning",
+    "RelativeConflictWarning",
     "DiscreteEditor",
     "DiscreteOptions",
     "Disk",

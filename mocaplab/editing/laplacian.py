@@ -38,22 +38,28 @@ Tangent flips (section 4.2)
 Relative constraints in metres (our choice; see
 :mod:`~mocaplab.editing.constraints`)
     Equations 1 and 2 are linear because they measure the offset in units of
-    the other character's tangent ``T = p[j+1] - p[j-1]``; written with the
-    undeformed length ``L``, ``p_a - p_b - (c_x + c_y R) T / L = 0``, the
-    metric offset grows and shrinks with ``|T| / L``.  We keep those linear
-    rows (the matrix, so its factorisation, does not change) and correct
-    their right-hand sides: with ``u = T / |T|`` measured on the solution,
-    ``r = (c_x + c_y R)(u - T / L)`` makes the rows read ``p_a - p_b = c_x u
-    + c_y R u``, metres along the edited tangent.  ``r`` depends on the
+    the other character's tangent ``T = p[j+1] - p[j-1]``: the metric offset
+    would grow and shrink with ``|T| / L`` (``L`` the undeformed length).  The
+    metric target ``C u`` (``u = T / |T|``, ``C = c_x + c_y R``) is nonlinear
+    in ``T``; its rows are written linearised about the undeformed path
+    (Newton rows ``lhs - C (I - u0 u0^T) T / L = r``, ``u0`` the undeformed
+    direction), so the matrix, and its factorisation, depends only on the
+    constraint structure.  Their right-hand sides are then corrected on the
+    solution: ``r = C u - C (I - u0 u0^T) T / L`` makes the rows read ``lhs =
+    c_x u + c_y R u``, metres along the edited tangent.  ``r`` depends on the
     solution, so the solve is repeated (a fixed point, Anderson-accelerated)
-    until ``r`` changes by less than ``relative_tolerance`` (1 mm); the
-    iterate with the smallest change is kept if they stop improving (a soft
-    constraint far from anything reachable).  An interactive drag starts from
-    the previous update's corrections and usually needs one solve.  This
-    stands in for the issue's "rescale the offset and refactorise": the same
-    fixed point, without refactorising.  The discrete evaluation instead
-    writes the metric rows linearised about the current solution
-    (``spatial_rows(..., linearize_at=...)``).
+    until ``r`` changes by less than ``relative_tolerance`` (1 mm).  Rows
+    linearised about the undeformed path already carry the right first-order
+    response (a stretch along the tangent leaves the offset alone, a turn
+    turns it), so a drag that moves tied characters together needs one or
+    two solves; the rows of equations 1 and 2 respond ``|c| / L`` times too
+    strongly to a stretch (about 9 for 0.8 m beside a walk at 30 fps) and
+    needed 10 to 20 solves in a formation.  The iteration keeps its best
+    iterate and stops when it stops improving or diverges (a soft
+    constraint far from anything reachable, or one that fights hard
+    constraints); an interactive drag starts from the previous update's
+    corrections.  The discrete evaluation writes the rows linearised about
+    the current solution instead (``spatial_rows(..., linearize_at=...)``).
 
 Redundant hard constraints
     A set of hard rows is accepted when it is consistent, not only when it
@@ -165,11 +171,12 @@ class Layout:
 class MetricPair:
     """Two rows (x, z) of a :class:`~mocaplab.editing.constraints.Relative` whose target is metric.
 
-    The linear rows (equations 1 and 2) read ``lhs(p) - (c / L) (T, R T) = 0``
-    with ``T`` the other character's tangent (a fixed linear function of
-    ``p``) and ``L`` its undeformed length; the metric target is ``c_x u +
-    c_y R u`` with ``u = T / |T|`` measured on the solution.  The difference,
-    ``(c_x + c_y R) (u - T / L)``, is the right-hand side correction.
+    The rows read ``lhs(p) - M T = r`` with ``T`` the other character's
+    tangent (a fixed linear function of ``p``) and ``M`` the metric target
+    ``c_x u + c_y R u`` (``u = T / |T|``) differentiated about a reference
+    tangent (the undeformed one unless ``linearize_at`` is given).  The
+    right-hand side correction is ``(c_x + c_y R) u - M T`` measured on the
+    solution.
 
     Attributes
     ----------
@@ -400,9 +407,8 @@ def spatial_rows(
             tb = paths[b].tangents[j]
             Lb = float(np.linalg.norm(tb))
             tx, tz = var(b, fb, 0), var(b, fb, 1)
-            T_at = None
-            if linearize_at is not None:
-                T_at = np.array([wb @ linearize_at[tx], wb @ linearize_at[tz]])
+            # Newton rows about the given positions, else about the undeformed path (module docstring)
+            T_at = tb if linearize_at is None else np.array([wb @ linearize_at[tx], wb @ linearize_at[tz]])
             coefs = [(c.offset, False)]
             if c.direction is not None:
                 La = float(np.linalg.norm(paths[a].tangents[i]))
@@ -492,6 +498,16 @@ class MetricTargets:
                 target[i] = vals[sel, 0]
                 target[i + 1] = vals[sel, 1]
         return bw, h
+
+    def current(self, bw: Array, h: Array) -> Array:
+        """The metric rows' right-hand sides in ``bw`` (weighted) and ``h``, unweighted, shape (R, 2)."""
+        out = np.zeros((self.n, 2))
+        s, hd = self.soft, ~self.soft
+        for source, sel in ((bw, s), (h, hd)):
+            if sel.any():
+                i = self.index[sel]
+                out[sel] = np.stack([source[i], source[i + 1]], axis=1)
+        return out / self.scale[:, None]
 
     def errors(self, p: Array, rows: Array) -> Array:
         """Metric error of each pair at positions ``p``, shape (R,).
@@ -842,6 +858,7 @@ class Redundancy:
 
 _ANDERSON = 5  # iterates mixed by the metric-target iteration
 _STALE = 3  # iterations without a smaller change before the metric-target iteration stops
+_DIVERGE = 10.0  # a change this many times the best one so far: the metric-target iteration diverges
 _INFLUENCE = 8  # at most this many moved right-hand-side entries update phase 1 through cached columns
 _INFLUENCE_CACHE = 16  # supports kept per factorisation
 _CONSISTENCY_TOL = 1e-7  # metres or seconds: how far a left-out redundant hard row may miss
@@ -1163,6 +1180,9 @@ class SpatialSolution:
         (its metric error, about).
     corrections : ndarray, shape (R, 2)
         The relative rows' right-hand-side corrections solved for.
+    diverged : bool
+        The metric-target iteration was stopped because its corrections
+        grew (the kept iterate is the best one before).
     """
 
     pbar: Array
@@ -1172,6 +1192,7 @@ class SpatialSolution:
     iterations: int
     change: float
     corrections: Array
+    diverged: bool = False
 
 
 class SpatialSolver:
@@ -1359,19 +1380,24 @@ class SpatialSolver:
             return SpatialSolution(pbar, phat, bw, h, 1, 0.0, np.zeros((0, 2)))
         start = None if previous is None else previous.corrections
         if start is None or start.shape != (M.n, 2):
-            x, bw1, h1 = np.zeros(2 * M.n), bw, h
+            x, bw1, h1 = M.current(bw, h).reshape(-1), bw, h
         else:
             x = start.reshape(-1).copy()
             bw1, h1 = M.apply(bw, h, start)
-        pbar, phat = self._solve_once(f, bw1, h1, previous)
+        # redundant hard rows are checked on the kept iterate: a relative's rows are met only once corrected
+        pbar, phat = self._solve_once(f, bw1, h1, previous, redundant=False)
         xs: list[Array] = []
         gs: list[Array] = []
         best = (np.inf, pbar, phat, bw1, h1, x)
         stale = 0
         it = 1
+        diverged = False
         while True:
             g = M.correction(phat).reshape(-1)
             change = float(np.max(np.abs(g - x)))
+            if not np.isfinite(change) or change > _DIVERGE * best[0]:
+                diverged = True  # corrections that grow: the targets cannot be met (a conflict), keep the best
+                break
             if change < best[0]:
                 best, stale = (change, pbar, phat, bw1, h1, x), 0
             else:
@@ -1388,10 +1414,15 @@ class SpatialSolver:
                 gamma = np.linalg.lstsq(dR, R_[-1], rcond=None)[0]
                 x = g - dG @ gamma
             bw1, h1 = M.apply(bw, h, x.reshape(-1, 2))
-            pbar, phat = self._solve_once(f, bw1, h1)
             it += 1
+            try:
+                pbar, phat = self._solve_once(f, bw1, h1, redundant=False)
+            except ConstraintError:  # targets run out of numeric range: the iteration diverged
+                diverged = True
+                break
         change, pbar, phat, bw1, h1, x = best
-        return SpatialSolution(pbar, phat, bw1, h1, it, change, x.reshape(-1, 2))
+        self._check_hard(f, pbar, phat, h1)
+        return SpatialSolution(pbar, phat, bw1, h1, it, change, x.reshape(-1, 2), diverged)
 
     def _phase1(
         self, f: SpatialFactors, Btb: Array, hk: Array, previous: SpatialSolution | None, bw: Array, h: Array
@@ -1436,14 +1467,31 @@ class SpatialSolver:
         return f.shape.solve(Btb, hk)
 
     def _solve_once(
-        self, f: SpatialFactors, bw: Array, h: Array, previous: SpatialSolution | None = None
+        self,
+        f: SpatialFactors,
+        bw: Array,
+        h: Array,
+        previous: SpatialSolution | None = None,
+        *,
+        redundant: bool = True,
     ) -> tuple[Array, Array]:
-        """Phase 1 and phase 2 solutions, each shape (2 * total,)."""
+        """Phase 1 and phase 2 solutions, each shape (2 * total,).
+
+        ``redundant=False``: only the kept hard rows are checked (numeric
+        range); the caller checks the left-out ones (:meth:`_check_hard`).
+        """
         zr = np.zeros(self.R.shape[0])
         Btb = f.BwT @ bw if len(bw) else np.zeros(2 * self.layout.total)
         full1 = np.concatenate([h, zr])
         pbar = self._phase1(f, Btb, np.concatenate([full1[f.hard1.keep], f.g1]), previous, bw, h)
-        f.hard1.check(pbar, full1, scale=self.extent)
+
+        def check(rows: HardRows, x: Array, full: Array) -> None:
+            if redundant:
+                rows.check(x, full, scale=self.extent)
+            else:
+                rows.check_range(x, full, self.extent)
+
+        check(f.hard1, pbar, full1)
         if f.scale is None or f.hard2 is None:
             return pbar, pbar
         a, v = self._scale_terms(pbar)
@@ -1451,8 +1499,81 @@ class SpatialSolver:
         r2 = v[self._rigid_step_rows].reshape(-1)
         full2 = np.concatenate([h, r2])
         phat = f.scale.solve(rhs + Btb, np.concatenate([full2[f.hard2.keep], f.G2 @ pbar]))
-        f.hard2.check(phat, full2, scale=self.extent)
+        check(f.hard2, phat, full2)
         return pbar, phat
+
+    def soft_conflicts(
+        self, f: SpatialFactors, sol: SpatialSolution, *, tolerance: float | None = None, limit: int = 20
+    ) -> list[tuple[int, float, tuple[Any, ...]]]:
+        """Soft relative pairs missed by more than ``tolerance`` because hard rows fix what they ask for.
+
+        A pair is in conflict when a combination of its two rows is a
+        combination of the hard rows touching its unknowns (the pins on the
+        positions and tangent it relates): no solution can reduce that part
+        of its error, so the result is the least-squares compromise.
+
+        Returns
+        -------
+        list of (index, error, labels)
+            ``index``: the pair's x row in ``bw``; ``error``: its metric
+            error in metres; ``labels``: the hard constraints it fights.  At
+            most ``limit`` pairs, largest error first.
+        """
+        M = f.metric
+        tol = self.metric_tolerance if tolerance is None else float(tolerance)
+        if M is None or not M.soft.any():
+            return []
+        soft = np.flatnonzero(M.soft)
+        idx = M.index[soft]
+        vals = f.Bw @ sol.phat
+        rows = np.stack([vals[idx], vals[idx + 1]], axis=1) / M.scale[soft, None]
+        sub = dataclasses.replace(
+            M,
+            tangent=M.tangent[np.stack([2 * soft, 2 * soft + 1], 1).ravel()],
+            coef=M.coef[soft],
+            length=M.length[soft],
+            linear=M.linear[soft],
+            soft=M.soft[soft],
+            index=idx,
+            scale=M.scale[soft],
+            direction=M.direction[soft],
+        )
+        err = sub.errors(sol.phat, rows)
+        order = np.argsort(-err)
+        H = f.H.tocsc()
+        Hr = f.H.tocsr()
+        row_label = {}
+        for lab, g in f.hard1.groups:
+            for r in np.asarray(g).tolist():
+                row_label[r] = lab
+        out: list[tuple[int, float, tuple[Any, ...]]] = []
+        for q in order[: 4 * limit]:
+            if not err[q] > tol or len(out) >= limit:
+                break
+            B = f.Bw[[int(idx[q]), int(idx[q]) + 1]]
+            cols = np.unique(B.indices)
+            touching = np.unique(H[:, cols].tocoo().row)
+            if not len(touching):
+                continue
+            allcols = np.unique(np.concatenate([cols, Hr[touching].indices]))
+            Hs = Hr[touching][:, allcols].toarray()
+            Bs = B[:, allcols].toarray()
+            rank_h = int(np.linalg.matrix_rank(Hs))
+            if int(np.linalg.matrix_rank(np.vstack([Hs, Bs]))) < rank_h + 2:
+                labels: list[Any] = []
+                for r in touching.tolist():
+                    lab = row_label.get(r)
+                    if lab is not None and not any(lab is x for x in labels):
+                        labels.append(lab)
+                out.append((int(idx[q]), float(err[q]), tuple(labels)))
+        return out
+
+    def _check_hard(self, f: SpatialFactors, pbar: Array, phat: Array, h: Array) -> None:
+        """Check every hard row (the left-out redundant ones too) on a kept iterate (:meth:`HardRows.check`)."""
+        f.hard1.check(pbar, np.concatenate([h, np.zeros(self.R.shape[0])]), scale=self.extent)
+        if f.scale is not None and f.hard2 is not None:
+            r2 = self._scale_terms(pbar)[1][self._rigid_step_rows].reshape(-1)
+            f.hard2.check(phat, np.concatenate([h, r2]), scale=self.extent)
 
     def scale_rhs(self, pbar: Array) -> Array:
         """Right-hand side ``vbar_i - vbar_{i-1}`` of equation 7, shape (2 * n_interior,)."""

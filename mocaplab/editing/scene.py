@@ -121,7 +121,16 @@ from .laplacian import (
 from .paths import MotionPath, apply_path, contact_joints, laplacian_coordinates, stationary_segments, with_roles
 from .timewarp import TimeFactors, TimeSolver, temporal_rows
 
-__all__ = ["edit", "SceneEditor", "EditResult", "RefineCache", "PathJumpWarning", "MAX_CLOCK_FPS", "MAX_CLOCK_FRAMES"]
+__all__ = [
+    "edit",
+    "SceneEditor",
+    "EditResult",
+    "RefineCache",
+    "PathJumpWarning",
+    "RelativeConflictWarning",
+    "MAX_CLOCK_FPS",
+    "MAX_CLOCK_FRAMES",
+]
 
 Array = NDArray[np.float64]
 
@@ -844,6 +853,17 @@ _JUMP_FACTOR = 1.5
 _JUMP_SLACK = 0.002
 
 
+class RelativeConflictWarning(UserWarning):
+    """A soft relative constraint fights hard constraints: the edit is their least-squares compromise.
+
+    The hard constraints fix (part of) what the relative asks for, e.g. hard
+    pins on both characters at the related frames 3 m apart and an offset
+    of 0.8 m; the relative is then missed by about 2.2 m.  A hard relative
+    in that place raises :class:`~mocaplab.editing.constraints.ConstraintError`
+    naming it and the pins.
+    """
+
+
 def _path_jumps(result: EditResult) -> list[str]:
     """Messages for each character whose edited path makes a one-frame jump (see :class:`PathJumpWarning`)."""
     out = []
@@ -896,10 +916,16 @@ def edit(characters: Any, constraints: Sequence[Any] = (), **options: Any) -> Ed
     PathJumpWarning
         Where the constraints force a one-frame jump of a path (a rigid
         segment dragged from a hard pin next to it), naming the frames.
+    RelativeConflictWarning
+        Where a soft :class:`~mocaplab.editing.constraints.Relative` asks
+        for what hard constraints fix (:attr:`EditResult.conflicts`).
     """
     result = SceneEditor(characters, constraints, **options).result
     for message in _path_jumps(result):
         warn(message, PathJumpWarning)
+    for note in result.notes:
+        if note.startswith("soft relative constraint #"):
+            warn(note, RelativeConflictWarning)
     return result
 
 
@@ -1033,6 +1059,25 @@ class EditResult:
             out[i] = _ro(np.array(r))
         return out
 
+    def _relative_conflicts(
+        self, editor: SceneEditor, sol: SpatialSolution
+    ) -> tuple[tuple[int, float, tuple[int, ...]], ...]:
+        """``(constraint, metric error, hard constraints)`` of each soft Relative that hard constraints defeat."""
+        found = editor._space.soft_conflicts(self._sfac, sol)
+        if not found:
+            return ()
+        owner = {}
+        for i, (which, sl) in self._sslices.items():
+            if which == "soft":
+                owner[(sl.start, sl.stop)] = i
+        worst: dict[int, tuple[float, set[int]]] = {}
+        for row, err, labels in found:
+            i = next(i for (a, b), i in owner.items() if a <= row < b)
+            pins = {lab[0] for lab in labels if isinstance(lab, tuple)}
+            e, p = worst.get(i, (0.0, set()))
+            worst[i] = (max(e, err), p | pins)
+        return tuple((i, e, tuple(sorted(p))) for i, (e, p) in sorted(worst.items()) if p)
+
     def __init__(self, editor: SceneEditor, constraints: tuple[Any, ...]) -> None:
         self._ed = editor
         self.constraints = constraints
@@ -1054,6 +1099,13 @@ class EditResult:
             notes.append(
                 f"relative constraints: metric targets still changing by {sp_.change:.2g} m after "
                 f"{sp_.iterations} solves (relative_tolerance {tol:g} m); residuals() shows the metric errors"
+            )
+        self.conflicts: tuple[tuple[int, float, tuple[int, ...]], ...] = self._relative_conflicts(editor, sp_)
+        for i, err, pins in self.conflicts:
+            notes.append(
+                f"soft relative constraint #{i} is missed by {err:.3g} m: hard constraints "
+                + ", ".join(f"#{j}" for j in pins)
+                + " fix what it asks for, so the result is a least-squares compromise (move them, or make them soft)"
             )
         self.notes: tuple[str, ...] = tuple(notes)
         self._tfac: TimeFactors = editor._td.factors

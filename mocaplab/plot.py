@@ -48,7 +48,7 @@ from .roles import parse_name
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
 
-__all__ = ["skeleton", "root_path", "joint_curves", "contact_timeline", "COLORS"]
+__all__ = ["skeleton", "root_path", "joint_curves", "contact_timeline", "literal", "COLORS"]
 
 #: Default colours of successive characters (matplotlib's tab10 cycle).
 COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
@@ -57,6 +57,31 @@ Projection = Literal["3d", "front", "side", "top"]
 # world axis indices shown on (horizontal, vertical) of each 2D projection
 _PLANES = {"front": (0, 1), "side": (2, 1), "top": (0, 2)}
 _AXIS_NAMES = ("x", "y", "z")
+
+
+def literal(text: object) -> str:
+    """Text from data (a joint, clip or file name) that matplotlib shows as written.
+
+    Matplotlib reads text between two ``$`` as mathtext: a clip named
+    ``$\\foo$`` fails to draw (an unknown symbol), and ``$x$`` turns italic.
+    Every ``$`` is escaped, so mathtext never sees the text.  Use it for every
+    label, title or tick built from data (the widgets do too).
+
+    Parameters
+    ----------
+    text : object
+        Shown with ``str()``.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> literal("cost in $")
+    'cost in \\$'
+    """
+    return str(text).replace("$", "\\$")
 
 
 def _new_axes(ax: Axes | None, *, three_d: bool = False, figsize: tuple[float, float] = (6.0, 4.0)) -> Axes:
@@ -188,7 +213,7 @@ def skeleton(
     pos, segs = _bones(motion, f, end_sites)
     body = pos[_drawn(motion)]
     color = color or COLORS[0]
-    label = motion.name if label is None else label
+    label = literal(motion.name if label is None else label)
     marked = np.array([motion.skeleton.index(n) for n in highlight], dtype=np.int64)
     if projection == "3d":
         ax3: Any = _new_axes(ax, three_d=True)  # mpl_toolkits.mplot3d.Axes3D
@@ -230,7 +255,7 @@ def skeleton(
         if projection == "top":
             _top_view(ax)
     title = f"{motion.name + ', ' if motion.name else ''}frame {f} (t = {f / motion.fps:.2f} s)"
-    ax.set_title(title)
+    ax.set_title(literal(title))
     return ax
 
 
@@ -298,7 +323,7 @@ def root_path(
         xz, name = _ground_path(item, k)
         color = colors[k % len(colors)] if colors else COLORS[k % len(COLORS)]
         label = labels[k] if labels is not None else (name or f"path {k}")
-        ax.plot(xz[:, 0], xz[:, 1], color=color, linewidth=linewidth, label=label)
+        ax.plot(xz[:, 0], xz[:, 1], color=color, linewidth=linewidth, label=literal(label))
         ax.plot(*xz[0], "o", color=color, markersize=7)
         ax.plot(*xz[-1], "s", color=color, markersize=7)
         if ticks and isinstance(item, Motion):
@@ -371,7 +396,7 @@ def joint_curves(
     t = motion.times
     for k, name in enumerate(names):
         color = colors[k % len(colors)] if colors else COLORS[k % len(COLORS)]
-        ax.plot(t, values[:, k], color=color, label=name)
+        ax.plot(t, values[:, k], color=color, label=literal(name))
         if contacts is not None and name in contacts.joints:
             for a, b in contacts.intervals(name):
                 ax.axvspan(a / motion.fps, (b - 1) / motion.fps, color=color, alpha=0.12, linewidth=0)
@@ -426,7 +451,7 @@ def contact_timeline(
         ax.broken_barh(bars, (k - 0.35, 0.7), facecolors=color)
     if frame is not None:
         ax.axvline(int(frame) * dt, color="k", linewidth=1)
-    ax.set_yticks(range(len(contacts.joints)), labels=list(contacts.joints))
+    ax.set_yticks(range(len(contacts.joints)), labels=[literal(j) for j in contacts.joints])
     ax.set_ylim(len(contacts.joints) - 0.5, -0.5)
     ax.set_xlim(0.0, max(contacts.n_frames * dt, dt))
     ax.set_xlabel("time (s)")
@@ -575,7 +600,7 @@ def path_vectors(
             raise IndexError(f"Expected `frames` in [0, {path.n_frames}), got {idx.tolist()}")
     ax = _new_axes(ax, figsize=(6.0, 5.0))
     p = np.asarray(path.positions)
-    ax.plot(p[:, 0], p[:, 1], color=color, label=label)
+    ax.plot(p[:, 0], p[:, 1], color=color, label=literal(label))
     if path.degenerate.any():
         ax.plot(*p[path.degenerate].T, "x", color="crimson", label="degenerate")
     at = p[idx]
@@ -650,8 +675,8 @@ def time_warps(
         t = np.asarray(w.times[character] if hasattr(w, "times") else w, dtype=float)
         if t.ndim != 1:
             raise ValueError(f"Expected warp {k} as an edit result or times of shape (F,), got shape {t.shape}")
-        a1.plot(t, label=label)
-        a2.plot(np.diff(t) / h, label=label)
+        a1.plot(t, label=literal(label))
+        a2.plot(np.diff(t) / h, label=literal(label))
     a2.axhline(0.0, color="0.5", linewidth=0.8)
     a1.set_xlabel("frame i")
     a1.set_ylabel("reference time t_i (s)")
@@ -661,7 +686,7 @@ def time_warps(
     a1.grid(True, alpha=0.3)
     a2.grid(True, alpha=0.3)
     if title:
-        fig.suptitle(title)
+        fig.suptitle(literal(title))
     return a1, a2
 
 

@@ -301,3 +301,56 @@ def test_save_bvh_names_what_it_was_given_instead_of_a_motion(tmp_path):
     with pytest.raises(TypeError, match=r"Expected `motion` to be a Motion, got list$"):
         save_bvh([_tiny()], tmp_path / "x.bvh")
     assert not (tmp_path / "x.bvh").exists()
+
+
+# ------------------------------------------------- text from data in figures
+MATH = "$\\foo$"  # an unknown mathtext symbol: drawing it raises unless the '$' are escaped
+
+
+def _draw(fig) -> None:
+    fig.canvas.draw()
+
+
+@pytest.fixture(scope="module")
+def dollar_walk(cmu):
+    import dataclasses
+
+    walk = cmu("16_15")[:40]
+    names = tuple(MATH if n == "Head" else n for n in walk.skeleton.names)
+    return walk.replace(skeleton=dataclasses.replace(walk.skeleton, names=names), name=MATH)
+
+
+def test_plot_functions_draw_names_with_dollar_signs_as_written(dollar_walk):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mocaplab import plot
+    from mocaplab.contacts import Contacts
+
+    try:
+        axes = [
+            plot.skeleton(dollar_walk, 0, projection="front"),
+            plot.root_path(dollar_walk),
+            plot.joint_curves(dollar_walk, [MATH]),
+            plot.contact_timeline(Contacts((MATH,), np.zeros((40, 1), dtype=bool), 30.0)),
+            plot.time_warps([np.arange(40) / 30.0], [MATH], h=1 / 30, title=MATH)[0],
+        ]
+        for ax in axes:
+            _draw(ax.figure)
+        shown = [t.get_text() for ax in axes for t in ax.figure.findobj(matplotlib.text.Text)]
+        assert any(MATH.replace("$", "\\$") in t for t in shown)
+    finally:
+        plt.close("all")
+    assert plot.literal(MATH) == "\\$\\foo\\$"
+
+
+def test_time_track_editor_draws_labels_with_dollar_signs(cmu):
+    from mocaplab.widgets.time_track import TimeTrackEditor
+
+    from mocaplab.editing import SceneEditor
+
+    walk = cmu("16_15").resample(30)[:60]
+    tt = TimeTrackEditor(SceneEditor([walk], []), labels=[MATH], title=MATH)
+    _draw(tt.figure)

@@ -79,6 +79,7 @@ from numpy.typing import NDArray
 
 from mocaplab import editing
 from mocaplab.contacts import foot_contacts, intervals_from_mask
+from mocaplab.plot import literal
 
 from ._drag import (
     Backend,
@@ -233,7 +234,7 @@ class PathEditor(DragView):
         n = len(self.original_paths)
         self.colors = character_colors(n)
 
-        self._build_figure(figsize, backend, title)
+        self._build_figure(figsize, backend, literal(title))
         self.ax.set_xlabel("x (m)")
         self.ax.set_ylabel("z (m)")
         self.ax.set_aspect("equal", adjustable="datalim")

@@ -60,6 +60,7 @@ from matplotlib.figure import Figure
 from matplotlib.layout_engine import ConstrainedLayoutEngine
 
 from mocaplab.motion import Motion
+from mocaplab.plot import literal
 from mocaplab.staggered import StaggeredEditor
 
 from ._controls import ExportControl, HistoryButtons
@@ -325,7 +326,7 @@ class StaggeredExplorer:
             ax.axvline(t, color="k", lw=1.6 if k == sel else 0.5, alpha=0.8 if k == sel else 0.35)
         unit = "m" if c["kind"] == "translation" else "rad (rotation vector)"
         mode = "staggered" if ed.staggered else "non-staggered (refinements zeroed)"
-        ax.set_title(f"{name}: {mode}", fontsize=10)
+        ax.set_title(literal(f"{name}: {mode}"), fontsize=10)
         ax.set_xlabel("time (s)")
         ax.set_ylabel(unit)
         ax.legend(loc="upper right", fontsize=8, ncols=3)

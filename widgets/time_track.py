@@ -38,6 +38,7 @@ from matplotlib.lines import Line2D
 from numpy.typing import NDArray
 
 from mocaplab import editing
+from mocaplab.plot import literal
 
 from ._drag import (
     Backend,
@@ -141,9 +142,9 @@ class TimeTrackEditor(DragView):
 
         if figsize is None:
             figsize = (8.0, 1.2 + 0.9 * n)
-        self._build_figure(figsize, backend, title)
+        self._build_figure(figsize, backend, literal(title))
         self.ax.set_xlabel("reference time (s)")
-        self.ax.set_yticks(range(n), self.labels)
+        self.ax.set_yticks(range(n), [literal(label) for label in self.labels])
         self.ax.set_ylim(n - 0.4, -0.7)  # track 0 on top
         self.ax.grid(True, axis="x", alpha=0.3)
         for k, (t, c) in enumerate(zip(self.original_times, self.colors, strict=True)):

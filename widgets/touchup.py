@@ -54,6 +54,7 @@ from matplotlib.layout_engine import ConstrainedLayoutEngine
 
 from mocaplab.motion import Motion
 from mocaplab.physics import Adjustment, TouchUpSession
+from mocaplab.plot import literal
 
 from ._controls import ExportControl
 from ._drag import TOOLBAR_PX
@@ -182,7 +183,7 @@ def plot_zmp_distance(curves: dict[str, Any], *, fps: float, ax: Any = None) -> 
         d = np.asarray(d, dtype=float)
         color = INPUT_COLOR if k == 0 else f"C{k - 1}"
         ax.plot(
-            np.arange(len(d)) / fps, 1000 * d, color=color, lw=1.2, label=f"{label}: mean {1000 * np.nanmean(d):.1f} mm"
+            np.arange(len(d)) / fps, 1000 * d, color=color, lw=1.2, label=literal(f"{label}: mean {1000 * np.nanmean(d):.1f} mm")
         )
     ax.set_xlabel("time (s)")
     ax.set_ylabel("ZMP distance (mm)")

@@ -37,6 +37,9 @@ _ENTRY_POINTS = {
 _SUBMODULES = (
     "contacts", "data", "displacement", "editing", "ik", "io", "kinematics", "lessons", "motion", "physics",
     "quality", "quat", "refinement", "roles", "staggered", "undo",
+    # the views (ipywidgets, matplotlib, pyvista): imported only when ``mocaplab.widgets`` is first used,
+    # so ``import mocaplab`` never loads a UI package
+    "widgets",
 )
 
 __all__ = ["Motion", "Skeleton", "concatenate", *_ENTRY_POINTS, "__version__"]

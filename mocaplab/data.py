@@ -218,8 +218,16 @@ def mirror_dir() -> Path | None:
 def _existing_mirror() -> Path | None:
     """:func:`mirror_dir`, checked to be a folder (a mistyped path is not a layout problem)."""
     root = mirror_dir()
-    if root is not None and not root.is_dir():
-        what = "is a file, not a folder" if root.exists() else "does not exist"
+    try:
+        missing = root is not None and not root.is_dir()
+        what = "is a file, not a folder" if missing and root.exists() else "does not exist"  # type: ignore[union-attr]
+    except OSError as exc:  # a name too long, a folder that may not be read, ...
+        shown = str(root) if len(str(root)) <= 120 else f"{str(root)[:100]}... ({len(str(root))} characters)"
+        raise DataError(
+            f"{ENV_VAR}={shown} is set but that folder cannot be used ({exc.strerror or exc}). Set {ENV_VAR} to "
+            f"the folder holding the mirror (bvh/, asfamc/<subject>/, pair_salsa_daz/), or unset it to download."
+        ) from None
+    if missing:
         raise DataError(
             f"{ENV_VAR}={root} is set but that folder {what}. Set {ENV_VAR} to the folder holding the "
             f"mirror (bvh/, asfamc/<subject>/, pair_salsa_daz/), or unset it to download the clips."

@@ -6,6 +6,8 @@ Each test fails on the defect it names (checked by reverting the fix once).
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import tracemalloc
 
 import numpy as np
@@ -354,3 +356,50 @@ def test_time_track_editor_draws_labels_with_dollar_signs(cmu):
     walk = cmu("16_15").resample(30)[:60]
     tt = TimeTrackEditor(SceneEditor([walk], []), labels=[MATH], title=MATH)
     _draw(tt.figure)
+
+
+# ------------------------------------------------------ widget error display
+class _Unprintable(Exception):
+    def __str__(self):
+        raise RuntimeError("the message itself fails")
+
+
+def test_error_display_cannot_fail():
+    from mocaplab.widgets._controls import error_html
+
+    for err in (_Unprintable("x"), ValueError("<b>'quoted'</b>"), KeyError(None)):
+        shown = error_html(err, trace=True)
+        assert shown.startswith("<pre") and type(err).__name__ in shown
+    assert "&lt;b&gt;" in error_html(ValueError("<b>"))  # escaped
+
+
+def test_touch_up_widget_shows_an_error_whose_message_fails(cmu):
+    from mocaplab.widgets.touchup import TouchUpStepper
+
+    widget = TouchUpStepper(cmu("16_15").resample(30)[:45])
+
+    def boom():
+        raise _Unprintable("x")
+
+    widget._guard(boom)  # must not raise
+    assert "_Unprintable" in widget.status.value
+
+
+def test_widgets_are_reachable_from_a_plain_import_lazily():
+    script = (
+        "import sys, mocaplab as ml\n"
+        "assert 'ipywidgets' not in sys.modules and 'mocaplab.widgets' not in sys.modules\n"
+        "assert 'widgets' in dir(ml)\n"
+        "assert ml.widgets.__name__ == 'mocaplab.widgets'\n"
+        "print('ok')\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
+
+
+def test_an_unusable_data_dir_is_a_data_error_naming_the_variable(monkeypatch, tmp_path):
+    from mocaplab import data
+
+    monkeypatch.setenv("MOCAPLAB_DATA_DIR", str(tmp_path / ("a" * 5000)))
+    with pytest.raises(data.DataError, match=r"MOCAPLAB_DATA_DIR=.*\(5\d{3} characters\) is set but that folder cannot be used"):
+        data.cmu("16_15")

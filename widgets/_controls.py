@@ -20,7 +20,49 @@ import ipywidgets as W
 from mocaplab.io import save_bvh
 from mocaplab.motion import Motion
 
-__all__ = ["HistoryButtons", "ExportControl", "export_paths"]
+__all__ = ["HistoryButtons", "ExportControl", "export_paths", "error_html"]
+
+
+def _text(get: Callable[[], str], what: str) -> str:
+    try:
+        return str(get())
+    except Exception:  # noqa: BLE001 - an error display must not fail
+        return f"<{what} could not be shown>"
+
+
+def error_html(err: BaseException, *, trace: bool = False) -> str:
+    """An exception as the HTML of a widget's status line; never raises.
+
+    The message of an exception is user code (``__str__``) and may itself
+    fail, or not be text; the display shows what it can and never lets a
+    second exception out of the widget's callback.
+
+    Parameters
+    ----------
+    err : BaseException
+    trace : bool
+        Add the last frames of the traceback.
+
+    Returns
+    -------
+    str
+        A ``<pre>`` block, HTML-escaped.
+    """
+    name = _text(lambda: type(err).__name__, "exception type")
+    message = _text(lambda: str(err), "message")
+    if message.startswith("<message could not"):
+        message = _text(lambda: object.__repr__(err), "message")
+    text = f"{name}: {message}"
+    if trace:
+        import traceback
+
+        text += "\n" + _text(
+            lambda: "".join(traceback.format_exception(type(err), err, err.__traceback__, limit=3)), "traceback"
+        )
+    return (
+        "<pre class='mocaplab-error' style='color:#b00; white-space:pre-wrap'>"
+        f"{html.escape(text)}</pre>"
+    )
 
 
 class HistoryButtons:

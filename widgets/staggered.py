@@ -50,7 +50,6 @@ from __future__ import annotations
 import html
 import io
 import json
-import traceback
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -63,7 +62,7 @@ from mocaplab.motion import Motion
 from mocaplab.plot import literal
 from mocaplab.staggered import StaggeredEditor
 
-from ._controls import ExportControl, HistoryButtons
+from ._controls import ExportControl, HistoryButtons, error_html
 from ._drag import TOOLBAR_PX, make_canvas
 
 __all__ = ["StaggeredExplorer"]
@@ -216,10 +215,7 @@ class StaggeredExplorer:
         try:
             action()
         except Exception as err:  # show it in the widget instead of losing it in the log
-            self.status.value = (
-                f"<pre style='color:#b00; white-space:pre-wrap'>{html.escape(type(err).__name__)}: "
-                f"{html.escape(str(err))}\n{html.escape(traceback.format_exc(limit=3))}</pre>"
-            )
+            self.status.value = error_html(err, trace=True)
         finally:
             self._sync_controls()
 

@@ -56,7 +56,7 @@ from mocaplab.motion import Motion
 from mocaplab.physics import Adjustment, TouchUpSession
 from mocaplab.plot import literal
 
-from ._controls import ExportControl
+from ._controls import ExportControl, error_html
 from ._drag import TOOLBAR_PX
 
 __all__ = ["TouchUpStepper", "plot_zmp_distance", "plot_mean_distance", "plot_balance_top"]
@@ -407,9 +407,7 @@ class TouchUpStepper:
             action()
             self.status.value = ""
         except Exception as err:  # shown in the widget, not lost in the log
-            self.status.value = (
-                f"<pre style='color:#b00; white-space:pre-wrap'>{html.escape(f'{type(err).__name__}: {err}')}</pre>"
-            )
+            self.status.value = error_html(err)
             self._sync_controls()  # every control shows the session again (the edit that failed is undone)
 
     def _sync_controls(self) -> None:

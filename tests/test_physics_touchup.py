@@ -7,9 +7,11 @@ import warnings
 
 import numpy as np
 import pytest
+from pipeline import step_functions, trimmed
 from scipy.ndimage import gaussian_filter1d
 from test_physics_body import LAYOUTS
 
+import mocaplab as ml
 from mocaplab import quat
 from mocaplab.contacts import foot_contacts
 from mocaplab.physics import (
@@ -30,7 +32,7 @@ from mocaplab.physics import (
     step,
     touch_up,
 )
-from mocaplab.physics.touchup import MAX_ANGLE, STALL_TOLERANCE, _ground_rotation
+from mocaplab.physics.touchup import MAX_ANGLE, STALL_TOLERANCE, ZMP_SLACK, _ground_rotation, _posed
 from mocaplab.physics.zmp import zmp_from_links
 
 
@@ -380,7 +382,8 @@ def test_flight_gets_a_parabola_and_steady_angular_momentum(cmu):
     com = center_of_mass(h.final, body)[a:b][:, [0, 2]]
     fit = np.column_stack([np.arange(b - a), np.ones(b - a)])
     resid = com - fit @ np.linalg.lstsq(fit, com, rcond=None)[0]
-    assert np.abs(resid).max() < 0.01
+    # within 11 mm: a pass may not raise the ground frames' mean ZMP distance by more than ZMP_SLACK
+    assert np.abs(resid).max() < 0.011
 
 
 def test_walks_have_no_flight_adjustment(walk30):
@@ -578,19 +581,26 @@ def test_the_bent_jump_improves_with_the_papers_flight_window(cmu):
     bent = refine(edit([jump], pins).motions[0], contacts=c, reference=jump)
     h = touch_up(bent, body=Body.from_skeleton(jump), contacts=c, flight_window=0.5, iterations=3)
     n = len(h.states[0].schedule)
-    assert h.best == 3 * n and h.errors[h.best] < 0.5 * h.errors[0]
+    # two passes (8.6 -> 4.9 mm); a third would unbalance the long take-off and landing windows the 0.5 s
+    # window changes: the ground frames' mean ZMP distance past the input's by more than ZMP_SLACK
+    assert h.best == 2 * n and h.errors[h.best] < 0.6 * h.errors[0]
     assert np.all(np.diff(h.errors[::n]) < 0)
+    zmp = [s.mean_zmp_distance for s in h.states[:: n]]
+    assert max(zmp) <= zmp[0] + ZMP_SLACK < 2.0 * max(zmp)
 
 
 def test_no_pass_that_helps_returns_the_input_with_a_reason(walk30):
-    """A walk whose root bounces beyond g: no step down to MIN_STEP helps; the input comes back with the reason."""
+    """A walk whose root bounces beyond g, balanced by turning the head: no step down to MIN_STEP helps.
+
+    The input comes back with the reason.
+    """
     root = walk30.root_positions.copy()
     root[:, 1] += 0.06 * np.sin(2 * np.pi * 3.0 * walk30.times)
     bouncing = walk30.replace(root_positions=root)
     c = foot_contacts(walk30)
     with warnings.catch_warnings(record=True) as record:
         warnings.simplefilter("always")
-        h = touch_up(bouncing, contacts=c, iterations=3)
+        h = touch_up(bouncing, contacts=c, iterations=3, schedule=[Adjustment(("Head",), (), 10 / 30, 0.2)])
     texts = [str(w.message) for w in record if "returns its input unchanged" in str(w.message)]
     assert len(texts) == 1 and record[-1].filename == __file__  # it points at the caller's line
     text = texts[0]
@@ -808,3 +818,36 @@ def test_the_error_without_the_uncorrected_ends_is_reported_beside_it(walk30):
         assert h.mean_zmp_distance_interior[k] == st.mean_zmp_distance_interior
     # the ends keep what the input had there, so the whole and the interior tell different stories
     assert h.interior_errors[h.best] != h.errors[h.best]
+
+
+def test_the_footplant_step_leaves_untouched_frames_alone(mocap_dir):
+    """The IK layer carries knees bent against their hinge over to its side; frames no step moved must keep theirs.
+
+    The OptiTrack walk's left knee, near straight, bends a little against its clip-wide hinge: re-planting
+    the input itself turned it by up to 0.25 rad (and flipped it back and forth between passes).
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        walk = ml.load(mocap_dir / "realworld" / "optitrack_mda" / "test_optitrack.bvh")[:600]
+        st = start(walk)
+    same = st.fix(_posed(walk))
+    np.testing.assert_array_equal(same.motion.rotations, walk.rotations)
+    # a step that moves the lower body is re-planted where it moved, and nowhere else
+    moved = step(st)
+    changed = np.abs(moved.motion.rotations - walk.rotations).max(axis=(1, 2)) > 0
+    assert changed.any() and not changed.all()
+
+
+def test_a_touch_up_never_leaves_the_ground_worse_balanced(cmu):
+    """CMU 16_05 bent and refined: the flight steps bought their parabola with the ground frames (6.3 -> 15.8 mm)."""
+    jump = trimmed(cmu("16_05"), 8.0)
+    bent = step_functions(jump)["bend+refine"](jump)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        h = touch_up(bent)
+    first = h.states[0]
+    assert h.best > 0 and h.errors[h.best] < 0.7 * h.errors[0]  # it still helps the flight
+    assert h.states[h.best].mean_zmp_distance <= first.mean_zmp_distance + ZMP_SLACK
+    # every accepted pass keeps the ground frames within the slack
+    n = len(first.schedule)
+    assert all(s.mean_zmp_distance <= first.mean_zmp_distance + ZMP_SLACK for s in h.states[n::n])

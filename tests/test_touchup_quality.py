@@ -12,13 +12,13 @@ measure            why the touch-up must keep it
 ``penetration``    the touch-up turns body parts about the pelvis or the ZMP's projection: a foot pushed into
                    the floor the input stands on would be a wrong rotation centre
 ``displacement``   the corrections are smoothed over 10-40 frames (sigma): a one-frame pop means an unsmoothed
-                   correction (a kernel edge, a frame the line search should have refused)
+``angular_``       correction (a kernel edge, a frame the line search should have refused), a knee snapped
+``acceleration``   straight by the footplant IK (a hip turned beyond the leg's reach) or a knee flipped to its
+                   hinge's side on frames the step never moved (issue 24)
 ``hinge_flips``    a rotation of the legs must not bend a knee against its own axis
+``zmp``            the point of the touch-up: the ground frames end no worse balanced than the input (a flight
+                   step may not buy its parabola with the take-off and landing windows)
 =================  ==========================================================================================
-
-Known exception (``xfail``, strict so a fix is noticed): on ``optitrack_mda/test_optitrack.bvh`` (3146 frames
-at 120 fps) the touch-up's largest one-frame move of ``LeftLeg`` grows from 14.7 to 47.7 mm/frame
-(x3.25, limit x1.5 + 2 mm).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ import pytest
 import mocaplab as ml
 from mocaplab import quality
 
-CHECKED = ("skate", "skate_max", "penetration", "displacement", "hinge_flips")
+CHECKED = ("skate", "skate_max", "penetration", "displacement", "angular_acceleration", "hinge_flips", "zmp")
 
 REALWORLD = (
     "bvhtoolbox/test_freebvh.bvh",
@@ -43,10 +43,8 @@ REALWORLD = (
     "pymo/AV_8Walk_Meredith_HVHA_Rep1.bvh",
 )
 
-#: (file, measure) pairs known to regress, with the figures measured.
-KNOWN = {
-    ("optitrack_mda/test_optitrack.bvh", "displacement"): "LeftLeg pops 14.7 -> 47.7 mm/frame (x3.25)",
-}
+#: (file, measure) pairs known to regress, with the figures measured (strict expected failures).
+KNOWN: dict[tuple[str, str], str] = {}
 
 
 def _report(motion):

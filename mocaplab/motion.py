@@ -121,16 +121,14 @@ class _Fresh:
             self._buffer.seek(size - 1)
             self._buffer.write(b"\0")
         self._view: memoryview | None = self._buffer.getbuffer()
-        self.array: NDArray[Any] | None = np.frombuffer(self._view, dtype=dtype).reshape(shape)
+        self.array: NDArray[Any] = np.frombuffer(self._view, dtype=dtype).reshape(shape)
 
     def freeze(self) -> NDArray[Any]:
         """The values, read-only for good (no copy when nothing else sees ``array``)."""
-        array = self.array
-        if array is None or self._view is None:
+        if self._view is None:
             raise RuntimeError("This array was frozen already")
-        shape, dtype = array.shape, array.dtype
-        self.array = None
-        del array
+        shape, dtype = self.array.shape, self.array.dtype
+        del self.array  # gone from here on (an AttributeError)
         view, self._view = self._view, None
         if sys.getrefcount(view) <= 2:  # this name and the call's argument: no array left on the buffer
             view.release()  # the buffer is then handed over as it is, not copied

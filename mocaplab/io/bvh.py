@@ -654,7 +654,7 @@ class _FrameRows:
     def _slow(self, lines: list[str], number: int, done: int) -> NDArray[np.float64]:
         """The rows of ``lines`` read one by one, or the error naming the first bad one."""
         path, n_frames, n_channels = self.path, self.n_frames, self.n_channels
-        out = []
+        out: list[list[float | None]] = []
         for i, row in enumerate(lines):
             toks = row.split()
             if not toks:
@@ -835,9 +835,8 @@ def _motion_from_text(path: str, text: str, *, scale: float | None, name: str | 
         if order:
             groups.setdefault(order, []).append((ji, rot_cols))
     tr_buf = _Fresh((n_frames, n, 3)) if any(ji > 0 for _, ji, _ in positions) else None
-    translations = None if tr_buf is None else tr_buf.array
-    if translations is not None:
-        translations[:] = offsets
+    if tr_buf is not None:
+        tr_buf.array[:] = offsets
     # Rotations are built component-major, (4, J, F): the layout forward
     # kinematics works in, so Motion.rotations is its (F, J, 4) transposed
     # view and no copy is made on the way.
@@ -846,7 +845,7 @@ def _motion_from_text(path: str, text: str, *, scale: float | None, name: str | 
     if len(groups) != 1 or sum(len(m) for m in groups.values()) != n:
         rot4[:3] = 0.0
         rot4[3] = 1.0
-    plans = []
+    plans: list[tuple[str, list[int] | slice, list[NDArray[np.int64]]]] = []
     for order, members in groups.items():
         idx = [m[0] for m in members]
         cols = np.array([m[1] for m in members])  # (G, len(order))
@@ -855,16 +854,18 @@ def _motion_from_text(path: str, text: str, *, scale: float | None, name: str | 
         f1 = f0 + len(block)
         table = np.ascontiguousarray(block.T)  # (C, k): each channel contiguous
         del block
-        for c, ji, axis in positions:
+        for column, ji, axis in positions:
             if ji == 0:
-                root[f0:f1, axis] = table[c]
+                root[f0:f1, axis] = table[column]
             else:
-                translations[f0:f1, ji, axis] = table[c]  # type: ignore[index]
-        for order, idx, at in plans:
-            quats = np.empty((4, len(at[0]), f1 - f0))
-            euler.to_quat_channels(order, [table[a] for a in at], quats, degrees=True)
-            rot4[:, idx, f0:f1] = quats
+                assert tr_buf is not None
+                tr_buf.array[f0:f1, ji, axis] = table[column]
+        for order, members_at, where in plans:
+            quats = np.empty((4, len(where[0]), f1 - f0))
+            euler.to_quat_channels(order, [table[w] for w in where], quats, degrees=True)
+            rot4[:, members_at, f0:f1] = quats
     del rows
+    translations = None if tr_buf is None else tr_buf.array
     with np.errstate(over="ignore"):  # overflow is reported below
         root *= scale
         if translations is not None:

@@ -114,7 +114,7 @@ KNOWN_DEFECTS: dict[tuple[str, str, str], str] = {
     ('02_01', 'bend+refine', 'angular_acceleration'): "refinement's foot goals ramp in before contact and the leg IK bends near-straight knees fast (issue 23 item 8): angular_acceleration 216 -> 569 rad/s^2 at RightLeg",
     ('02_01', 'squeeze+refine', 'angular_acceleration'): "refinement's foot goals ramp in before contact and the leg IK bends near-straight knees fast (issue 23 item 8): angular_acceleration 557 -> 1.19e+03 rad/s^2 at LeftFoot",
     ('16_05', 'bend+refine', 'angular_acceleration'): "refinement's foot goals ramp in before contact and the leg IK bends near-straight knees fast (issue 23 item 8): angular_acceleration 198 -> 432 rad/s^2 at LeftLeg",
-    ('16_05', 'bend+refine+touch_up', 'skate_max'): 'the touch-up adds it (issue 24): the footplant goals fade out on the ground frames before take-off and the toes planted there slide: skate_max 1.97 -> 14.8 mm/frame at frame 130',
+    ('16_05', 'bend+refine+touch_up', 'skate_max'): 'the touch-up adds it (issue 24): the footplant goals fade out on the ground frames before take-off and the toes planted there slide: skate_max 1.97 -> 15.8 mm/frame at frame 130',
     ('05_02', 'bend+refine', 'displacement'): "refinement's leg IK pops a knee or foot (issue 23 item 8): displacement 17 -> 47.5 mm/frame at LeftFoot",
     ('05_02', 'bend+refine', 'angular_acceleration'): "refinement's foot goals ramp in before contact and the leg IK bends near-straight knees fast (issue 23 item 8): angular_acceleration 1.01e+03 -> 4.47e+03 rad/s^2 at LeftLeg",
     ('05_02', 'squeeze+refine', 'displacement'): "refinement's leg IK pops a knee or foot (issue 23 item 8): displacement 17 -> 47.6 mm/frame at LeftFoot",

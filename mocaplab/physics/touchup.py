@@ -177,7 +177,7 @@ Choices made where the paper leaves them open
   of the centre of mass from its parabola (flight frames), in metres; on a
   walk it is the mean ZMP distance of Figure 9.  A pass is accepted (and
   can be the best) only when the ground frames' mean ZMP distance is at
-  most :data:`ZMP_SLACK` (1 mm) above the input's (:func:`_admissible`): the error trades ground
+  most :data:`ZMP_SLACK` (2 mm) above the input's (:func:`_admissible`): the error trades ground
   frames for flight frames, and a flight step can buy its parabola with
   the balance of the take-off and landing windows.  Ground frames without a
   ZMP (negative vertical ground force) are counted (``dropped``), never
@@ -300,10 +300,12 @@ FOOT_BLEND = 0.2
 #: a flight (goal weights are 0 on flight frames), seconds.
 PLANT_BLEND = 0.05
 #: How much a touch-up may raise the ground frames' mean ZMP distance above
-#: its input's, metres (:func:`_admissible`): what a flight step costs the
+#: its input's, metres (:func:`_admissible`): what a flight step may cost the
 #: take-off and landing windows when it gives the flight its parabola (the
-#: captured jump CMU 16_05: 0.63 -> 0.70 mm while the flight error halves).
-ZMP_SLACK = 1e-3
+#: captured jump CMU 16_05: 0.63 -> 0.70 mm while the flight error halves;
+#: lesson 10's bent jump 0.27 -> 2.1 mm, 3.8 without the bound).  2 mm is
+#: what the quality pipeline allows a touch-up (tests/test_quality_pipeline.py).
+ZMP_SLACK = 2e-3
 #: A planted joint within this distance of its footplant goal (metres) needs
 #: no correction (:func:`_need_gate`); the goals hold fully from twice it.
 PLANT_TOLERANCE = 5e-4
@@ -1771,7 +1773,7 @@ class TouchUpHistory:
         a pass some link sets are not adjusted yet), and only those with no
         more ground frames without a ZMP than the input (dropping a frame
         must not pass for fixing it) and a mean ZMP distance over the
-        ground frames at most :data:`ZMP_SLACK` (1 mm) above the input's (a
+        ground frames at most :data:`ZMP_SLACK` (2 mm) above the input's (a
         touch-up never leaves the ground frames worse balanced).  The earliest wins a tie.
         """
         first = self.states[0]

@@ -50,5 +50,5 @@ def no_flight_adjustment(monkeypatch: pytest.MonkeyPatch) -> None:
 CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
     (L08, no_horizontal_acceleration, "carry the ZMP away from the COM"),
     (L09, no_ground_adjustment, "one adjustment already helps"),
-    (L10, no_flight_adjustment, "no swerve left in the air"),
+    (L10, no_flight_adjustment, "little swerve left in the air"),
 ]

@@ -81,8 +81,6 @@ def test_balance_arrays_are_frozen_for_good(cmu):
         _assert_frozen_for_good(getattr(bal, name), name)
 
 
-@pytest.mark.xfail(strict=True, reason="StaggeredMotion sets flags.writeable = False on arrays that own their "
-                   "memory (mocaplab/staggered/representation.py, not this helper's file): use motion.readonly")
 def test_staggered_times_and_refinements_are_frozen_for_good(cmu):
     from mocaplab.staggered import extract
 

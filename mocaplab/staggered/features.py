@@ -401,7 +401,7 @@ def tent_filter(signal: Array, width: float, fps: float) -> Array:
     n = int(np.ceil(h + 0.5))
     edges = np.arange(-n, n + 2) - 0.5  # frame i covers [i - 1/2, i + 1/2]
 
-    def area(u: Array) -> Array:
+    def area(u: NDArray[np.floating[Any]]) -> Array:
         # the tent's integral from -h to u (its cumulative distribution), total 1
         v = np.clip(u / h, -1.0, 1.0)
         return np.where(v < 0.0, 0.5 * (1.0 + v) ** 2, 1.0 - 0.5 * (1.0 - v) ** 2)

@@ -104,7 +104,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import quat
 from .._warnings import warn
-from ..motion import Motion, Skeleton
+from ..motion import Motion, Skeleton, readonly
 
 if TYPE_CHECKING:  # pragma: no cover
     from .edit import ReferencePose
@@ -370,8 +370,7 @@ class StaggeredMotion:
                 raise ValueError(f"Expected `{label}` of shape {shape}, got {a.shape}")
             if dtype is float and not np.all(np.isfinite(a)):
                 raise ValueError(f"Expected finite `{label}`, got NaN or inf")
-            a.flags.writeable = False
-            return a
+            return readonly(a)
 
         object.__setattr__(self, "translation_joints", tj)
         refinements = arr(self.refinements, (K, V), "refinements")
@@ -389,7 +388,7 @@ class StaggeredMotion:
                 )
         N = np.asarray(self.sample_u).shape[0]
         object.__setattr__(self, "fps", float(self.fps))
-        times.flags.writeable = False
+        times = readonly(times)
         object.__setattr__(self, "times", times)
         object.__setattr__(self, "refinements", refinements)
         object.__setattr__(self, "active", active)
@@ -432,8 +431,7 @@ class StaggeredMotion:
         pr = np.full(K, np.nan) if self.priorities is None else np.array(self.priorities, dtype=float, copy=True)
         if pr.shape != (K,):
             raise ValueError(f"Expected `priorities` of shape ({K},), got {pr.shape}")
-        pr.flags.writeable = False
-        object.__setattr__(self, "priorities", pr)
+        object.__setattr__(self, "priorities", readonly(pr))
         object.__setattr__(self, "name", str(self.name))
 
     # ----------------------------------------------------------------- sizes
@@ -683,8 +681,7 @@ class StaggeredMotion:
                 rot[:, js] = c_rot
         else:
             pos, rot = self._compose(t)
-        pos.flags.writeable = False
-        rot.flags.writeable = False
+        pos, rot = readonly(pos), readonly(rot)
         object.__setattr__(self, "_raw_cache", (pos, rot))
         self.__dict__.pop("_parent_raw", None)
         return pos, rot
@@ -762,7 +759,7 @@ class StaggeredMotion:
             if self.rotation_noise is not None:
                 still &= np.all(self.rotation_noise == 0.0, axis=(0, 2))
             st = same & ident & still
-            st.flags.writeable = False
+            st = readonly(st)
             object.__setattr__(self, "_static", st)
         return st
 

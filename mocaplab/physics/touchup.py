@@ -1342,7 +1342,7 @@ def _footplant_fn(
         goals = _reference_goals(reference, contacts, blend=FOOT_BLEND)
     goals = _outside_flights(goals, contacts, reference.fps)
     sk = reference.skeleton
-    columns = np.array([sk.index(g.joint) for g in goals], dtype=np.int64)
+    columns = np.array([g.joint if isinstance(g.joint, int) else sk.index(g.joint) for g in goals], dtype=np.int64)
     gate_width = 4.0 * PLANT_BLEND * reference.fps
 
     def plant(p: _Posed) -> _Posed:

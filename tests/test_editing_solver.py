@@ -488,14 +488,12 @@ def test_relative_offsets_stay_metres_when_the_path_is_squeezed_or_stretched(tie
     assert np.abs(gaps - 0.8).max() < 0.05 * 0.8  # the bound; in fact:
     assert np.abs(gaps - 0.8).max() < 1e-3
     assert res.residuals()[2] < 1e-3 and res.hard_residual_space < 1e-9
-    # one solve (the rows linearised about the undeformed path, no correction measured on the result):
-    # a stretch along the tangent is already metric to first order, the turn it causes is not
+    # one solve: a hard relative's rows are those of eqs. 1-2, whose gap follows the tangent's stretch
     plain = edit(tied, cons, relative_iterations=1)
     off = np.abs(np.linalg.norm(plain.paths[1][frames] - plain.paths[0][frames], axis=1) - 0.8).max()
     if factor != 1.0:
-        assert 2e-3 < off < 0.02, off
-        # residuals() reports the metric error in metres: the offset vector's miss, at least the gap's
-        assert off <= plain.residuals()[2] < 0.1
+        assert off > 0.1, "the linear form alone is off by more than 10 cm"
+        assert plain.residuals()[2] == pytest.approx(off, rel=0.2), "and residuals() reports it in metres"
         assert any("still changing" in n for n in plain.notes)
 
 
@@ -647,7 +645,7 @@ def test_a_soft_relative_between_hard_pins_is_a_compromise_with_a_warning(tied, 
 def test_a_hard_relative_between_hard_pins_names_itself_and_the_pins(tied, gap):
     from mocaplab.editing import ConstraintError
 
-    with pytest.raises(ConstraintError, match=r"Relative.*PinPosition") as err:
+    with pytest.raises(ConstraintError, match=r"hard relative constraint #2 Relative.* it fights #0 PinPosition") as err:
         edit(tied, _pinned_apart(tied, gap, hard=True))
     assert set(err.value.indices) == {0, 1, 2}
     assert "out of numeric range" not in str(err.value)
@@ -680,7 +678,8 @@ def test_a_formation_drag_settles_in_few_solves_whatever_the_drag_history(walk):
         res = ed.drag(1, end + 0.8 * np.array([np.cos(a) - 1.0, np.sin(a)]))
         solves.append(res.relative_iterations)
     rel = [i for i, c in enumerate(cons) if isinstance(c, Relative)]
-    assert max(res.residuals()[i] for i in rel) < 2e-3 and res.notes == ()
+    residuals = res.residuals()
+    assert max(residuals[i] for i in rel) < 2e-3 and res.notes == ()
     assert np.median(solves) <= 2, solves
     scratch = edit(chars, list(ed.constraints))
     assert max(float(np.abs(p - q).max()) for p, q in zip(scratch.paths, res.paths, strict=True)) < 3e-3

@@ -415,6 +415,7 @@ def spatial_rows(
             Lb = float(np.linalg.norm(tb))
             tx, tz = var(b, fb, 0), var(b, fb, 1)
             # Newton rows about the given positions, else soft ones about the undeformed path (module docstring)
+            T_at: NDArray[Any] | None
             if linearize_at is not None:
                 T_at = np.array([wb @ linearize_at[tx], wb @ linearize_at[tz]])
             else:

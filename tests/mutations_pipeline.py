@@ -57,13 +57,16 @@ def no_up_axis_detection(monkeypatch: pytest.MonkeyPatch) -> None:
 def refinement_off(monkeypatch: pytest.MonkeyPatch) -> None:
     """Refinement returns its input: an edited walk keeps the feet the path edit slid."""
     import mocaplab
+    import mocaplab.physics  # noqa: F401  (binds refine at import: it keeps the real one after the test)
     from mocaplab import refinement
 
     def unchanged(motion, *args, **kwargs):
         return motion
 
-    monkeypatch.setattr(refinement, "refine", unchanged)
+    # mocaplab.refine first: resolving it lazily after the module's refine is patched would cache the stand-in
+    # as the value to restore
     monkeypatch.setattr(mocaplab, "refine", unchanged, raising=False)
+    monkeypatch.setattr(refinement, "refine", unchanged)
 
 
 def role_names_ignored(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -1,7 +1,7 @@
 """Benchmark: full-body refinement of a 500-frame 120 fps CMU walk.
 
 The walk 16_11 (first 500 frames) has its path bent by a progressive 90-degree
-heading rotation, then :func:`mocaplab.refinement.refine` plants both feet
+heading rotation, then :func:`mocaplab.editing.refinement.refine` plants both feet
 through the contacts detected on the unbent clip.  Target (issue 4): under
 100 ms.  Prints the median of repeats, the split between the IK layer and
 the displacement map, and the quality figures.
@@ -20,7 +20,8 @@ import mocaplab
 from mocaplab import quat
 from mocaplab.contacts import foot_contacts
 from mocaplab.displacement import DisplacementMap, displacement_between
-from mocaplab.refinement import foot_goals, foot_skate, max_joint_angle_jump, refine, solve_goals
+from mocaplab.editing.refinement import foot_skate, max_joint_angle_jump, refine
+from mocaplab.goals import foot_goals, solve_goals
 
 TARGET_MS = 100.0
 REPEATS = 5 if os.environ.get("MOCAPLAB_FAST") == "1" else 15

@@ -48,9 +48,9 @@ import numpy as np
 
 from mocaplab import data, quat
 from mocaplab.contacts import foot_contacts
+from mocaplab.editing.refinement import refine
 from mocaplab.physics import GROUND_SCHEDULE, Body, start, step, touch_up
 from mocaplab.physics.touchup import STALL_TOLERANCE
-from mocaplab.refinement import refine
 
 PAPER_SECONDS = 0.172  # 111 frames, Shin et al. 2003, section 4.3
 

@@ -30,13 +30,13 @@ _ENTRY_POINTS = {
     "cmu": ("mocaplab.data", "cmu"),
     "edit": ("mocaplab.editing", "edit"),
     "SceneEditor": ("mocaplab.editing", "SceneEditor"),
-    "refine": ("mocaplab.refinement", "refine"),
+    "refine": ("mocaplab.editing.refinement", "refine"),
     "touch_up": ("mocaplab.physics", "touch_up"),
     "extract": ("mocaplab.staggered", "extract"),
 }
 _SUBMODULES = (
-    "contacts", "data", "displacement", "editing", "ik", "io", "kinematics", "lessons", "motion", "physics",
-    "quality", "quat", "refinement", "roles", "staggered", "undo",
+    "contacts", "data", "displacement", "editing", "goals", "ik", "io", "kinematics", "lessons", "motion", "physics",
+    "quality", "quat", "roles", "staggered", "undo",
     # the views (ipywidgets, matplotlib, pyvista): imported only when ``mocaplab.widgets`` is first used,
     # so ``import mocaplab`` never loads a UI package
     "widgets",

@@ -14,7 +14,7 @@ expressed in the joint's own, already rotated frame, as in Lee and Shin's
 inverse, ``d = log(q^-1 q')``.
 
 The map is fitted to per-frame corrections (for example the per-frame IK
-solutions of :mod:`mocaplab.refinement`) coarse to fine: level 0 is a uniform
+solutions of :mod:`mocaplab.goals`) coarse to fine: level 0 is a uniform
 cubic B-spline with knots every ``spacing`` frames, least-squares fitted to
 the corrections; each further level has its knot spacing divided by
 ``ratio`` and is fitted to what the previous levels left.  The sum of the

@@ -52,7 +52,6 @@ Examples
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 from typing import Any
 
@@ -60,6 +59,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import kinematics, quat
+from ._warnings import warn
 from .displacement import blend_ramp
 from .motion import Motion, Skeleton
 
@@ -75,6 +75,7 @@ __all__ = [
     "aim_deltas",
     "dls_ik",
     "reach",
+    "two_bone_locals",
 ]
 
 Array = NDArray[np.float64]
@@ -137,14 +138,6 @@ def unreachable_message(joint: str, residual: ArrayLike, *, tolerance: float = U
 
 
 # --------------------------------------------------------------------- helpers
-def _joint(skeleton: Skeleton, j: JointRef, arg: str = "joint") -> int:
-    if isinstance(j, str):
-        return skeleton.index(j)
-    if isinstance(j, (int, np.integer)) and 0 <= int(j) < skeleton.n_joints:
-        return int(j)
-    raise ValueError(f"Expected `{arg}` to be a joint name or an index in [0, {skeleton.n_joints}), got {j!r}")
-
-
 def _unit(v: Array, *, eps: float = _TINY) -> tuple[Array, Array]:
     n = _norm(v)
     return v / np.maximum(n, eps)[..., None], n
@@ -235,7 +228,7 @@ def limb_joints(skeleton: Skeleton, end: JointRef) -> tuple[int, int, int]:
     LeftFoot on the CMU skeleton, ``"RightHand"`` gives RightArm,
     RightForeArm, RightHand.
     """
-    e = _joint(skeleton, end, "end")
+    e = skeleton.index(end, arg="end")
     roles = _roles_or_none(skeleton)
     if roles is not None:
         name = skeleton.names[e]
@@ -632,7 +625,7 @@ def two_bone_ik(
     else:
         if len(joints) != 3:
             raise ValueError(f"Expected `joints` as (upper, middle, end), got {joints!r}")
-        ju, jm, je = (_joint(skeleton, j, "joints") for j in joints)
+        ju, jm, je = (skeleton.index(j, arg="joints") for j in joints)
         skeleton.chain(ju, jm)
         skeleton.chain(jm, je)
     tgt = _per_frame(target, n_frames, 3, "target")
@@ -654,27 +647,17 @@ def two_bone_ik(
         gpos[:, ju], gpos[:, jm], gpos[:, je], tgt, pole=pole_w, bend_axis=axis_w, hinge=hinge_w, weight=wgt
     )
     want = None if end_rotation is None else _per_frame(end_rotation, n_frames, 4, "end_rotation")
-    out = _two_bone_locals(rot, grot, skeleton.parents, (ju, jm, je), q_up, q_mid, want)
+    out = two_bone_locals(rot, grot, skeleton.parents, (ju, jm, je), q_up, q_mid, want)
     if not (return_residual or warn_unreachable):
         return out
     residual = reach_residual(gpos[:, ju], gpos[:, jm], gpos[:, je], tgt)
     message = unreachable_message(skeleton.names[je], residual) if warn_unreachable else None
     if message is not None:
-        _warn(message, UnreachableTargetWarning)
+        warn(message, UnreachableTargetWarning)
     return (out, residual) if return_residual else out
 
 
-def _warn(message: str, category: type[Warning]) -> None:
-    """Warn at the user's line (the first frame outside mocaplab)."""
-    import warnings
-
-    frame, level = sys._getframe(1), 2  # stacklevel 1 would be this function
-    while frame.f_back is not None and str(frame.f_globals.get("__name__", "")).startswith("mocaplab"):
-        frame, level = frame.f_back, level + 1
-    warnings.warn(message, category, stacklevel=level)
-
-
-def _two_bone_locals(
+def two_bone_locals(
     rot: Array,
     grot: Array,
     parents: NDArray[np.int64],
@@ -811,15 +794,15 @@ def dls_ik(
     """
     rot, root = _check_rotations(rotations, root_positions, skeleton)
     n_frames = rot.shape[0]
-    chain_idx = [_joint(skeleton, j, "chain") for j in chain]
+    chain_idx = [skeleton.index(j, arg="chain") for j in chain]
     if not chain_idx:
         raise ValueError("Expected at least one joint in `chain`, got none")
     if len(set(chain_idx)) != len(chain_idx):
         raise ValueError(f"Expected distinct joints in `chain`, got {list(chain)}")
     if isinstance(effectors, (str, int, np.integer)):
-        eff_idx = [_joint(skeleton, effectors, "effectors")]
+        eff_idx = [skeleton.index(effectors, arg="effectors")]
     else:
-        eff_idx = [_joint(skeleton, e, "effectors") for e in effectors]
+        eff_idx = [skeleton.index(e, arg="effectors") for e in effectors]
     m = len(eff_idx)
     tg = np.asarray(targets, dtype=float)
     if tg.shape == (n_frames, m, 3):
@@ -926,7 +909,7 @@ def reach(
     else:
         if dls_options:
             raise TypeError(f"Options {sorted(dls_options)} apply only with `chain` (damped least squares)")
-        j = _joint(sk, joint)
+        j = sk.index(joint)
         grot = motion.global_rotations()
         new = two_bone_ik(
             motion.rotations, motion.root_positions, sk, j, target, pole=pole,

@@ -25,18 +25,16 @@ import io
 import sys
 from collections.abc import Sequence
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import kinematics, quat
 from ._warnings import warn
+from .roles import Roles, RolesError, infer_roles, mirror_map
 
-if TYPE_CHECKING:
-    from .roles import Roles
-
-__all__ = ["Skeleton", "Motion", "concatenate", "mirror_name", "readonly", "FPS_RANGE"]
+__all__ = ["Skeleton", "Motion", "concatenate", "readonly", "FPS_RANGE"]
 
 DEFAULT_ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation")
 DEFAULT_JOINT_CHANNELS = ("Zrotation", "Yrotation", "Xrotation")
@@ -276,8 +274,6 @@ class Skeleton:
         object.__setattr__(self, "end_site_offsets", _frozen(eso))
         overrides = dict(self.role_overrides.items() if isinstance(self.role_overrides, dict) else self.role_overrides)
         if overrides:
-            from .roles import Roles
-
             Roles(names, overrides)  # role and joint names are checked here
         object.__setattr__(self, "role_overrides", tuple((k, overrides[k]) for k in sorted(overrides)))
 
@@ -289,8 +285,6 @@ class Skeleton:
         Raises :class:`~mocaplab.roles.RolesError` only when a missing role
         is indexed; roles a skeleton lacks are simply absent.
         """
-        from .roles import infer_roles
-
         return infer_roles(self, overrides=dict(self.role_overrides))
 
     def with_roles(self, **roles: Any) -> Skeleton:
@@ -309,12 +303,44 @@ class Skeleton:
     def n_joints(self) -> int:
         return len(self.names)
 
-    def index(self, name: str) -> int:
-        """Index of the joint called ``name`` (KeyError listing names if absent)."""
-        try:
-            return self.names.index(name)
-        except ValueError:
-            raise KeyError(f"No joint named {name!r}; joints are {list(self.names)}") from None
+    def index(self, joint: str | int, *, arg: str = "joint") -> int:
+        """Index of a joint given by name or by index (numpy integers too).
+
+        The one place a joint reference is resolved: every function taking
+        ``joint : str or int`` asks this method.
+
+        Parameters
+        ----------
+        joint : str or int
+            A joint name, or an index in ``[0, n_joints)``.
+        arg : str
+            The caller's argument name, used in the error message.
+
+        Returns
+        -------
+        int
+
+        Raises
+        ------
+        KeyError
+            No joint has that name (the message lists the names).
+        ValueError
+            Neither a name nor an index in range.
+
+        Examples
+        --------
+        >>> sk = Skeleton(["hips", "knee"], [-1, 0], [[0, 0, 0], [0, -0.4, 0]])
+        >>> sk.index("knee"), sk.index(1)
+        (1, 1)
+        """
+        if isinstance(joint, str):
+            try:
+                return self.names.index(joint)
+            except ValueError:
+                raise KeyError(f"No joint named {joint!r}; joints are {list(self.names)}") from None
+        if isinstance(joint, (int, np.integer)) and not isinstance(joint, bool) and 0 <= int(joint) < self.n_joints:
+            return int(joint)
+        raise ValueError(f"Expected `{arg}` to be a joint name or an index in [0, {self.n_joints}), got {joint!r}")
 
     def children(self, j: int) -> list[int]:
         """Indices of the direct children of joint ``j``."""
@@ -327,17 +353,9 @@ class Skeleton:
             d[j] = d[self.parents[j]] + 1
         return d
 
-    def _joint(self, j: str | int, arg: str) -> int:
-        """Index of a joint given by name or index (numpy integers too)."""
-        if isinstance(j, str):
-            return self.index(j)
-        if isinstance(j, (int, np.integer)) and not isinstance(j, bool) and 0 <= int(j) < self.n_joints:
-            return int(j)
-        raise ValueError(f"Expected `{arg}` to be a joint name or an index in [0, {self.n_joints}), got {j!r}")
-
     def chain(self, start: str | int, end: str | int) -> list[int]:
         """Joints from ``start`` down to its descendant ``end`` (both included)."""
-        s, e = self._joint(start, "start"), self._joint(end, "end")
+        s, e = self.index(start, arg="start"), self.index(end, arg="end")
         out = [e]
         while out[-1] != s:
             if out[-1] <= 0:
@@ -357,24 +375,12 @@ class Skeleton:
         Pairs come from the joint roles, the limb subtrees matched by shape,
         and the names (:func:`mocaplab.roles.mirror_map`).
         """
-        from .roles import mirror_map
-
         return mirror_map(self)
 
     def describe(self) -> str:
         """An indented text tree of the hierarchy."""
         depth = self.depth()
         return "\n".join("  " * int(depth[j]) + self.names[j] for j in range(self.n_joints))
-
-
-def mirror_name(name: str) -> str:
-    """The joint name of the other side (``LeftArm`` -> ``RightArm``, ``Toes_L`` -> ``Toes_R``).
-
-    See :func:`mocaplab.roles.mirror_name`.
-    """
-    from .roles import mirror_name as _mirror_name
-
-    return _mirror_name(name)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -523,8 +529,6 @@ class Motion:
         common export layout).  Motion paths, editing, physical touch-up,
         staggered poses and the viewer follow this joint.
         """
-        from .roles import RolesError
-
         sk = self.skeleton
         try:
             j = sk.roles.index("pelvis")

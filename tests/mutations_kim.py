@@ -133,20 +133,20 @@ def no_monotonicity_rounds(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def no_ik(monkeypatch: pytest.MonkeyPatch) -> None:
     """Two-bone IK returns the rotations it was given."""
-    from mocaplab import ik, refinement
+    from mocaplab import goals, ik
 
     def unchanged(rotations, *args, **kw):  # noqa: ANN001, ANN202
         return np.array(rotations, dtype=float)
 
     monkeypatch.setattr(ik, "two_bone_ik", unchanged)
-    monkeypatch.setattr(refinement, "two_bone_ik", unchanged)
+    monkeypatch.setattr(goals, "two_bone_ik", unchanged)
 
 
 def no_goal_solver(monkeypatch: pytest.MonkeyPatch) -> None:
     """The IK layer of refinement (``solve_goals``) meets no goal: it returns the motion unchanged."""
-    from mocaplab import refinement
+    from mocaplab import goals
 
-    monkeypatch.setattr(refinement, "solve_goals", lambda motion, goals, **kw: motion)
+    monkeypatch.setattr(goals, "solve_goals", lambda motion, goals, **kw: motion)
 
 
 def no_discrete_transformations(monkeypatch: pytest.MonkeyPatch) -> None:

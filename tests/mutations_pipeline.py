@@ -57,8 +57,7 @@ def no_up_axis_detection(monkeypatch: pytest.MonkeyPatch) -> None:
 def refinement_off(monkeypatch: pytest.MonkeyPatch) -> None:
     """Refinement returns its input: an edited walk keeps the feet the path edit slid."""
     import mocaplab
-    import mocaplab.physics  # noqa: F401  (binds refine at import: it keeps the real one after the test)
-    from mocaplab import refinement
+    from mocaplab.editing import refinement
 
     def unchanged(motion, *args, **kwargs):
         return motion

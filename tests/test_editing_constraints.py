@@ -91,7 +91,7 @@ def test_missing_arguments_are_named(make, message):
 
 
 def test_end_effector_constraint_frames_include_both_ends():
-    refine = pytest.importorskip("mocaplab.refinement")
+    from mocaplab import goals
     from mocaplab.editing import EndEffectorConstraint
     from mocaplab.editing.constraints import effector_frames
 
@@ -101,7 +101,7 @@ def test_end_effector_constraint_frames_include_both_ends():
     assert c.constraint.intervals(100) == [(10, 21)]  # refinement's own half-open tuple
     one = EndEffectorConstraint(0, joint="RightHand", frame=7, target=(0.0, 1.0, 0.0))
     assert effector_frames(one, 100) == [(7, 7)]
-    ee = refine.EndEffector("RightHand", (10, 20), (0.0, 1.0, 0.0))  # half-open there: 10..19
+    ee = goals.EndEffector("RightHand", (10, 20), (0.0, 1.0, 0.0))  # half-open there: 10..19
     assert effector_frames(EndEffectorConstraint(2, ee), 100) == [(10, 19)]
     assert EndEffectorConstraint(2, ee).constraint.character == 2
     with pytest.raises(TypeError, match="not both"):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mocaplab.editing import PinPosition, SceneEditor
-from mocaplab.refinement import EndEffector, RelativeTo
+from mocaplab.goals import EndEffector, RelativeTo
 
 
 @pytest.fixture(scope="module")

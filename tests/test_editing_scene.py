@@ -193,10 +193,10 @@ def test_report_and_transformations(pair):
 
 
 def test_end_effectors_recorded_and_refined(pair):
-    refine = pytest.importorskip("mocaplab.refinement")
+    from mocaplab import goals
     a, b = pair
     hand = a.global_positions()[40, a.skeleton.index("RightHand")] + [0.0, 0.1, 0.0]
-    ee = refine.EndEffector("RightHand", 40, hand)
+    ee = goals.EndEffector("RightHand", 40, hand)
     cons = scene(pair) + [EndEffectorConstraint(0, ee)]
     ed = SceneEditor(pair, cons)
     res = ed.result

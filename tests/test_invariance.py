@@ -18,7 +18,7 @@ import pytest
 from conventions import CONVENTIONS, EXTRA_JOINTS, as_original
 
 from mocaplab.contacts import foot_contacts, stillness_contacts
-from mocaplab.refinement import refine
+from mocaplab.editing.refinement import refine
 
 CLIPS = ("16_15", "16_05", "05_02")
 FRAMES = slice(0, 360)

@@ -9,7 +9,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mocaplab import quat
-from mocaplab.motion import Motion, Skeleton, concatenate, mirror_name
+from mocaplab.motion import Motion, Skeleton, concatenate
+from mocaplab.roles import mirror_name
 
 
 def skeleton() -> Skeleton:
@@ -300,7 +301,7 @@ def test_concatenate_accepts_frame_rates_equal_to_file_precision(cmu):
 
 def test_public_arrays_cannot_be_made_writeable_again(rng):
     from mocaplab.contacts import Contacts
-    from mocaplab.refinement import Goal
+    from mocaplab.goals import Goal
 
     m0 = random_motion(rng)
     m = m0.replace(translations=np.broadcast_to(m0.skeleton.offsets, (m0.n_frames, m0.n_joints, 3)))

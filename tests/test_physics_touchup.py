@@ -567,7 +567,7 @@ def test_a_pass_that_gets_worse_is_retried_with_smaller_steps(walk30):
 def test_the_bent_jump_improves_with_the_papers_flight_window(cmu):
     """Lesson 10's jump bent 15 cm sideways, flight_window 0.5 s: 8.8 mm used to come back untouched ('stalled')."""
     from mocaplab.editing import PinPosition, edit
-    from mocaplab.refinement import refine
+    from mocaplab.editing.refinement import refine
 
     jump = cmu("16_05").resample(30)
     c = foot_contacts(jump)
@@ -760,7 +760,7 @@ def test_guards_against_silent_nonsense(walk30):
     # feet sliding during their contacts (edited, not refined): run refine first
     with pytest.warns(TouchUpWarning, match="slide by .* cm over a median contact.*Run refine first"):
         start(issue_bend(walk30, 0.4), contacts=c)
-    from mocaplab.refinement import refine
+    from mocaplab.editing.refinement import refine
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", TouchUpWarning)
@@ -804,7 +804,7 @@ def test_clips_with_no_frame_between_their_ends_are_refused(walk30, cmu):
 
 
 def test_the_error_without_the_uncorrected_ends_is_reported_beside_it(walk30):
-    from mocaplab.refinement import refine
+    from mocaplab.editing.refinement import refine
 
     c = foot_contacts(walk30)
     h = touch_up(refine(issue_bend(walk30, 0.4), contacts=c, reference=walk30), contacts=c, iterations=2)

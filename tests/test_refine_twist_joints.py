@@ -14,8 +14,9 @@ import pytest
 import mocaplab
 from mocaplab import quat
 from mocaplab.contacts import Contacts, foot_contacts
+from mocaplab.editing.refinement import foot_skate, refine
+from mocaplab.goals import foot_goals, plant_positions, solve_goals
 from mocaplab.motion import Motion, Skeleton
-from mocaplab.refinement import foot_goals, foot_skate, plant_positions, refine, solve_goals
 
 HUMANIK = "realworld/motionmachine/animation.bvh"
 

@@ -380,7 +380,7 @@ def test_constraint_layer_keeps_the_input_knee_bend(walk_layer) -> None:
     assert held.min() > 0.0
     assert _peak_acceleration(held, walk.fps) < 3.0 * _peak_acceleration(free, walk.fps)
     # the hinge of the input, not of the edited frames: a leg solved on hyperextended frames bends forward
-    from mocaplab.refinement import Goal, solve_goals
+    from mocaplab.goals import Goal, solve_goals
 
     ankle = roles["left_ankle"]
     j = walk.skeleton.index(ankle)

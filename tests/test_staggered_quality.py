@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from mocaplab import Motion, Skeleton, ik, quality
-from mocaplab.refinement import Goal, solve_goals
+from mocaplab.goals import Goal, solve_goals
 from mocaplab.staggered import extract
 
 

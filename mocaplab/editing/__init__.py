@@ -56,10 +56,10 @@ Constraints (:mod:`mocaplab.editing.constraints`), frozen dataclasses
     ``Sync(character, frame, other, other_frame, *, offset=0.0, hard=False,
     weight=1.0, frames=None, other_frames=None)`` (``t[frame] = t_other[other_frame] + offset``)
     End effectors: ``EndEffectorConstraint(character, joint=..., frame=i or
-    frames=(a, b), target=...)`` (or wrapping a :class:`mocaplab.refinement.EndEffector`,
+    frames=(a, b), target=...)`` (or wrapping a :class:`mocaplab.goals.EndEffector`,
     which may also go straight into the list); path editing ignores them,
     ``EditResult.end_effectors[k]`` records them and ``EditResult.refined()``
-    hands them to :func:`mocaplab.refinement.refine_scene`.
+    hands them to :func:`mocaplab.editing.refinement.refine_scene`.
     Variational form by keyword: ``PinPosition(0, position=p, frames=(30, 90))``,
     ``Relative(1, other=0, offset=(0.0, 0.6), frames=(30, 90))``; sampled every
     10th frame.  Intervals ``frames=(start, end)`` include both ends, for every

@@ -14,7 +14,7 @@ the character it acts on.  Each one is
 Intervals: every ``frames=(start, end)`` of mocaplab.editing includes both
 ends (frames ``start .. end``; ``(30, 90)`` is 61 frames), for the path,
 time and end-effector constraints alike (:class:`EndEffectorConstraint`
-converts to the half-open tuples of :mod:`mocaplab.refinement`).
+converts to the half-open tuples of :mod:`mocaplab.goals`).
 
 Units: ground positions ``(x, z)`` in metres, times in seconds on the shared
 reference clock.  Local frames are ``(forward, left)``: forward along the
@@ -60,7 +60,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, cast
 
 import numpy as np
 
-from ..refinement import EndEffector
+from ..goals import EndEffector
 
 __all__ = [
     "Constraint",
@@ -547,7 +547,7 @@ class EndEffectorConstraint:
     """An end-effector constraint (section 4.3) on ``character``, for full-body refinement.
 
     Path editing ignores it; the scene records it (``EditResult.end_effectors``)
-    and hands it to :func:`mocaplab.refinement.refine_scene` (Kim et al. 2009,
+    and hands it to :func:`mocaplab.editing.refinement.refine_scene` (Kim et al. 2009,
     section 4.3).  Frames are the character's own frames.
 
     Two forms:
@@ -555,14 +555,14 @@ class EndEffectorConstraint:
     * ``EndEffectorConstraint(character, joint=..., frame=i, target=...)`` or
       ``frames=(a, b)`` (both ends included, like every constraint here),
       with ``target`` a world point (3,), one point per frame ``(b - a + 1,
-      3)``, or a :class:`~mocaplab.refinement.RelativeTo` /
-      :class:`~mocaplab.refinement.ObjectFrame`; ``chain`` and ``blend`` as in
-      :class:`~mocaplab.refinement.EndEffector`.
+      3)``, or a :class:`~mocaplab.goals.RelativeTo` /
+      :class:`~mocaplab.goals.ObjectFrame`; ``chain`` and ``blend`` as in
+      :class:`~mocaplab.goals.EndEffector`.
     * ``EndEffectorConstraint(character, end_effector)``: a
-      :class:`~mocaplab.refinement.EndEffector` as it is (its own frame
+      :class:`~mocaplab.goals.EndEffector` as it is (its own frame
       convention: a ``(start, stop)`` tuple there is half-open).
 
-    ``constraint`` is the :class:`~mocaplab.refinement.EndEffector` either way.
+    ``constraint`` is the :class:`~mocaplab.goals.EndEffector` either way.
 
     Examples
     --------
@@ -594,7 +594,7 @@ class EndEffectorConstraint:
                 )
             if not isinstance(self.constraint, EndEffector):
                 raise TypeError(
-                    f"Expected `constraint` to be a mocaplab.refinement.EndEffector, got {type(self.constraint).__name__}"
+                    f"Expected `constraint` to be a mocaplab.goals.EndEffector, got {type(self.constraint).__name__}"
                 )
             ee = self.constraint
             if ee.character != self.character:
@@ -640,8 +640,8 @@ def effector_frames(effector: Any, n_frames: int) -> list[tuple[int, int]]:
     """Inclusive ``(first, last)`` runs of frames an end effector constrains.
 
     ``effector`` is an :class:`EndEffectorConstraint` or a
-    :class:`~mocaplab.refinement.EndEffector` (whose own
-    :meth:`~mocaplab.refinement.EndEffector.intervals` decide).
+    :class:`~mocaplab.goals.EndEffector` (whose own
+    :meth:`~mocaplab.goals.EndEffector.intervals` decide).
     """
     ee = effector.constraint if isinstance(effector, EndEffectorConstraint) else effector
     return [(a, b - 1) for a, b in ee.intervals(n_frames)]

@@ -103,8 +103,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._warnings import warn
+from ..contacts import foot_contacts
+from ..goals import EndEffector
 from ..motion import FPS_RANGE, Motion
-from ..refinement import EndEffector
 from ..undo import Undoable, UndoStack
 from ._threads import single_blas_thread
 from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint, Relative, effector_frames
@@ -119,6 +120,7 @@ from .laplacian import (
     spatial_rows,
 )
 from .paths import MotionPath, apply_path, contact_joints, laplacian_coordinates, stationary_segments, with_roles
+from .refinement import refine_scene
 from .timewarp import TimeFactors, TimeSolver, temporal_rows
 
 __all__ = [
@@ -199,7 +201,7 @@ _TIME_TOLERANCE = 1e-6  # seconds: frame times closer than this count as unchang
 class RefineCache:
     """Refined motions per character, kept between edits so only what changed is refined again.
 
-    Full-body refinement (:func:`mocaplab.refinement.refine_scene`) costs
+    Full-body refinement (:func:`mocaplab.editing.refinement.refine_scene`) costs
     tens of milliseconds per character; a drag usually moves one character
     (and, through soft relative constraints, its neighbours a little).  Each
     entry remembers what a character was refined from: the shared clock
@@ -208,7 +210,7 @@ class RefineCache:
     reuses the refined motion itself when the clock and the end effectors
     are the same, the frame times within :data:`_TIME_TOLERANCE` and the
     path within ``tolerance`` metres; characters tied by end effectors
-    relative to one another (:class:`~mocaplab.refinement.RelativeTo` of
+    relative to one another (:class:`~mocaplab.goals.RelativeTo` of
     another character) are refined, or reused, together.
 
     The time-warped input clips and their foot contacts (the references of
@@ -296,7 +298,7 @@ def _effector_groups(end_effectors: Sequence[Sequence[EndEffector]]) -> list[lis
 
 
 def _effectors(constraints: Sequence[Any], K: int) -> tuple[tuple[EndEffector, ...], ...]:
-    """End-effector constraints per character (as :class:`mocaplab.refinement.EndEffector`)."""
+    """End-effector constraints per character (as :class:`mocaplab.goals.EndEffector`)."""
     ee: list[list[EndEffector]] = [[] for _ in range(K)]
     for c in constraints:
         if isinstance(c, EndEffectorConstraint):
@@ -1225,11 +1227,6 @@ class EditResult:
 
     @cached_property
     def _refined_list(self) -> list[Motion]:
-        try:
-            from ..refinement import refine_scene
-        except ImportError:
-            raise NotImplementedError("full-body refinement needs mocaplab.refine, which is not available") from None
-        from ..contacts import foot_contacts
 
         cache: RefineCache = self._ed._refine_cache
         clock = (float(self.clock[0]), float(self.clock_fps), len(self.clock))
@@ -1267,7 +1264,7 @@ class EditResult:
         """Full-body refined motions on the shared clock (section 4.3).
 
         The time-warped motions (:attr:`motions` without refinement) go through
-        :func:`mocaplab.refinement.refine_scene` with the input clips warped the
+        :func:`mocaplab.editing.refinement.refine_scene` with the input clips warped the
         same way as references (the foot contacts of their
         :meth:`SceneEditor.contact_joints`, detected on them, are planted) and the
         scene's end-effector constraints, whose frames (each character's own

@@ -154,8 +154,8 @@ from scipy.ndimage import gaussian_filter1d
 from .. import quat
 from .._warnings import warn
 from ..kinematics import fk
-from ..motion import Motion, Skeleton, mirror_name, readonly
-from ..roles import Roles, RolesError, _plausible, resolve_roles
+from ..motion import Motion, Skeleton, readonly
+from ..roles import Roles, RolesError, _plausible, mirror_name, resolve_roles
 
 __all__ = [
     "DE_LEVA_MALE",

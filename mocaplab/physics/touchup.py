@@ -134,9 +134,9 @@ Choices made where the paper leaves them open
   alone on ground frames; a flight adjustment translates the whole body),
   per frame like the paper's choice (Kovar et al. 2002, "because of its
   efficiency").  There is one correction layer: footplants are goals
-  (:class:`mocaplab.refinement.Goal`), built once from the input's
+  (:class:`mocaplab.goals.Goal`), built once from the input's
   contacts in :func:`start`, and met after each step by the refinement
-  module's IK layer (:func:`mocaplab.refinement.solve_goals`: two-bone IK
+  module's IK layer (:func:`mocaplab.goals.solve_goals`: two-bone IK
   of the legs, then each foot turned about its ankle toward its toe goal),
   lowering the root (smoothly, at most 15 cm) where a leg would have to
   stretch beyond 99 % of its length or beyond what the input already
@@ -154,19 +154,21 @@ Choices made where the paper leaves them open
 
   - ``"ik"`` (what ``"auto"`` picks): each planted joint back where the
     input motion had it, frame by frame (targets the input's positions,
-    weights :func:`mocaplab.refinement.blend_weights` over 0.2 s around the
+    weights :func:`mocaplab.goals.blend_weights` over 0.2 s around the
     frames where its foot is planted); the ankle's orientation is the IK
     layer's (the foot keeps its turn about the ankle-to-toe axis).  On the
     input itself it changes nothing, so a touch-up of a good motion starts
     from that motion;
-  - ``"plant"``: the plant goals of :func:`mocaplab.refinement.foot_goals`,
+  - ``"plant"``: the plant goals of :func:`mocaplab.goals.foot_goals`,
     one plant position per contact interval of the input.  It re-plants
     the input's feet as well: on the captured walk CMU 16_15 the step alone
     moves the knees by up to 8 cm at heel-off (the ankle held on one spot
     while the captured heel rolls) and raises the mean ZMP distance from
     1.26 to 1.61 cm, so it is no longer the default; plant an edited
-    motion's feet with :func:`mocaplab.refinement.refine` first;
-  - ``"refine"``: the full :func:`mocaplab.refinement.refine`, which also
+    motion's feet with :func:`mocaplab.editing.refinement.refine` first;
+  - ``"refine"``: the foot planting of :func:`mocaplab.refine` (Kim et al.'s
+    s4.3: :func:`mocaplab.goals.foot_goals` met by
+    :func:`mocaplab.goals.enforce_goals`), which also
     lowers the root where a leg cannot reach and smooths the corrections
     with a displacement map; both leak into flight frames and bend the
     ballistic centre-of-mass path again;
@@ -222,8 +224,8 @@ from .. import quat
 from .._warnings import warn
 from ..contacts import intervals_from_mask
 from ..displacement import blend_ramp
+from ..goals import Goal, blend_weights, enforce_goals, foot_goals, solve_goals
 from ..motion import Motion, Skeleton, _owned, readonly
-from ..refinement import Goal, _solve_goals, blend_weights, foot_goals, refine
 from ..roles import Roles, RolesError, resolve_roles
 from .body import GRAVITY, Body, angular_momentum, center_of_mass, link_positions, paper_width, smoothed_derivatives
 from .zmp import _LEVEL, Balance, _check_contacts, _rebalance, balance, default_contacts
@@ -1279,7 +1281,7 @@ def _reference_goals(reference: Motion, contacts: Contacts, *, blend: float) -> 
     contact joint too, else a ``"foot"`` goal), targets the joint's
     positions in ``reference``, weights 1 while its foot is planted (its
     ankle or its toe) blended to 0 over ``blend`` seconds on each side
-    (:func:`mocaplab.refinement.blend_weights`).
+    (:func:`mocaplab.goals.blend_weights`).
     """
     sk = reference.skeleton
     names = tuple(contacts.joints)
@@ -1309,7 +1311,7 @@ def _outside_flights(goals: Sequence[Goal], contacts: Contacts, fps: float) -> l
     back toward the input after the flight adjustments and breaks the
     conserved angular momentum and the parabola they made; the fade lies
     on the ground frames (the one blend ramp, through
-    :func:`mocaplab.refinement.blend_weights`).  A foot planted up to
+    :func:`mocaplab.goals.blend_weights`).  A foot planted up to
     take-off can slide there (CMU 16_05 bent by a quarter of its chord,
     refined and touched up: the toes 14.8 mm in the frame before take-off,
     2.0 in the input); fading inside the flight instead held it, but
@@ -1326,7 +1328,7 @@ def _outside_flights(goals: Sequence[Goal], contacts: Contacts, fps: float) -> l
 def _footplant_fn(
     footplants: Footplants, contacts: Contacts, reference: Motion
 ) -> Callable[[_Posed], _Posed] | None:
-    """The footplant step of a touch-up, built once: goals met by the refinement module's IK layer."""
+    """The footplant step of a touch-up, built once: goals met by the goal layer (:func:`mocaplab.goals.solve_goals`)."""
     if footplants is None:
         return None
     if callable(footplants):
@@ -1335,7 +1337,9 @@ def _footplant_fn(
     if footplants not in ("auto", "plant", "refine", "ik"):
         raise ValueError(f"Expected `footplants` 'auto', 'plant', 'refine', 'ik', a callable or None, got {footplants!r}")
     if footplants == "refine":
-        return lambda p: _posed(refine(p.motion, contacts=contacts, reference=reference))
+        # Kim et al.'s s4.3 refinement without end effectors (mocaplab.refine's defaults), from the shared goal
+        # layer: a paper package does not import another's
+        return lambda p: _posed(enforce_goals(p.motion, foot_goals(p.motion, contacts, reference=reference, blend=0.1)))
     if footplants == "plant":
         goals = foot_goals(reference, contacts, reference=reference, blend=PLANT_BLEND)
     else:  # "ik", "auto"
@@ -1354,9 +1358,9 @@ def _footplant_fn(
         if not np.any(gate > 0):
             return p
         gated = [dataclasses.replace(g, weights=np.asarray(g.weights) * gate) for g in goals]
-        new, fk = _solve_goals(
+        new, fk = solve_goals(
             p.motion, gated, adjust_root=True, reach=0.99, max_drop=0.15, drop_window=0.15, dls_options=None,
-            fk=(p.grot, p.gpos),
+            fk=(p.grot, p.gpos), return_fk=True,
         )
         return _Posed(new, *fk)
 
@@ -1605,7 +1609,7 @@ def start(
     (:class:`TouchUpWarning`) about flights longer than :data:`LONG_FLIGHT`,
     feet that slide during their contacts (more than :data:`SLIDE_WARNING`
     over a median contact: the touch-up keeps the feet where the input has
-    them, so plant them first with :func:`mocaplab.refinement.refine`) and
+    them, so plant them first with :func:`mocaplab.editing.refinement.refine`) and
     ground frames without a ZMP.
     """
     if not isinstance(motion, Motion):
@@ -1858,7 +1862,7 @@ def touch_up(
     ----------
     motion : Motion
         The (edited) motion; never modified.  Its feet should be planted
-        (:func:`mocaplab.refinement.refine`): the touch-up keeps them where
+        (:func:`mocaplab.editing.refinement.refine`): the touch-up keeps them where
         they are and warns when they slide.
     body : Body, optional
         Masses; default :meth:`Body.from_skeleton` of the motion (de Leva table;

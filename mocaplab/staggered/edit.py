@@ -55,9 +55,9 @@ Constraint layer
 :class:`ConstraintLayer` is the final displacement layer of section 3: on
 contact intervals (mapped through the pose timing), the feet (and any other
 constrained end effector) are brought back to their original positions by
-the package's one goal solver, :func:`mocaplab.refinement.solve_goals`, with
-:class:`~mocaplab.refinement.Goal` weights blended in and out over a short
-window by :func:`mocaplab.refinement.blend_weights`.
+the package's one goal solver, :func:`mocaplab.goals.solve_goals`, with
+:class:`~mocaplab.goals.Goal` weights blended in and out over a short
+window by :func:`mocaplab.goals.blend_weights`.
 
 Joints are never named here: the succession's default joint is the pelvis
 and the constraint layer's joints are the feet of the skeleton's joint roles
@@ -962,7 +962,7 @@ def constraint_joints(
     ankle a ``"toe"`` goal (the foot turns about the ankle), a wrist a
     ``"limb"`` goal (the arm's two-bone IK); other joints are left out.
     Returns the kept joint names (in the order of ``candidates``) and their
-    kinds of :class:`~mocaplab.refinement.Goal`.
+    kinds of :class:`~mocaplab.goals.Goal`.
     """
     r = resolve_roles(skeleton, roles)
     ankles = {r[f"{s}_ankle"] for s in ("left", "right") if f"{s}_ankle" in r}
@@ -988,15 +988,15 @@ def constraint_joints(
 
 
 #: Seconds on each side over which the constraint layer's root lowering is
-#: smoothed (``drop_window`` of :func:`mocaplab.refinement.solve_goals`).
+#: smoothed (``drop_window`` of :func:`mocaplab.goals.solve_goals`).
 _DROP_WINDOW = 0.15
 #: Fraction of a leg's length the layer's root lowering keeps a held leg
-#: within (``reach`` of :func:`mocaplab.refinement.solve_goals`).  Near full
+#: within (``reach`` of :func:`mocaplab.goals.solve_goals`).  Near full
 #: extension the knee angle is very sensitive to the hip: at 0.99 the broad
 #: jump 16_05 under a succession of 0.02 s snaps its knee to 167 degrees and
 #: back at take-off (1,048 rad/s^2, the input 198); at 0.96, 529.
 _REACH = 0.96
-#: The straightest a held leg may stay (``max_reach`` of :func:`mocaplab.refinement.solve_goals`): the
+#: The straightest a held leg may stay (``max_reach`` of :func:`mocaplab.goals.solve_goals`): the
 #: walk 16_15 with its legs exaggerated by 0.5 straightens a knee to 4 degrees where the toe still holds,
 #: and a target brushing past that makes the held knee dip and return within 5 frames (peak knee
 #: acceleration 779 rad/s^2 uncapped, 436 at 0.997, 345 at 0.995; the edit alone 230).  Lower caps
@@ -1020,11 +1020,11 @@ class ConstraintLayer:
 
     On the frames of a contact each constrained joint is held at its
     original world position by the one goal solver of the package,
-    :func:`mocaplab.refinement.solve_goals` (ankles by the leg's two-bone
+    :func:`mocaplab.goals.solve_goals` (ankles by the leg's two-bone
     IK, toes by turning the foot about the ankle, wrists by the arm's
     two-bone IK), with weights that are 1 inside the contact and fall to 0
     over ``window`` seconds on each side
-    (:func:`mocaplab.refinement.blend_weights`).  The motion's translation
+    (:func:`mocaplab.goals.blend_weights`).  The motion's translation
     channels take part in the forward kinematics and are passed through.
 
     * **Timing.**  A contact and its targets are laid on the original
@@ -1071,7 +1071,7 @@ class ConstraintLayer:
         Original world positions of the joints (the targets kept).
     speeds : ndarray, shape (N, E), optional
         Original world speeds of the joints (m/s); a goal's stiffness is
-        ``1 / (speed + 0.05 m/s)`` as in :func:`mocaplab.refinement.foot_goals`,
+        ``1 / (speed + 0.05 m/s)`` as in :func:`mocaplab.goals.foot_goals`,
         so where an ankle and its toe cannot both hold (one of them blending
         in or out) the foot rolls about the stiller one.  Default zeros.
     window : float
@@ -1082,12 +1082,12 @@ class ConstraintLayer:
         unedited motion and outside the edited stretch (a contact with any
         such frame is solved whole).
     kinds : tuple of str, optional
-        The :class:`~mocaplab.refinement.Goal` kind of each joint
+        The :class:`~mocaplab.goals.Goal` kind of each joint
         (``"foot"``, ``"toe"`` or ``"limb"``); default from the joint roles
         (:func:`constraint_joints`).
     adjust_root : bool
         Let the solver lower the root where a leg cannot reach its target
-        (:func:`~mocaplab.refinement.solve_goals`); on by default (see
+        (:func:`~mocaplab.goals.solve_goals`); on by default (see
         "Reach").
     timing : tuple of (str or None), optional
         For each joint, the control variable whose knots its contacts
@@ -1238,11 +1238,11 @@ class ConstraintLayer:
 
         The contact intervals, mapped onto ``sm``'s frames through each
         joint's timing (:meth:`frame_times`), are blended by
-        :func:`mocaplab.refinement.blend_weights` (weights between frames are
+        :func:`mocaplab.goals.blend_weights` (weights between frames are
         interpolated); targets are interpolated between original frames.
         """
         from ..contacts import intervals_from_mask
-        from ..refinement import blend_weights
+        from ..goals import blend_weights
 
         t = np.asarray(t, dtype=float).reshape(-1)
         grid = np.arange(sm.n_frames) / sm.fps
@@ -1268,7 +1268,7 @@ class ConstraintLayer:
         ).reshape(t.size, len(self.joints))
 
     def apply(self, sm: StaggeredMotion, motion: Motion, t: Array, *, staggered: bool = True) -> Motion:
-        """Hold the constrained joints on their targets (:func:`mocaplab.refinement.solve_goals`).
+        """Hold the constrained joints on their targets (:func:`mocaplab.goals.solve_goals`).
 
         Warns (:class:`UnreachableTargetWarning`) naming the frames where,
         by more than ``reach_tolerance``, a fully held joint misses its
@@ -1276,7 +1276,7 @@ class ConstraintLayer:
         reach (:func:`mocaplab.ik.reach_residual`).
         """
         from ..contacts import intervals_from_mask
-        from ..refinement import Goal, solve_goals
+        from ..goals import Goal, solve_goals
 
         if not self.joints:
             return motion

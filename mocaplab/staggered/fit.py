@@ -723,7 +723,7 @@ def extract(
         Attach the contact constraint layer
         (:class:`~mocaplab.staggered.edit.ConstraintLayer`: the feet of the
         analysis' contacts held by the shared goal solver
-        :func:`mocaplab.refinement.solve_goals`, blended over
+        :func:`mocaplab.goals.solve_goals`, blended over
         ``constraint_window`` seconds).  It is the identity on the unedited
         motion.
     constraint_window : float

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ...refinement import EndEffector
+from ...goals import EndEffector
 from ..constraints import SPATIAL, TEMPORAL, EndEffectorConstraint, effector_frames, is_effector
 from .transformations import TYPES, Transformation
 
@@ -164,7 +164,7 @@ def protected_frames(constraints: Iterable[Any], character: int) -> set[int]:
 
     Every frame of an instant constraint, and the first and last frames of
     a variational one (also for end-effector constraints of
-    :mod:`mocaplab.refinement`).
+    :mod:`mocaplab.goals`).
     """
     out: set[int] = set()
     for c in constraints:

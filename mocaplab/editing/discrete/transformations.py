@@ -63,8 +63,8 @@ from numpy.typing import NDArray
 
 from ... import quat
 from ...displacement import displace, rotation_displacement
+from ...goals import EndEffector
 from ...motion import Motion
-from ...refinement import EndEffector
 from ..constraints import SPATIAL, TEMPORAL, EndEffectorConstraint, Relative, Sync
 from ..graph import MotionGraph, _above
 from ..paths import apply_path

@@ -62,7 +62,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import minimum_filter1d
 
 from . import kinematics, quat
-from .contacts import Contacts
+from .contacts import Contacts, intervals_from_mask
 from .displacement import DisplacementMap, blend_ramp, displacement_between
 from .ik import (
     aim_deltas,
@@ -81,7 +81,6 @@ __all__ = [
     "EndEffector",
     "RelativeTo",
     "ObjectFrame",
-    "blend_ramp",
     "interval_weights",
     "blend_weights",
     "plant_positions",
@@ -1066,8 +1065,7 @@ class EndEffector:
                 raise ValueError(f"Expected EndEffector frames in [0, {n_frames}), got {arr[0]}..{arr[-1]}")
             mask = np.zeros(n_frames, dtype=bool)
             mask[arr] = True
-            edges = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
-            ivs = list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True))
+            ivs = intervals_from_mask(mask)
         return _check_intervals(ivs, n_frames)
 
 

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from . import quat
 
-__all__ = ["fk", "fk_below", "subtree_levels", "velocities"]
+__all__ = ["fk", "fk_below", "joint_depths", "subtree_levels", "velocities"]
 
 
 def fk(
@@ -29,50 +29,63 @@ def fk(
     *,
     translations: NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Global rotations and positions of every joint on every frame.
+    """Global rotations and positions of every joint, for one pose, a clip or a batch.
 
     Parameters
     ----------
-    rotations : ndarray, shape (F, J, 4)
-        Local joint rotations, unit quaternions ``(x, y, z, w)``.
-    root_positions : ndarray, shape (F, 3)
-        World position of joint 0.
+    rotations : ndarray, shape (..., J, 4)
+        Local joint rotations, unit quaternions ``(x, y, z, w)``: one pose
+        ``(J, 4)``, a clip ``(F, J, 4)`` or any batch of them.
+    root_positions : ndarray, shape (..., 3)
+        World position of joint 0, with the same leading shape.
     offsets : ndarray, shape (J, 3)
         Rest translation of each joint in its parent's frame.
     parents : ndarray of int, shape (J,)
         ``parents[0] == -1`` and ``parents[j] < j``.
-    translations : ndarray, shape (F, J, 3), optional
+    translations : ndarray, shape (..., J, 3), optional
         Per-frame local translations replacing ``offsets`` (the root row is
         ignored: ``root_positions`` places the root).
 
     Returns
     -------
-    global_rotations : ndarray, shape (F, J, 4)
-    global_positions : ndarray, shape (F, J, 3)
-        New arrays (transposed views of component-major buffers, so not
-        C-contiguous; ``np.ascontiguousarray`` them if that matters).
+    global_rotations : ndarray, shape (..., J, 4)
+    global_positions : ndarray, shape (..., J, 3)
+        New arrays (views of component-major buffers, so not C-contiguous;
+        ``np.ascontiguousarray`` them if that matters).
 
     Examples
     --------
     >>> import numpy as np
-    >>> rot = np.tile([0.0, 0.0, 0.0, 1.0], (1, 2, 1))
-    >>> _, pos = fk(rot, np.zeros((1, 3)), np.array([[0, 0, 0], [0, 1.0, 0]]), np.array([-1, 0]))
-    >>> pos[0, 1].tolist()
+    >>> pose = np.tile([0.0, 0.0, 0.0, 1.0], (2, 1))  # one pose of two joints
+    >>> _, pos = fk(pose, np.zeros(3), np.array([[0, 0, 0], [0, 1.0, 0]]), np.array([-1, 0]))
+    >>> pos[1].tolist()
     [0.0, 1.0, 0.0]
     """
     rotations = np.asarray(rotations, dtype=float)
     root_positions = np.asarray(root_positions, dtype=float)
     offsets = np.asarray(offsets, dtype=float)
     parents = np.asarray(parents, dtype=np.int64)
-    if rotations.ndim != 3 or rotations.shape[2] != 4:
-        raise ValueError(f"Expected `rotations` of shape (F, J, 4), got {rotations.shape}")
-    n_frames, n_joints = rotations.shape[:2]
-    if root_positions.shape != (n_frames, 3):
-        raise ValueError(f"Expected `root_positions` of shape ({n_frames}, 3), got {root_positions.shape}")
+    if rotations.ndim < 2 or rotations.shape[-1] != 4:
+        raise ValueError(f"Expected `rotations` of shape (..., J, 4), got {rotations.shape}")
+    lead, n_joints = rotations.shape[:-2], rotations.shape[-2]
+    if root_positions.shape != lead + (3,):
+        raise ValueError(f"Expected `root_positions` of shape {lead + (3,)}, got {root_positions.shape}")
     if offsets.shape != (n_joints, 3) or parents.shape != (n_joints,):
         raise ValueError(
             f"Expected `offsets` ({n_joints}, 3) and `parents` ({n_joints},), got {offsets.shape} and {parents.shape}"
         )
+    if translations is not None:
+        translations = np.asarray(translations, dtype=float)
+        if translations.shape != lead + (n_joints, 3):
+            raise ValueError(f"Expected `translations` of shape {lead + (n_joints, 3)}, got {translations.shape}")
+    if len(lead) != 1:  # one pose or a batch: the kernel below runs over one flat frame axis
+        n = int(np.prod(lead))
+        grot, gpos = fk(
+            rotations.reshape(n, n_joints, 4), root_positions.reshape(n, 3), offsets, parents,
+            translations=None if translations is None else translations.reshape(n, n_joints, 3),
+        )
+        return grot.reshape(lead + (n_joints, 4)), gpos.reshape(lead + (n_joints, 3))
+    n_frames = lead[0]
     # Component-major layout, (4, J, F) and (3, J, F): each quaternion or
     # vector component of a set of joints is one contiguous (n, F) block, so
     # the products below run on contiguous memory without temporaries of
@@ -87,13 +100,10 @@ def fk(
     # step per level of the tree instead of one per joint
     for level in _levels(parents):
         p = parents[level]
-        ax, ay, az, aw = gq[:, p]  # parents' global rotations, (n, F) each
-        bx, by, bz, bw = lq[:, level]
-        # global rotation: Hamilton product parent * local
-        gq[0, level] = aw * bx + ax * bw + ay * bz - az * by
-        gq[1, level] = aw * by - ax * bz + ay * bw + az * bx
-        gq[2, level] = aw * bz + ax * by - ay * bx + az * bw
-        gq[3, level] = aw * bw - ax * bx - ay * by - az * bz
+        parent = gq[:, p]  # parents' global rotations, (4, n, F)
+        ax, ay, az, aw = parent
+        # global rotation: parent * local
+        gq[0, level], gq[1, level], gq[2, level], gq[3, level] = quat.mul_components(parent, lq[:, level])
         # position: parent + parent rotation applied to the local translation,
         # v' = v + w t + u x t with t = 2 u x v
         if lt is None:
@@ -166,11 +176,10 @@ def _subtree_levels(parents_bytes: bytes, tops: tuple[int, ...]) -> tuple[NDArra
     parents = np.frombuffer(parents_bytes, dtype=np.int64)
     below = np.zeros(len(parents), dtype=bool)
     below[list(tops)] = True
-    depth = np.zeros(len(parents), dtype=np.int64)
     for j in range(1, len(parents)):
         below[j] |= below[parents[j]]
-        depth[j] = depth[parents[j]] + 1
     below[0] = False
+    depth = joint_depths(parents)
     levels = []
     for d in np.unique(depth[below]):
         level = np.flatnonzero(below & (depth == d))
@@ -181,11 +190,28 @@ def _subtree_levels(parents_bytes: bytes, tops: tuple[int, ...]) -> tuple[NDArra
 
 def _levels(parents: NDArray[np.int64]) -> list[NDArray[np.int64]]:
     """Joint indices grouped by depth below the root (root excluded)."""
-    parents = np.asarray(parents)
+    depth = joint_depths(parents)
+    return [np.flatnonzero(depth == d) for d in range(1, int(depth.max(initial=0)) + 1)]
+
+
+def joint_depths(parents: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Number of bones from the root to each joint, shape (J,).
+
+    Parameters
+    ----------
+    parents : ndarray of int, shape (J,)
+        ``parents[0] == -1`` and ``parents[j] < j``.
+
+    Examples
+    --------
+    >>> joint_depths(np.array([-1, 0, 1, 0])).tolist()
+    [0, 1, 2, 1]
+    """
+    parents = np.asarray(parents, dtype=np.int64)
     depth = np.zeros(len(parents), dtype=np.int64)
     for j in range(1, len(parents)):
         depth[j] = depth[parents[j]] + 1
-    return [np.flatnonzero(depth == d) for d in range(1, int(depth.max(initial=0)) + 1)]
+    return depth
 
 
 def velocities(positions: NDArray[np.float64], fps: float) -> NDArray[np.float64]:

@@ -348,10 +348,7 @@ class Skeleton:
 
     def depth(self) -> NDArray[np.int64]:
         """Number of edges from the root to each joint, shape (J,)."""
-        d = np.zeros(self.n_joints, dtype=np.int64)
-        for j in range(1, self.n_joints):
-            d[j] = d[self.parents[j]] + 1
-        return d
+        return kinematics.joint_depths(self.parents)
 
     def chain(self, start: str | int, end: str | int) -> list[int]:
         """Joints from ``start`` down to its descendant ``end`` (both included)."""

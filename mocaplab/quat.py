@@ -18,12 +18,15 @@ arguments.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "identity",
     "mul",
+    "mul_components",
     "inv",
     "normalize",
     "rotate",
@@ -54,14 +57,36 @@ def mul(a: ArrayLike, b: ArrayLike) -> Array:
     """Hamilton product ``a * b`` (apply ``b`` first, then ``a``)."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
-    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = aw * bx + ax * bw + ay * bz - az * by
-    out[..., 1] = aw * by - ax * bz + ay * bw + az * bx
-    out[..., 2] = aw * bz + ax * by - ay * bx + az * bw
-    out[..., 3] = aw * bw - ax * bx - ay * by - az * bz
+    out[..., 0], out[..., 1], out[..., 2], out[..., 3] = mul_components(np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0))
     return out
+
+
+def mul_components(a: Sequence[Array], b: Sequence[Array]) -> tuple[Array, Array, Array, Array]:
+    """The Hamilton product ``a * b`` written once, on components.
+
+    ``a`` and ``b`` are ``(x, y, z, w)`` sequences of component arrays (any
+    broadcasting shapes); returns the four components of the product.
+    :func:`mul` uses it on ``(..., 4)`` arrays and
+    :func:`mocaplab.kinematics.fk` on component-major ``(4, J, F)``
+    buffers, where one contiguous block per component is faster than
+    strided views.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x90 = np.array([np.sin(np.pi / 4), 0.0, 0.0, np.cos(np.pi / 4)])
+    >>> np.round(mul_components(x90, x90), 6).tolist()  # two quarter turns: a half turn
+    [1.0, 0.0, 0.0, 0.0]
+    """
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
 
 
 def inv(q: ArrayLike) -> Array:

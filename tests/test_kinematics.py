@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from mocaplab import kinematics, quat
 from mocaplab.io import euler
+from mocaplab.motion import Skeleton
 
 SIX_ORDERS = ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"]
 SHORT_ORDERS = ["X", "Y", "Z"] + ["".join(p) for p in itertools.permutations("XYZ", 2)]
@@ -146,10 +147,38 @@ def test_fk_does_not_mutate_inputs(rng):
 
 def test_fk_shape_errors():
     offsets, parents = chain()
-    with pytest.raises(ValueError, match=r"`rotations` of shape \(F, J, 4\), got \(2, 3\)"):
+    with pytest.raises(ValueError, match=r"`rotations` of shape \(\.\.\., J, 4\), got \(2, 3\)"):
         kinematics.fk(np.zeros((2, 3)), np.zeros((2, 3)), offsets, parents)
+    with pytest.raises(ValueError, match=r"`root_positions` of shape \(3,\), got \(1, 3\)"):
+        kinematics.fk(quat.identity((3,)), np.zeros((1, 3)), offsets, parents)
     with pytest.raises(ValueError, match=r"`root_positions` of shape \(1, 3\), got \(2, 3\)"):
         kinematics.fk(quat.identity((1, 3)), np.zeros((2, 3)), offsets, parents)
+
+
+def test_fk_broadcasts_over_leading_axes():
+    # one pose, a clip and a batch of clips give the same joints: the frame axis is not special
+    rng = np.random.default_rng(3)
+    offsets, parents = chain()
+    rot = quat.normalize(rng.normal(size=(2, 5, 3, 4)))
+    root = rng.normal(size=(2, 5, 3))
+    trans = rng.normal(size=(2, 5, 3, 3))
+    for t in (None, trans):
+        grot, gpos = kinematics.fk(rot, root, offsets, parents, translations=t)
+        assert grot.shape == (2, 5, 3, 4) and gpos.shape == (2, 5, 3, 3)
+        for b in range(2):
+            clip = kinematics.fk(rot[b], root[b], offsets, parents, translations=None if t is None else t[b])
+            assert np.array_equal(clip[1], gpos[b]) and np.array_equal(clip[0], grot[b])
+            pose = kinematics.fk(rot[b, 4], root[b, 4], offsets, parents, translations=None if t is None else t[b, 4])
+            assert pose[1].shape == (3, 3) and np.array_equal(pose[1], gpos[b, 4])
+    with pytest.raises(ValueError, match=r"`translations` of shape \(2, 5, 3, 3\)"):
+        kinematics.fk(rot, root, offsets, parents, translations=trans[:, :4])
+
+
+def test_joint_depths_one_home():
+    _, parents = chain()
+    sk = Skeleton([f"j{i}" for i in range(4)], [-1, 0, 1, 0], np.zeros((4, 3)))
+    assert kinematics.joint_depths(np.array([-1, 0, 1, 0])).tolist() == [0, 1, 2, 1] == sk.depth().tolist()
+    assert kinematics.joint_depths(parents).tolist() == list(range(len(parents)))
 
 
 def test_velocities_of_linear_motion():

@@ -54,6 +54,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import gaussian_filter1d
 
 from .. import quat
+from ..contacts import intervals_from_mask
 from ..motion import Motion
 from ..roles import Roles, parse_name, resolve_roles
 
@@ -460,14 +461,6 @@ def apply_path(motion: Motion, positions: ArrayLike, heading_change: ArrayLike) 
     return motion.transformed(yaw=dyaw, translation=t)
 
 
-def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
-    m = np.concatenate([[False], np.asarray(mask, bool), [False]])
-    d = np.diff(m.astype(np.int8))
-    starts = np.flatnonzero(d == 1)
-    stops = np.flatnonzero(d == -1)
-    return [(int(a), int(b)) for a, b in zip(starts, stops, strict=True)]
-
-
 def stationary_segments(
     motion: Motion,
     *,
@@ -529,4 +522,4 @@ def stationary_segments(
         if count["left"] and count["right"]:
             still = still | (planted["left"] & planted["right"])
     min_len = max(3, int(np.ceil(min_duration * motion.fps)))
-    return [(a, b) for a, b in _runs(still) if b - a >= min_len]
+    return [(a, b) for a, b in intervals_from_mask(still) if b - a >= min_len]

@@ -36,8 +36,9 @@ jump ``d`` between the frame after the seam and the natural successor of the
 frame before it (every body joint's local rotation and the path joint's
 placed world rotation as rotation vectors ``d = log(q^-1 q')``, the path
 joint's height and the body joints' translations) is spread as ``+d w / 2``
-before and ``-d w / 2`` after the seam, ``w`` a raised cosine over ``blend``
-seconds on each side, rotations as ``q exp(c d)`` (the one displacement
+before and ``-d w / 2`` after the seam, ``w`` falling from 1 to 0 over ``blend``
+seconds on each side by :func:`~mocaplab.displacement.blend_ramp` (no velocity or
+acceleration jump where the blend ends), rotations as ``q exp(c d)`` (the one displacement
 convention of :mod:`mocaplab.displacement`), so there is no pop.  (A frame
 that ends its clip has no successor to compare with; its seam is not
 blended.)  The motion path and the time track (uniform, one frame step per
@@ -62,7 +63,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ... import quat
-from ...displacement import displace, rotation_displacement
+from ...displacement import blend_ramp, displace, rotation_displacement
 from ...goals import EndEffector
 from ...motion import Motion
 from ..constraints import SPATIAL, TEMPORAL, EndEffectorConstraint, Relative, Sync
@@ -315,8 +316,8 @@ def _placement(nodes: IntArray, gd: GraphArrays, first: tuple[float, float, floa
 
 
 def _blend_weights(n: int) -> Array:
-    m = np.arange(n)
-    return 0.5 * (1.0 + np.cos(np.pi * m / n))
+    """Seam weights, 1 at the seam falling to 0 at ``n`` frames: the package's one blend ramp."""
+    return blend_ramp((n - np.arange(n)) / n)
 
 
 def _assemble(

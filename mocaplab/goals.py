@@ -55,7 +55,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
-from typing import Any, Literal
+from typing import Any, Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -599,6 +599,40 @@ def _lower_envelope(need: Array, half: int) -> Array:
     kernel /= kernel.sum()
     padded = np.pad(eroded, half, mode="edge")
     return np.minimum(np.convolve(padded, kernel, mode="valid"), 0.0)
+
+
+@overload
+def solve_goals(
+    motion: Motion,
+    goals: Sequence[Goal],
+    *,
+    adjust_root: bool = ...,
+    reach: float = ...,
+    max_drop: float = ...,
+    drop_window: float = ...,
+    dls_options: dict[str, Any] | None = ...,
+    fk: tuple[Array, Array] | None = ...,
+    hinges: Mapping[JointRef, Any] | None = ...,
+    max_reach: float = ...,
+    return_fk: Literal[False] = ...,
+) -> Motion: ...
+
+
+@overload
+def solve_goals(
+    motion: Motion,
+    goals: Sequence[Goal],
+    *,
+    adjust_root: bool = ...,
+    reach: float = ...,
+    max_drop: float = ...,
+    drop_window: float = ...,
+    dls_options: dict[str, Any] | None = ...,
+    fk: tuple[Array, Array] | None = ...,
+    hinges: Mapping[JointRef, Any] | None = ...,
+    max_reach: float = ...,
+    return_fk: Literal[True],
+) -> tuple[Motion, tuple[Array, Array]]: ...
 
 
 def solve_goals(

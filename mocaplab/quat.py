@@ -62,11 +62,12 @@ def mul(a: ArrayLike, b: ArrayLike) -> Array:
     return out
 
 
-def mul_components(a: Sequence[Array], b: Sequence[Array]) -> tuple[Array, Array, Array, Array]:
+def mul_components(a: Array | Sequence[Array], b: Array | Sequence[Array]) -> tuple[Array, Array, Array, Array]:
     """The Hamilton product ``a * b`` written once, on components.
 
-    ``a`` and ``b`` are ``(x, y, z, w)`` sequences of component arrays (any
-    broadcasting shapes); returns the four components of the product.
+    ``a`` and ``b`` are ``(x, y, z, w)`` components: sequences of four
+    arrays, or arrays whose first axis has length 4 (any broadcasting
+    shapes after it); returns the four components of the product.
     :func:`mul` uses it on ``(..., 4)`` arrays and
     :func:`mocaplab.kinematics.fk` on component-major ``(4, J, F)``
     buffers, where one contiguous block per component is faster than

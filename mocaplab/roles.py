@@ -86,15 +86,12 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterator, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ._warnings import warn
-
-if TYPE_CHECKING:
-    from .motion import Skeleton
 
 __all__ = [
     "ROLE_NAMES",
@@ -109,6 +106,32 @@ __all__ = [
     "mirror_name",
     "mirror_map",
 ]
+
+
+class Skeleton(Protocol):
+    """What role inference reads of a skeleton (:class:`mocaplab.motion.Skeleton` is one).
+
+    A structural type, so this module needs nothing from :mod:`mocaplab.motion`:
+    the dependency runs one way, ``motion -> roles`` (a skeleton caches its
+    roles; roles never import the skeleton class).
+    """
+
+    @property
+    def names(self) -> tuple[str, ...]: ...
+
+    @property
+    def parents(self) -> NDArray[np.int64]: ...
+
+    @property
+    def offsets(self) -> NDArray[np.float64]: ...
+
+    @property
+    def n_joints(self) -> int: ...
+
+    @property
+    def roles(self) -> Roles: ...
+
+    def with_roles(self, **roles: Any) -> Skeleton: ...
 
 SIDES = ("left", "right")
 LEG_PARTS = ("hip", "knee", "ankle", "toe")

@@ -71,7 +71,7 @@ def forward_difference_tangents(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def no_scale_compensation(monkeypatch: pytest.MonkeyPatch) -> None:
     """Phase 2 rescales no segment to its original length (equation 7 on the phase-1 segments)."""
-    from mocaplab.editing import laplacian
+    from mocaplab.editing import spatial
 
     def unscaled(self, pbar):  # noqa: ANN001, ANN202
         P = pbar.reshape(-1, 2)
@@ -79,28 +79,28 @@ def no_scale_compensation(monkeypatch: pytest.MonkeyPatch) -> None:
         i = self._interior
         return (v[i] - v[i - 1]).reshape(-1), v
 
-    monkeypatch.setattr(laplacian.SpatialSolver, "_scale_terms", unscaled)
+    monkeypatch.setattr(spatial.SpatialSolver, "_scale_terms", unscaled)
 
 
 def no_flip_repair(monkeypatch: pytest.MonkeyPatch) -> None:
     """Section 4.2's tangent-flip detection finds nothing: the heading follows every flipped tangent."""
-    from mocaplab.editing import laplacian
+    from mocaplab.editing import flips
 
-    monkeypatch.setattr(laplacian, "detect_tangent_flips", lambda t0, t1, **_: np.zeros(len(t0), bool))
+    monkeypatch.setattr(flips, "detect_tangent_flips", lambda t0, t1, **_: np.zeros(len(t0), bool))
 
 
 def linear_relative(monkeypatch: pytest.MonkeyPatch) -> None:
     """Relative offsets in units of the tangent (equations 1-2 alone): no metric correction."""
-    from mocaplab.editing import laplacian
+    from mocaplab.editing import spatial
 
-    monkeypatch.setattr(laplacian, "metric_targets", lambda *args, **kw: None)
+    monkeypatch.setattr(spatial, "metric_targets", lambda *args, **kw: None)
 
 
 def no_relative_rows(monkeypatch: pytest.MonkeyPatch) -> None:
     """Relative constraints (equations 1-2) give no row: the characters are no longer tied in space."""
     from mocaplab.editing import scene
     from mocaplab.editing.constraints import Relative
-    from mocaplab.editing.laplacian import Rows
+    from mocaplab.editing.lsq import Rows
 
     real = scene.spatial_rows
 

@@ -278,7 +278,7 @@ def test_rank_screen_agrees_with_the_exact_rank():
     # the sparse Cholesky screen only clears full-row-rank hard rows; anything else goes to the SVD search
     import scipy.sparse as sp
 
-    from mocaplab.editing.laplacian import full_row_rank_screen
+    from mocaplab.editing.lsq import full_row_rank_screen
 
     rng = np.random.default_rng(3)
     for _ in range(20):

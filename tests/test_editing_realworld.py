@@ -68,7 +68,7 @@ def test_a_standing_clip_keeps_its_heading_smooth(mocap_dir):
     motion = _load("optitrack_mda/test_optitrack")
     res = ml.edit([motion], _pins(motion, bend=0.25, squeeze=0.0))
     turn = np.degrees(np.abs(np.diff(res.heading_change[0])))
-    assert turn.max() <= ml.editing.laplacian.TURN_RATE / motion.fps + 1e-9
+    assert turn.max() <= ml.editing.flips.TURN_RATE / motion.fps + 1e-9
     # the long standing segment turns as one (planted feet stay planted) away from its blended ends
     a, b = res.stationary[0][-1]
     middle = res.heading_change[0][a + motion.n_frames // 8 : b - motion.n_frames // 8]

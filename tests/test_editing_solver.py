@@ -16,7 +16,7 @@ from mocaplab.editing import (
     deformation_energy,
     edit,
 )
-from mocaplab.editing.laplacian import FLIP_RATE, detect_tangent_flips
+from mocaplab.editing.flips import FLIP_RATE, detect_tangent_flips
 from mocaplab.editing.paths import central_tangents, ground_angle, laplacian_coordinates, wrap_angle
 
 
@@ -392,7 +392,7 @@ def test_tangent_flip_repaired_when_squeezing(walk):
     assert np.abs(psi).max() < np.pi / 2  # repaired heading turns less than the threshold per frame
     # repaired tangents agree with the raw ones away from flips, where the walk moves steadily before and after
     # the squeeze (slower, the heading is blended at TURN_RATE: a slow tangent's direction is mostly sway)
-    from mocaplab.editing.laplacian import STEADY_SPEED
+    from mocaplab.editing.flips import STEADY_SPEED
 
     steady = np.minimum(np.linalg.norm(res.original_paths[0].tangents, axis=1), np.linalg.norm(t_new, axis=1))
     good = ~res.flips[0] & ~res.original_paths[0].degenerate & (steady >= 2 * STEADY_SPEED / walk.fps)
@@ -427,7 +427,7 @@ def test_u_shaped_drag_turns_smoothly(walk):
     assert abs(abs(turn[-1] - turn[0]) - np.pi) < 0.6
     assert np.abs(np.diff(turn)).max() < np.pi / 4
     # where the walk moves steadily the heading follows the deformed tangent exactly (section 4.1)
-    from mocaplab.editing.laplacian import STEADY_SPEED
+    from mocaplab.editing.flips import STEADY_SPEED
 
     t_new = central_tangents(res.paths[0])
     steady = np.minimum(np.linalg.norm(res.original_paths[0].tangents, axis=1), np.linalg.norm(t_new, axis=1))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import threadpoolctl
 
-from mocaplab.editing import PinPosition, SceneEditor, laplacian
+from mocaplab.editing import PinPosition, SceneEditor, spatial
 
 
 def _blas_threads() -> list[int]:
@@ -22,13 +22,13 @@ def test_solves_run_on_one_blas_thread_and_the_setting_is_restored(walk, monkeyp
     if not _blas_threads():
         pytest.skip("no BLAS library reported by threadpoolctl")
     seen: list[list[int]] = []
-    solve = laplacian.SpatialSolver.solve
+    solve = spatial.SpatialSolver.solve
 
     def spy(self, *args, **kwargs):
         seen.append(_blas_threads())
         return solve(self, *args, **kwargs)
 
-    monkeypatch.setattr(laplacian.SpatialSolver, "solve", spy)
+    monkeypatch.setattr(spatial.SpatialSolver, "solve", spy)
     p = walk.root_positions[:, [0, 2]]
     with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
         outside = _blas_threads()
@@ -41,7 +41,7 @@ def test_solves_run_on_one_blas_thread_and_the_setting_is_restored(walk, monkeyp
         outside = _blas_threads()
         with pytest.raises(IndexError):
             ed.drag(7, np.zeros(2))
-        monkeypatch.setattr(laplacian.SpatialSolver, "solve", lambda *a, **k: 1 / 0)
+        monkeypatch.setattr(spatial.SpatialSolver, "solve", lambda *a, **k: 1 / 0)
         with pytest.raises(ZeroDivisionError):
             ed.drag(1, p[50])
         assert _blas_threads() == outside

@@ -42,7 +42,7 @@ flip_rate : float or None, default 900.0 (degrees per second)
     undeformed one between two frames larger than ``flip_rate / fps`` is a
     flip, and the repaired heading turns at most this much faster than the
     input did, at any frame rate
-    (:func:`~mocaplab.editing.laplacian.detect_tangent_flips`).  ``None``
+    (:func:`~mocaplab.editing.flips.detect_tangent_flips`).  ``None``
     switches the repair off.
 flip_window : float, default 1.0
     Seconds: the longest reversed stretch between two paired jumps that is
@@ -110,17 +110,12 @@ from ..undo import Undoable, UndoStack
 from ._threads import single_blas_thread
 from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint, Relative, effector_frames
 from .energy import Energies
-from .laplacian import (
-    Rows,
-    SpatialFactors,
-    SpatialSolution,
-    SpatialSolver,
-    flip_step,
-    heading_changes,
-    spatial_rows,
-)
+from .flips import flip_step, heading_changes
+from .laplacian import spatial_rows
+from .lsq import Rows
 from .paths import MotionPath, apply_path, contact_joints, laplacian_coordinates, stationary_segments, with_roles
 from .refinement import refine_scene
+from .spatial import SpatialFactors, SpatialSolution, SpatialSolver
 from .timewarp import TimeFactors, TimeSolver, temporal_rows
 
 __all__ = [

@@ -23,7 +23,7 @@ Defaults (our choice; the paper gives no numbers): ``h_min = h / 4``,
 A character whose timing no constraint touches would leave the system
 singular (time shifts cost nothing); its shift is fixed by a hard gauge row
 keeping its mean time at the undeformed clock ``t0 = start + i h`` (see
-:func:`mocaplab.editing.laplacian.gauge_rows`), so no constraint is biased.
+:func:`mocaplab.editing.lsq.gauge_rows`), so no constraint is biased.
 
 How far times may reach: the edited characters are played on one shared
 clock that spans every character's times, so a time target far from the
@@ -49,7 +49,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from .constraints import AbsoluteTime, ConstraintError, Duration, Sync
-from .laplacian import KKT, HardRows, Layout, Rows, _mode_matrix, assemble, gauge_rows, independent_hard_rows
+from .lsq import KKT, HardRows, Layout, Rows, assemble, gauge_rows, independent_hard_rows, mode_matrix
 
 __all__ = ["TimeSolver", "TimeFactors", "temporal_rows", "uniformity_matrix", "time_reach", "TIME_REACH"]
 
@@ -222,7 +222,7 @@ class TimeSolver:
         self.hmax = max_step * self.h
         self.cache_size = int(cache_size)
         K = len(self.layout.n_frames)
-        self.Q = _mode_matrix(
+        self.Q = mode_matrix(
             [
                 (int(self.layout.offsets[k]), np.full((F, 1), 1.0 / np.sqrt(F)))
                 for k, F in enumerate(self.layout.n_frames)

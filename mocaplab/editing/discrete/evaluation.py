@@ -86,7 +86,8 @@ from numpy.typing import NDArray
 from scipy.linalg.lapack import dpbsv as _lapack_pbsv
 
 from ..constraints import SPATIAL, TEMPORAL
-from ..laplacian import Layout, spatial_rows
+from ..laplacian import spatial_rows
+from ..lsq import Layout
 from ..paths import MotionPath
 from ..timewarp import temporal_rows
 from .transformations import GraphArrays, Track, Transformation, _rot2

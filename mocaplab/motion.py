@@ -11,7 +11,13 @@ Conventions, written once for the whole package
 * **Frames and time:** frame ``i`` of a clip sampled at ``fps`` frames per
   second happens at time ``i / fps`` seconds after its first frame.
 * **Joints:** joint 0 is the root; ``parents[j] < j`` for every other joint,
-  so a single forward pass visits parents before children.
+  so a single forward pass visits parents before children.  A joint argument
+  is a name or an index (:meth:`Skeleton.index` resolves both).
+* **Frame intervals** are half-open ``(start, stop)`` pairs, like Python
+  slices: frames ``start .. stop - 1``.  Contacts, goals, end effectors,
+  stationary segments and the editing constraints' ``frames=`` all use it;
+  both ends included is accepted only under its own name
+  (``frames_inclusive=(first, last)`` of :mod:`mocaplab.editing`).
 
 Both classes are frozen dataclasses whose arrays are private, read-only
 copies: no function in mocaplab mutates a Motion, every operation returns a

@@ -53,12 +53,12 @@ def test_frozen_and_with_target():
 
 
 def test_variational_samples_every_tenth_frame():
-    p = PinPosition(0, position=(0.0, 0.0), frames=(5, 32))
+    p = PinPosition(0, position=(0.0, 0.0), frames=(5, 33))  # half-open: frames 5..32
     assert p.variational
     assert p.samples() == [(5,), (15,), (25,), (32,)]
-    r = Relative(0, other=1, offset=(1.0, 0.0), frames=(0, 20), other_frames=(100, 140))
+    r = Relative(0, other=1, offset=(1.0, 0.0), frames=(0, 21), other_frames=(100, 141))
     assert r.samples() == [(0, 100), (10, 120), (20, 140)]
-    s = Sync(0, other=1, frames=(0, 20))
+    s = Sync(0, other=1, frames=(0, 21))
     assert s.samples() == [(0, 0), (10, 10), (20, 20)]
 
 
@@ -67,11 +67,24 @@ def test_variational_constraints_by_keyword_equal_the_positional_none_form():
     assert PinPosition(0, position=(1.0, 2.0), frames=(5, 32)) == PinPosition(0, None, (1.0, 2.0), frames=(5, 32))
     assert PinDirection(0, direction=0.3, frames=(5, 32)) == PinDirection(0, None, 0.3, frames=(5, 32))
     assert AbsoluteTime(0, time=1.0, frames=(5, 32)) == AbsoluteTime(0, None, 1.0, frames=(5, 32))
-    r = Relative(1, other=0, offset=(0.0, 0.6), direction=np.pi, frames=(40, 90), hard=True)
-    assert r == Relative(1, None, 0, None, (0.0, 0.6), direction=np.pi, frames=(40, 90), hard=True)
-    assert Sync(1, other=0, frames=(40, 90)) == Sync(1, None, 0, None, frames=(40, 90))
-    # intervals include both ends, everywhere: (40, 90) samples 40 and 90
+    r = Relative(1, other=0, offset=(0.0, 0.6), direction=np.pi, frames=(40, 91), hard=True)
+    assert r == Relative(1, None, 0, None, (0.0, 0.6), direction=np.pi, frames=(40, 91), hard=True)
+    assert Sync(1, other=0, frames=(40, 91)) == Sync(1, None, 0, None, frames=(40, 91))
+    # intervals are half-open, everywhere: (40, 91) samples 40 and 90
     assert r.samples()[0] == (40, 40) and r.samples()[-1] == (90, 90)
+
+
+def test_both_ends_included_only_by_name():
+    # one convention (half-open); the inclusive form is its own keyword, stored as the half-open one
+    assert PinPosition(0, position=(1.0, 2.0), frames_inclusive=(5, 32)) == PinPosition(0, position=(1.0, 2.0), frames=(5, 33))
+    r = Relative(1, other=0, offset=(0.0, 0.6), frames_inclusive=(40, 90), other_frames_inclusive=(10, 60))
+    assert (r.frames, r.other_frames) == ((40, 91), (10, 61)) and r.samples()[-1] == (90, 60)
+    assert Sync(1, other=0, frames_inclusive=(0, 20)).samples() == Sync(1, other=0, frames=(0, 21)).samples()
+    assert AbsoluteTime(0, time=1.0, frames_inclusive=(5, 32)).frames == (5, 33)
+    with pytest.raises(TypeError, match="not both"):
+        PinPosition(0, position=(1.0, 2.0), frames=(5, 33), frames_inclusive=(5, 32))
+    with pytest.raises(ValueError, match="frames_inclusive"):
+        PinPosition(0, position=(1.0, 2.0), frames=(5, 6))  # one frame: the hint names the inclusive keyword
 
 
 @pytest.mark.parametrize(
@@ -90,32 +103,35 @@ def test_missing_arguments_are_named(make, message):
         make()
 
 
-def test_end_effector_constraint_frames_include_both_ends():
+def test_end_effector_constraint_frames_mean_what_the_goal_layer_means():
     from mocaplab import goals
     from mocaplab.editing import EndEffectorConstraint
     from mocaplab.editing.constraints import effector_frames
 
+    # the same tuple means the same frames in an EndEffectorConstraint and in a goals.EndEffector
     c = EndEffectorConstraint(1, joint="RightHand", frames=(10, 20), target=(0.0, 1.0, 0.0))
+    ee = goals.EndEffector("RightHand", (10, 20), (0.0, 1.0, 0.0))
     assert c.frames == (10, 20) and c.constraint.character == 1
-    assert effector_frames(c, 100) == [(10, 20)]  # 11 frames, 10 and 20 included
-    assert c.constraint.intervals(100) == [(10, 21)]  # refinement's own half-open tuple
+    assert effector_frames(c, 100) == [(10, 20)] == ee.intervals(100)  # 10 frames, 10..19
+    assert c.constraint.intervals(100) == [(10, 20)]
+    both = EndEffectorConstraint(1, joint="RightHand", frames_inclusive=(10, 19), target=(0.0, 1.0, 0.0))
+    assert both.frames == (10, 20) and both.constraint.intervals(100) == [(10, 20)]
     one = EndEffectorConstraint(0, joint="RightHand", frame=7, target=(0.0, 1.0, 0.0))
-    assert effector_frames(one, 100) == [(7, 7)]
-    ee = goals.EndEffector("RightHand", (10, 20), (0.0, 1.0, 0.0))  # half-open there: 10..19
-    assert effector_frames(EndEffectorConstraint(2, ee), 100) == [(10, 19)]
+    assert effector_frames(one, 100) == [(7, 8)]
+    assert effector_frames(EndEffectorConstraint(2, ee), 100) == [(10, 20)]
     assert EndEffectorConstraint(2, ee).constraint.character == 2
     with pytest.raises(TypeError, match="not both"):
         EndEffectorConstraint(0, ee, frame=3)
     with pytest.raises(TypeError, match="joint="):
         EndEffectorConstraint(0, frame=3)
-    with pytest.raises(ValueError, match="start <= end"):
+    with pytest.raises(ValueError, match="at least 1 frames"):
         EndEffectorConstraint(0, joint="RightHand", frames=(20, 10), target=(0.0, 1.0, 0.0))
 
 
 @pytest.mark.parametrize(
     "make, message",
     [
-        (lambda: PinPosition(0, None, (0, 0), frames=(10, 10)), "Degenerate interval"),
+        (lambda: PinPosition(0, None, (0, 0), frames=(10, 11)), "at least 2 frames"),
         (lambda: PinPosition(0, None, (0, 0)), "give `frame`"),
         (lambda: PinPosition(0, position=(0, 0)), "got neither"),
         (lambda: PinPosition(0, 1, (0, 0), frames=(1, 5)), "not both"),

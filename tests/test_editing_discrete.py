@@ -163,7 +163,7 @@ def T(kind, removed, inserted, character=0):
 def test_pruning_duration_and_constraints():
     pins = [
         PinPosition(0, 20, (0, 0)),
-        PinPosition(0, None, (0, 0), frames=(50, 80)),
+        PinPosition(0, None, (0, 0), frames=(50, 81)),
         Sync(1, 5, 0, 90),
     ]
     assert D.protected_frames(pins, 0) == {20, 50, 80, 90}

@@ -645,5 +645,4 @@ def _frames(c: Any) -> NDArray[np.int64]:
     frames = getattr(c, "frames", None)
     if frames is None or getattr(c, "frame", None) is not None:
         return np.array([int(c.frame)])
-    a, b = int(frames[0]), int(frames[1])
-    return np.arange(a, b + 1)  # inclusive, as in mocaplab.editing
+    return np.arange(int(frames[0]), int(frames[1]))  # half-open, as in mocaplab.editing

@@ -60,10 +60,11 @@ Constraints (:mod:`mocaplab.editing.constraints`), frozen dataclasses
     which may also go straight into the list); path editing ignores them,
     ``EditResult.end_effectors[k]`` records them and ``EditResult.refined()``
     hands them to :func:`mocaplab.editing.refinement.refine_scene`.
-    Variational form by keyword: ``PinPosition(0, position=p, frames=(30, 90))``,
-    ``Relative(1, other=0, offset=(0.0, 0.6), frames=(30, 90))``; sampled every
-    10th frame.  Intervals ``frames=(start, end)`` include both ends, for every
-    constraint here.  Every constraint has ``.target``,
+    Variational form by keyword: ``PinPosition(0, position=p, frames=(30, 91))``,
+    ``Relative(1, other=0, offset=(0.0, 0.6), frames=(30, 91))``; sampled every
+    10th frame, the last one included.  Intervals ``frames=(start, stop)`` are
+    half-open, as everywhere in mocaplab (``(30, 91)``: frames 30 to 90); both
+    ends included is spelt ``frames_inclusive=(30, 90)``.  Every constraint has ``.target``,
     ``.with_target(new_target)``, ``.hard``, ``.weight``, ``.characters``.
     ``ConstraintError(ValueError)`` with ``.constraints`` (the offending ones)
     and ``.indices``: inconsistent hard constraints (redundant but consistent

@@ -6,15 +6,18 @@ the character it acts on.  Each one is
 * **soft** (``hard=False``, the default): met in the least-squares sense with
   weight ``weight`` (the squared residual is multiplied by ``weight``), or
   **hard** (``hard=True``): met exactly through Lagrange multipliers;
-* **instant** (``frame=i``) or **variational** (``frames=(start, end)`` by
-  keyword, no ``frame``: ``PinPosition(0, position=p, frames=(30, 90))``):
+* **instant** (``frame=i``) or **variational** (``frames=(start, stop)`` by
+  keyword, no ``frame``: ``PinPosition(0, position=p, frames=(30, 91))``):
   a variational constraint is approximated, as in the paper, by one instant
-  constraint every ``variational_step`` (10) frames of the interval.
+  constraint every ``variational_step`` (10) frames of the interval, its
+  last frame always included.
 
-Intervals: every ``frames=(start, end)`` of mocaplab.editing includes both
-ends (frames ``start .. end``; ``(30, 90)`` is 61 frames), for the path,
-time and end-effector constraints alike (:class:`EndEffectorConstraint`
-converts to the half-open tuples of :mod:`mocaplab.goals`).
+Intervals: every ``frames=(start, stop)`` is half-open, like a Python slice
+and like every frame interval in mocaplab (contacts, goals, stationary
+segments): frames ``start .. stop - 1``, so ``(30, 91)`` is the 61 frames
+30 to 90.  Both ends included is accepted only by name:
+``frames_inclusive=(30, 90)`` (and ``other_frames_inclusive=`` for
+:class:`Relative` and :class:`Sync`) is stored as ``frames=(30, 91)``.
 
 Units: ground positions ``(x, z)`` in metres, times in seconds on the shared
 reference clock.  Local frames are ``(forward, left)``: forward along the
@@ -56,7 +59,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any, ClassVar, cast
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -171,21 +174,38 @@ def _index(value: Any, name: str) -> int:
     return int(value)
 
 
-def _interval(value: Any, name: str) -> tuple[int, int]:
+def _interval(value: Any, name: str, *, least: int = 2) -> tuple[int, int]:
+    """A half-open ``(start, stop)`` interval of at least ``least`` frames."""
     try:
         a, b = value
     except (TypeError, ValueError):
-        raise ValueError(f"Expected `{name}` as a (start, end) pair of frames, got {value!r}") from None
+        raise ValueError(f"Expected `{name}` as a half-open (start, stop) pair of frames, got {value!r}") from None
     a, b = _index(a, f"{name}[0]"), _index(b, f"{name}[1]")
-    if b <= a:
-        raise ValueError(f"Degenerate interval `{name}`={value!r}: expected start < end")
+    if b - a < least:
+        raise ValueError(
+            f"Expected `{name}` (start, stop), half-open, of at least {least} frames, got {value!r}"
+            + (" (both ends included is written frames_inclusive=...)" if b - a == least - 1 else "")
+        )
     return (a, b)
 
 
-def _sample(start: int, end: int, step: int) -> list[int]:
-    out = list(range(start, end + 1, step))
-    if out[-1] != end:
-        out.append(end)
+def _inclusive(self: Any, name: str) -> None:
+    """Move ``<name>_inclusive=(first, last)`` into ``<name>=(first, last + 1)``."""
+    given = getattr(self, f"{name}_inclusive", None)
+    if given is None:
+        return
+    if getattr(self, name, None) is not None:
+        raise TypeError(f"{type(self).__name__}: give `{name}` (half-open) or `{name}_inclusive`, not both")
+    a, b = _interval(given, f"{name}_inclusive", least=0)
+    object.__setattr__(self, name, (a, b + 1))
+    object.__setattr__(self, f"{name}_inclusive", None)
+
+
+def _sample(start: int, stop: int, step: int) -> list[int]:
+    """Every ``step``-th frame of ``start .. stop - 1``, the last one always included."""
+    out = list(range(start, stop, step))
+    if out[-1] != stop - 1:
+        out.append(stop - 1)
     return out
 
 
@@ -205,12 +225,14 @@ class Constraint:
 
     def _check_common(self, *, allow_variational: bool = True) -> None:
         object.__setattr__(self, "character", _index(self.character, "character"))
+        _inclusive(self, "frames")
+        _inclusive(self, "other_frames")
         frame = self.frame
         frames = getattr(self, "frames", None)
         if frame is None and frames is None:
             raise ValueError(
-                f"{type(self).__name__}: give `frame` (instant) or `frames=(start, end)` (variational, both ends "
-                "included), got neither"
+                f"{type(self).__name__}: give `frame` (instant) or `frames=(start, stop)` (variational, half-open), "
+                "got neither"
             )
         if frame is not None and frames is not None:
             raise ValueError(f"{type(self).__name__}: give either `frame` or `frames`, not both")
@@ -260,7 +282,7 @@ class Constraint:
         """Frame tuples of the instant constraints this one stands for.
 
         The default: the frame itself, or every ``step``-th frame of a
-        variational interval (its end always included).
+        variational interval (its last frame always included).
         """
         frames: tuple[int, int] | None = getattr(self, "frames", None)
         if frames is None:
@@ -283,8 +305,10 @@ class PinPosition(Constraint):
     --------
     >>> PinPosition(0, 10, (1.0, 2.0), hard=True).position
     (1.0, 2.0)
-    >>> PinPosition(0, position=(0.0, 0.0), frames=(0, 30)).samples()
+    >>> PinPosition(0, position=(0.0, 0.0), frames=(0, 31)).samples()
     [(0,), (10,), (20,), (30,)]
+    >>> PinPosition(0, position=(0.0, 0.0), frames_inclusive=(0, 30)).frames
+    (0, 31)
     """
 
     character: int
@@ -294,6 +318,7 @@ class PinPosition(Constraint):
     hard: bool = False
     weight: float = 1.0
     frames: tuple[int, int] | None = None
+    frames_inclusive: tuple[int, int] | None = dataclasses.field(default=None, repr=False, compare=False)
 
     kind: ClassVar[str] = "space"
     target_name: ClassVar[str] = "position"
@@ -321,6 +346,7 @@ class PinDirection(Constraint):
     hard: bool = False
     weight: float = 1.0
     frames: tuple[int, int] | None = None
+    frames_inclusive: tuple[int, int] | None = dataclasses.field(default=None, repr=False, compare=False)
 
     kind: ClassVar[str] = "space"
     target_name: ClassVar[str] = "direction"
@@ -343,8 +369,8 @@ def _paired_samples(
     own = _sample(frames[0], frames[1], step)
     if other_frames is None:
         return [(f, f) for f in own]
-    a0, a1 = frames
-    b0, b1 = other_frames
+    a0, a1 = frames[0], frames[1] - 1  # first and last frame
+    b0, b1 = other_frames[0], other_frames[1] - 1
     return [(f, int(round(b0 + (f - a0) * (b1 - b0) / (a1 - a0)))) for f in own]
 
 
@@ -361,11 +387,13 @@ class Relative(Constraint):
         Path direction of ``character`` in that frame (``None``: free): a
         vector, or an angle ``a`` turned from forward towards left, ``(cos a,
         sin a)``: ``0`` walks the same way as ``other``, ``pi`` towards it.
-    frames, other_frames : (start, end), optional
-        Variational form (both ends included): ``frames`` of ``character``
+    frames, other_frames : (start, stop), optional
+        Variational form (half-open intervals): ``frames`` of ``character``
         matched linearly to ``other_frames`` of ``other`` (default: the same
         frame numbers), e.g. ``Relative(1, other=0, offset=(0.0, 0.6),
-        frames=(40, 90))``.
+        frames=(40, 91))``.
+    frames_inclusive, other_frames_inclusive : (first, last), optional
+        The same intervals with both ends included.
 
     Drag target: ``offset``.  The offset enters the matrix, so moving it
     refactorises (still fast; positions pins are the cheap drag).
@@ -387,6 +415,8 @@ class Relative(Constraint):
     weight: float = 1.0
     frames: tuple[int, int] | None = None
     other_frames: tuple[int, int] | None = None
+    frames_inclusive: tuple[int, int] | None = dataclasses.field(default=None, repr=False, compare=False)
+    other_frames_inclusive: tuple[int, int] | None = dataclasses.field(default=None, repr=False, compare=False)
 
     kind: ClassVar[str] = "space"
     target_name: ClassVar[str] = "offset"
@@ -408,7 +438,7 @@ class Relative(Constraint):
             object.__setattr__(self, "other_frame", _index(self.other_frame, "other_frame"))
         else:
             if self.other_frame is not None:
-                raise ValueError("Relative: variational form takes `other_frames=(start, end)`, not `other_frame`")
+                raise ValueError("Relative: variational form takes `other_frames=(start, stop)`, not `other_frame`")
             if self.other_frames is not None:
                 object.__setattr__(self, "other_frames", _interval(self.other_frames, "other_frames"))
         if self.other == self.character and self.samples(1)[0][0] == self.samples(1)[0][1]:
@@ -428,7 +458,7 @@ class Relative(Constraint):
 class AbsoluteTime(Constraint):
     """Frame ``frame`` of ``character`` happens at reference time ``time`` (s): ``t_i = time``.
 
-    Variational form ``AbsoluteTime(k, time=t, frames=(start, end))``: frame
+    Variational form ``AbsoluteTime(k, time=t, frames=(start, stop))``: frame
     ``start`` at ``time`` and the interval played at its original speed
     (``t_i = time + (i - start) h``).
     """
@@ -440,6 +470,7 @@ class AbsoluteTime(Constraint):
     hard: bool = False
     weight: float = 1.0
     frames: tuple[int, int] | None = None
+    frames_inclusive: tuple[int, int] | None = dataclasses.field(default=None, repr=False, compare=False)
 
     kind: ClassVar[str] = "time"
     target_name: ClassVar[str] = "time"
@@ -494,7 +525,7 @@ class Duration(Constraint):
 class Sync(Constraint):
     """Synchronise two characters: ``t[frame] = t_other[other_frame] + offset`` (s).
 
-    Variational form (both ends included): ``Sync(k, other=j, frames=(a, b),
+    Variational form (half-open intervals): ``Sync(k, other=j, frames=(a, b),
     other_frames=(c, d))``, ``frames`` of ``character`` matched linearly to
     ``other_frames`` of ``other`` (default: the same frame numbers).
     """
@@ -509,6 +540,8 @@ class Sync(Constraint):
     weight: float = 1.0
     frames: tuple[int, int] | None = None
     other_frames: tuple[int, int] | None = None
+    frames_inclusive: tuple[int, int] | None = dataclasses.field(default=None, repr=False, compare=False)
+    other_frames_inclusive: tuple[int, int] | None = dataclasses.field(default=None, repr=False, compare=False)
 
     kind: ClassVar[str] = "time"
     target_name: ClassVar[str] = "offset"
@@ -524,7 +557,7 @@ class Sync(Constraint):
             object.__setattr__(self, "other_frame", _index(self.other_frame, "other_frame"))
         else:
             if self.other_frame is not None:
-                raise ValueError("Sync: variational form takes `other_frames=(start, end)`, not `other_frame`")
+                raise ValueError("Sync: variational form takes `other_frames=(start, stop)`, not `other_frame`")
             if self.other_frames is not None:
                 object.__setattr__(self, "other_frames", _interval(self.other_frames, "other_frames"))
         if self.other == self.character:
@@ -553,22 +586,22 @@ class EndEffectorConstraint:
     Two forms:
 
     * ``EndEffectorConstraint(character, joint=..., frame=i, target=...)`` or
-      ``frames=(a, b)`` (both ends included, like every constraint here),
-      with ``target`` a world point (3,), one point per frame ``(b - a + 1,
-      3)``, or a :class:`~mocaplab.goals.RelativeTo` /
+      ``frames=(start, stop)`` (half-open, like every interval here; both
+      ends included only as ``frames_inclusive=(first, last)``), with
+      ``target`` a world point (3,), one point per frame of the clip
+      ``(F, 3)``, or a :class:`~mocaplab.goals.RelativeTo` /
       :class:`~mocaplab.goals.ObjectFrame`; ``chain`` and ``blend`` as in
       :class:`~mocaplab.goals.EndEffector`.
     * ``EndEffectorConstraint(character, end_effector)``: a
-      :class:`~mocaplab.goals.EndEffector` as it is (its own frame
-      convention: a ``(start, stop)`` tuple there is half-open).
+      :class:`~mocaplab.goals.EndEffector` as it is.
 
     ``constraint`` is the :class:`~mocaplab.goals.EndEffector` either way.
 
     Examples
     --------
-    >>> c = EndEffectorConstraint(0, joint="RightHand", frames=(10, 20), target=(0.0, 1.0, 0.0))
-    >>> c.constraint.frames, c.frames
-    ((10, 21), (10, 20))
+    >>> c = EndEffectorConstraint(0, joint="RightHand", frames=(10, 21), target=(0.0, 1.0, 0.0))
+    >>> c.constraint.frames == c.frames == (10, 21)
+    True
     """
 
     character: int
@@ -580,11 +613,13 @@ class EndEffectorConstraint:
     target: Any = None
     chain: Sequence[str] | None = None
     blend: float | None = None
+    frames_inclusive: tuple[int, int] | None = dataclasses.field(default=None, repr=False, compare=False)
 
     kind: ClassVar[str] = "body"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "character", _index(self.character, "character"))
+        _inclusive(self, "frames")
         keywords = {k: getattr(self, k) for k in ("joint", "frame", "frames", "target", "chain", "blend")}
         if self.constraint is not None:
             given = sorted(k for k, v in keywords.items() if v is not None)
@@ -603,24 +638,22 @@ class EndEffectorConstraint:
             return
         if self.joint is None or self.target is None:
             raise TypeError(
-                "EndEffectorConstraint: give `joint=` and `target=` with `frame=` or `frames=(start, end)` "
+                "EndEffectorConstraint: give `joint=` and `target=` with `frame=` or `frames=(start, stop)` "
                 "(e.g. EndEffectorConstraint(0, joint='RightHand', frame=40, target=(0.3, 1.1, 2.0)))"
             )
         if (self.frame is None) == (self.frames is None):
-            raise ValueError("EndEffectorConstraint: give `frame` (one frame) or `frames=(start, end)` (inclusive), one of them")
+            raise ValueError(
+                "EndEffectorConstraint: give `frame` (one frame) or `frames=(start, stop)` (half-open), one of them"
+            )
         if self.frame is not None:
             object.__setattr__(self, "frame", _index(self.frame, "frame"))
-            half_open: Any = int(self.frame)
+            frames: Any = int(self.frame)
         else:
-            a0, b0 = cast(tuple[int, int], self.frames)
-            a, b = _index(a0, "frames[0]"), _index(b0, "frames[1]")
-            if b < a:
-                raise ValueError(f"Expected `frames` (start, end) with start <= end, got {self.frames!r}")
-            object.__setattr__(self, "frames", (a, b))
-            half_open = (a, b + 1)  # refinement's tuples are half-open
+            frames = _interval(self.frames, "frames", least=1)
+            object.__setattr__(self, "frames", frames)
         ee = EndEffector(
             str(self.joint),
-            half_open,
+            frames,
             self.target,
             character=self.character,
             chain=None if self.chain is None else tuple(self.chain),
@@ -637,14 +670,14 @@ class EndEffectorConstraint:
 
 
 def effector_frames(effector: Any, n_frames: int) -> list[tuple[int, int]]:
-    """Inclusive ``(first, last)`` runs of frames an end effector constrains.
+    """Half-open ``(start, stop)`` runs of frames an end effector constrains.
 
     ``effector`` is an :class:`EndEffectorConstraint` or a
     :class:`~mocaplab.goals.EndEffector` (whose own
     :meth:`~mocaplab.goals.EndEffector.intervals` decide).
     """
     ee = effector.constraint if isinstance(effector, EndEffectorConstraint) else effector
-    return [(a, b - 1) for a, b in ee.intervals(n_frames)]
+    return ee.intervals(n_frames)
 
 
 def is_effector(c: Any) -> bool:

@@ -1214,10 +1214,10 @@ class EditResult:
         if isinstance(ee.frames, (int, np.integer)):
             frames: Any = min(self._tick(k, int(ee.frames)), n - 1)
         elif len(runs) == 1:
-            a, b = self._tick(k, runs[0][0]), self._tick(k, runs[0][1]) + 1
-            frames = (a, min(max(b, a + 1), n))  # refinement's half-open tuple
+            a, b = self._tick(k, runs[0][0]), self._tick(k, runs[0][1] - 1) + 1
+            frames = (a, min(max(b, a + 1), n))
         else:
-            frames = sorted({min(self._tick(k, i), n - 1) for a, b in runs for i in range(a, b + 1)})
+            frames = sorted({min(self._tick(k, i), n - 1) for a, b in runs for i in range(a, b)})
         return dataclasses.replace(ee, frames=frames)
 
     @cached_property

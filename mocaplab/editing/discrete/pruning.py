@@ -194,12 +194,12 @@ def _protected(c: Any) -> dict[int, set[int]]:
             put(other, cc.other_frame)
         return res
     put(c.character, frames[0])
-    put(c.character, frames[1])
+    put(c.character, frames[1] - 1)  # half-open: the last frame
     other = getattr(c, "other", None)
     if other is not None:
         of = getattr(c, "other_frames", None) or frames
         put(other, of[0])
-        put(other, of[1])
+        put(other, of[1] - 1)
     return res
 
 
@@ -214,7 +214,7 @@ def _effector_boundaries(ee: EndEffector) -> set[int]:
         extent = int(max(f)) + 1 if len(f) else 1
     out: set[int] = set()
     for a, b in effector_frames(ee, max(extent, 1)):
-        out |= {a, b}
+        out |= {a, b - 1}
     return out
 
 

@@ -644,14 +644,19 @@ def enumerate_transformations(
 
 
 
+def _map_interval(track: Track, frames: tuple[int, int]) -> tuple[int, int]:
+    """A half-open interval of input-clip frames, moved to the track's current frames (first and last follow)."""
+    return (track.frame_of(int(frames[0])), track.frame_of(int(frames[1]) - 1) + 1)
+
+
 def _map_effector(e: EndEffector, track: Track) -> EndEffector:
     """``e`` with its frames (input clip) moved to the track's current frames."""
     f = e.frames
     if isinstance(f, (int, np.integer)):
         new: Any = track.frame_of(int(f))
     else:
-        if isinstance(f, tuple) and len(f) == 2:  # refinement's half-open tuple
-            new = (track.frame_of(int(f[0])), track.frame_of(int(f[1]) - 1) + 1)
+        if isinstance(f, tuple) and len(f) == 2:
+            new = _map_interval(track, f)
         elif isinstance(f, range):
             new = range(track.frame_of(f[0]), track.frame_of(f[-1]) + 1) if len(f) else f
         else:
@@ -685,7 +690,7 @@ def map_constraint(c: Any, tracks: Sequence[Track], changed: Sequence[bool]) -> 
         upd["frame"] = tr.frame_of(c.frame)
     frames: Any = getattr(c, "frames", None)
     if frames is not None:
-        upd["frames"] = (tr.frame_of(frames[0]), tr.frame_of(frames[1]))
+        upd["frames"] = _map_interval(tr, frames)
     if hasattr(c, "end_frame"):
         upd["end_frame"] = tr.frame_of(c.end_frame)
     if isinstance(c, (Relative, Sync)):
@@ -693,8 +698,8 @@ def map_constraint(c: Any, tracks: Sequence[Track], changed: Sequence[bool]) -> 
         if c.other_frame is not None:
             upd["other_frame"] = to.frame_of(c.other_frame)
         if c.other_frames is not None:
-            upd["other_frames"] = (to.frame_of(c.other_frames[0]), to.frame_of(c.other_frames[1]))
+            upd["other_frames"] = _map_interval(to, c.other_frames)
         elif c.frames is not None and c.other != c.character:
             # frames of `other` default to the same numbers: make them explicit
-            upd["other_frames"] = (to.frame_of(c.frames[0]), to.frame_of(c.frames[1]))
+            upd["other_frames"] = _map_interval(to, c.frames)
     return dataclasses.replace(c, **upd)

@@ -1,6 +1,6 @@
 """Deploying the lab for a course: trame behind a proxy, Binder's files, an nbgrader round trip.
 
-* :func:`mocaplab.widgets.viewer.trame_proxy_prefix` decides where the trame
+* :func:`mocaplab.widgets.serving.trame_proxy_prefix` decides where the trame
   iframe points (JupyterHub, a server's base URL, an explicit setting);
   ``tests/test_deploy_browser.py`` checks the same in a real hub and browser.
 * ``.binder/`` (what repo2docker reads) agrees with ``pyproject.toml`` and
@@ -23,8 +23,8 @@ from pathlib import Path
 
 import nbformat
 import pytest
-from mocaplab.widgets import viewer
-from mocaplab.widgets.viewer import PROXY_ENV_VAR, trame_proxy_prefix
+from mocaplab.widgets import serving, viewer
+from mocaplab.widgets.serving import PROXY_ENV_VAR, trame_proxy_prefix
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -105,12 +105,12 @@ def test_the_iframe_address_through_the_proxy(monkeypatch):
     src = build_url(server, ui="P_1", server_proxy_enabled=True, server_proxy_prefix="/user/ann/proxy/")
     assert src == "/user/ann/proxy/40123/index.html?ui=P_1&reconnect=auto"
     # the trame page puts its own host (and ws or wss) in place of USE_HOST
-    assert viewer._session_url(src) == "ws://USE_HOST/user/ann/proxy/40123/ws"
-    assert viewer._session_url("/user/Ann/proxy/40123/index.html?ui=P") is None  # the page lower-cases it
-    assert viewer._session_url("proxy/40123/index.html") is None
+    assert serving.session_url(src) == "ws://USE_HOST/user/ann/proxy/40123/ws"
+    assert serving.session_url("/user/Ann/proxy/40123/index.html?ui=P") is None  # the page lower-cases it
+    assert serving.session_url("proxy/40123/index.html") is None
     direct = build_url(server, ui="P_1", server_proxy_enabled=False)
-    assert viewer._session_url(direct) == "ws://localhost:40123/ws"
-    assert viewer._session_url("https://lab.example.org/p/40123/index.html?ui=P") == "wss://lab.example.org/p/40123/ws"
+    assert serving.session_url(direct) == "ws://localhost:40123/ws"
+    assert serving.session_url("https://lab.example.org/p/40123/index.html?ui=P") == "wss://lab.example.org/p/40123/ws"
 
 
 def test_the_viewer_passes_the_prefix_to_pyvista(monkeypatch):

@@ -14,7 +14,9 @@ import pytest
 pv = pytest.importorskip("pyvista")
 pytest.importorskip("ipywidgets")
 
-from mocaplab.widgets.viewer import MotionViewer, PlayClock, _session_url, _SphereSet, fit_view  # noqa: E402
+from mocaplab.widgets.scene import fit_view  # noqa: E402
+from mocaplab.widgets.serving import session_url  # noqa: E402
+from mocaplab.widgets.viewer import MotionViewer, PlayClock, sphere_set  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -128,7 +130,7 @@ def test_overlays_follow_the_time(walk):
     v.add_points("target", lambda t: np.array([[t, 1.0, 0.0], [np.nan, 0.0, 0.0]]))
     v.set_frame(50)
     assert np.allclose(v.overlay_points("com"), com[50])
-    spheres = _SphereSet(0.05)
+    spheres = sphere_set(0.05)
     assert np.allclose(np.asarray(v.overlays["com"].mesh.points), spheres.points(com[50]))
     assert v.overlay_points("target").shape == (1, 3) and np.isclose(v.overlay_points("target")[0, 0], 50 / 120)
     mesh = v.overlays["support"].mesh
@@ -692,6 +694,6 @@ def test_trame_view_sends_pictures_only_and_names_its_websocket(walk, monkeypatc
     assert view.viewer.server.state[view.viewer.SHOW_UI] is True
     assert wide._toolbar_band() == pytest.approx(64 / 400)
     wide.close()
-    assert _session_url("http://localhost:8123/index.html?ui=x") == "ws://localhost:8123/ws"
-    assert _session_url("https://host:1/a/index.html") == "wss://host:1/a/ws"
-    assert _session_url("proxy/8123/index.html?ui=x") is None
+    assert session_url("http://localhost:8123/index.html?ui=x") == "ws://localhost:8123/ws"
+    assert session_url("https://host:1/a/index.html") == "wss://host:1/a/ws"
+    assert session_url("proxy/8123/index.html?ui=x") is None

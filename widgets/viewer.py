@@ -5,6 +5,22 @@
 >>> viewer = MotionViewer([cmu("16_15"), cmu("02_01")])  # doctest: +SKIP
 >>> viewer                                             # doctest: +SKIP
 
+This module is the widget: it builds the controls, keeps the clock and
+forwards each event.  Its neighbours hold the rest, one job each:
+
+========================================  =====================================================
+:mod:`mocaplab.widgets.scene`             the scene as arrays: bones, joints, overlays, ground,
+                                          camera framing (numpy only, tested without VTK)
+:mod:`mocaplab.widgets.serving`           the trame server: its secret, its address behind a
+                                          proxy, the iframe, the kernel's main thread
+:mod:`mocaplab.widgets.vtkjs_page`        the ``client`` backend's page (vtk.js in the browser)
+                                          and the state it reads
+========================================  =====================================================
+
+Longer than 800 lines because :class:`MotionViewer` is one object whose methods share one
+mutable state (the clock, the kernel's meshes, the controls, the page's state and the
+threads' queue): what does not need that state lives in the modules above.
+
 What is drawn
 -------------
 Each character is two meshes whose topology never changes: its bones as
@@ -76,91 +92,38 @@ reaches the notebook:
   never the geometry: pyvista's own ``"trame"`` mode also serialises the whole
   scene for its client-side toggle on every update (60-90 ms per frame for
   eight characters), which is the cost this viewer avoids.
-* ``"client"``: the browser draws the 3D view (vtk.js, bundled with
-  trame-vtk: nothing is fetched from the internet).  The kernel sends the
-  scene once, into the trame state of a page of its own on the same trame
-  server (same secret, same proxy route): each character's drawn points on
-  every one of its frames (float32), its bone pairs and its frame on each
-  clock frame, the overlays sampled once (a callable on every clock frame),
-  the ground grid and the fitted camera.  The page draws the whole crowd as
-  two glyph sets (bones as 6-sided cylinders placed by one 3x3 matrix each,
-  joints as low-poly spheres, a colour per glyph), overlays as their own
-  meshes, and plays on its own clock (``requestAnimationFrame``), writing
-  each frame's few arrays straight into vtk.js.  The kernel only sends
-  where to start and whether to play (on play, pause, a slider move or a
-  step) and moves the slider :attr:`~MotionViewer.slider_rate` times per
-  second from its own clock while the page plays: it draws no picture.  The
-  mouse rotates and zooms (vtk.js's interactor); a camera reset goes back
-  to the fitted camera.  :meth:`~MotionViewer.set_motions` and the overlay
-  methods send the changed part again.  The page's WebGL contexts are made
-  without multisampling (in a browser without a GPU it costs several times
-  the picture).  ``follow=True`` does not move this view's camera.
+* ``"client"``: the browser draws the 3D view with vtk.js
+  (:mod:`mocaplab.widgets.vtkjs_page`).  The kernel sends the scene once and
+  then only where to start and whether to play (on play, pause, a slider
+  move or a step); it moves the slider :attr:`~MotionViewer.slider_rate`
+  times per second from its own clock while the page plays and draws no
+  picture.  :meth:`~MotionViewer.set_motions` and the overlay methods send
+  the changed part again.  ``follow=True`` does not move this view's camera.
 * ``"static"`` renders off-screen and shows a PNG image that is re-rendered
   when the slider moves (used by the tests and by nbval);
 * ``"none"`` builds the controls without any 3D view.
 
 The trame toolbar starts collapsed (one button that opens it) in views
 narrower than :data:`TOOLBAR_WIDTH` pixels, where its icons would overlap.
-The iframe is told the address of the trame server's websocket
-(``sessionURL``): without it the trame page first asks a ParaView launcher at
-``.../paraview/`` (a ``POST`` that the trame server answers with 405, logged
-as an error in the browser console), then falls back to that websocket.
-
-Behind a proxy
---------------
-The trame server listens on a port of the kernel's machine.  Under JupyterHub
-(``JUPYTERHUB_SERVICE_PREFIX`` set), or when the Jupyter server has a base URL
-other than ``/`` (``--ServerApp.base_url=/course/lab/``), the iframe's address
-goes through ``jupyter-server-proxy`` (``<prefix>proxy/<port>/index.html``),
-which the browser reaches wherever it runs, and the page's websocket is given
-as ``ws://USE_HOST<prefix>proxy/<port>/ws``, which the trame page completes
-with its own host; otherwise the address is ``http://localhost:<port>/``.
-``MOCAPLAB_TRAME_PROXY`` sets the prefix for other proxies, or ``off`` (see
-:func:`trame_proxy_prefix`).
-
-Who may connect
----------------
-The trame server's websocket (wslink) lets a client in only if its first
-message carries the server's secret, and wslink's default secret is the
-public string ``"wslink-secret"``: with it, any process of the machine (any
-user's, on a shared course server) could connect to the 3D view and call its
-remote methods.  The viewer gives the kernel's trame server a random secret
-instead (:func:`secrets.token_urlsafe`, 256 bits, one per kernel: pyvista
-runs one trame server per kernel for all its views), set before the server
-starts through trame's own ``--authKey`` option, and hands it only to the
-page that shows the view, in its iframe's address (``secret=``, which the
-trame page reads with its other address parameters and sends in its first
-message).  The server still listens on 127.0.0.1 only, and the address still
-goes through ``jupyter-server-proxy`` where one is used.  A plain pyvista
-plot that started the server earlier with the default secret has its secret
-replaced: its page must be shown again.
+The iframe's address, its secret and its route behind JupyterHub or another
+proxy are :mod:`mocaplab.widgets.serving`'s.
 
 Threads
 -------
-VTK renders only in the thread that owns its (EGL off-screen) render window:
-the kernel's main thread, where the viewer is built and where trame's server
-runs on the kernel's asyncio loop.  JupyterLab 4.6 sends widget messages to a
-kernel *subshell* by default, so with ipykernel 7 a slider move or a button
-click runs its Python callback in another thread; rendering there gives a
-black view with white dashes in the browser.  The viewer therefore remembers
-the asyncio loop running in the main thread when it is built and, when one of
-its methods that touch the scene (:meth:`~MotionViewer.set_frame`,
-:meth:`~MotionViewer.set_time`, :meth:`~MotionViewer.set_motions`, the
-overlay methods, playback, :meth:`~MotionViewer.close`, the slider's callback)
-is called from another thread, queues the whole call onto that loop
-(``loop.call_soon_threadsafe``), in call order, and returns at once.  Slider
-moves are coalesced: a burst of them draws the newest frame once.  Calls made
-in the main thread, or when no loop was running there (a script, the tests),
-run immediately as before, so the static backend's image is re-rendered
-before the call returns.  An error in a queued call is shown in the widget's
-status line.  Every text from data or from an exception (labels, messages)
-is HTML-escaped before it goes into the widget.
-
-The trame server is started without ``trame-vtklocal``: pyvista loads it when
-it is installed, and it then downloads VTK's WebAssembly build from
-gitlab.kitware.com, which prints a traceback into some later cell when the
-machine is offline or behind a firewall.  The views used here (remote and
-vtk.js local rendering) do not need it.
+VTK renders only in the kernel's main thread, and JupyterLab may run a
+widget's callback in another (a kernel subshell; see
+:mod:`mocaplab.widgets.serving`).  The methods that touch the scene
+(:meth:`~MotionViewer.set_frame`, :meth:`~MotionViewer.set_time`,
+:meth:`~MotionViewer.set_motions`, the overlay methods, playback,
+:meth:`~MotionViewer.close`, the slider's callback) called from another
+thread are queued onto the main thread's asyncio loop, in call order, and
+return at once.  Slider moves are coalesced: a burst of them draws the
+newest frame once.  Calls made in the main thread, or when no loop was
+running there (a script, the tests), run immediately, so the static
+backend's image is re-rendered before the call returns.  An error in a
+queued call is shown in the widget's status line.  Every text from data or
+from an exception (labels, messages) is HTML-escaped before it goes into the
+widget.
 """
 
 from __future__ import annotations
@@ -168,26 +131,52 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
-import functools
 import html
 import io
 import logging
 import math
 import os
-import secrets
-import sys
 import threading
 import time
-import urllib.parse
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
-from mocaplab.editing.paths import with_roles
 from mocaplab.motion import Motion
+
+from . import vtkjs_page
+from .scene import (
+    COLORS,
+    Character,
+    Overlay,
+    OverlayData,
+    OverlayKind,
+    SphereSet,
+    as_motions,
+    box_corners,
+    character_geometry,
+    check_overlay_data,
+    clock_of,
+    fit_view,
+    ground_grid,
+    overlay_cells,
+    scene_bounds,
+    tube_faces,
+    tube_points,
+)
+from .serving import (
+    current_task,
+    iframe_widget,
+    main_thread_loop,
+    on_main_thread,
+    proxy_setting,
+    quiet_vtk,
+    secure_trame_server,
+    without_vtklocal,
+)
 
 __all__ = [
     "MotionViewer",
@@ -195,15 +184,12 @@ __all__ = [
     "BACKENDS",
     "DEFAULT_BACKEND",
     "TOOLBAR_WIDTH",
-    "PROXY_ENV_VAR",
     "default_backend",
-    "fit_view",
-    "trame_proxy_prefix",
+    "sphere_set",
 ]
 
 BACKENDS = ("trame", "server", "client", "static", "none")
 ENV_VAR = "MOCAPLAB_JUPYTER_BACKEND"
-COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 # Width (px) the trame toolbar needs for its icons (it spans x = 20..510 px in server mode);
 # narrower views start with it collapsed.
 TOOLBAR_WIDTH = 540
@@ -218,16 +204,8 @@ SLIDER_RATE = 8.0
 _TOOLBAR_BOTTOM = 64
 # pyvista's trame modes behind the viewer's backends.
 _TRAME_MODES = {"trame": "server", "server": "server"}
-# The explicit proxy setting (see trame_proxy_prefix) and the values that turn the proxy off.
-PROXY_ENV_VAR = "MOCAPLAB_TRAME_PROXY"
-_PROXY_OFF = ("off", "direct", "none", "0", "false", "no")
-# Share of the picture's area the characters' box may fill (the rest is margin).
-_FILL = 0.9
-
-OverlayData = ArrayLike | Sequence[ArrayLike] | Callable[[float], ArrayLike]
 
 _log = logging.getLogger(__name__)
-_MAIN_LOOP: asyncio.AbstractEventLoop | None = None  # the loop last seen running in the main thread
 
 
 DEFAULT_BACKEND = "client"
@@ -238,517 +216,10 @@ def default_backend() -> str:
     return os.environ.get(ENV_VAR, DEFAULT_BACKEND).strip().lower() or DEFAULT_BACKEND
 
 
-@contextlib.contextmanager
-def _quiet_vtk() -> Iterator[None]:
-    """Hide VTK's warnings while a render window is chosen.
-
-    Without a display, VTK first tries X ("bad X server connection"), then
-    falls back to EGL off-screen rendering, which works; the warning is noise.
-    """
-    try:
-        from vtkmodules.vtkCommonCore import vtkLogger
-    except ImportError:  # pragma: no cover
-        yield
-        return
-    old = vtkLogger.GetCurrentVerbosityCutoff()
-    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)
-    try:
-        yield
-    finally:
-        vtkLogger.SetStderrVerbosity(old)
-
-
-@contextlib.contextmanager
-def _without_vtklocal() -> Iterator[None]:
-    """Hide ``trame.widgets.vtklocal`` while pyvista starts its trame server.
-
-    pyvista's ``launch_server`` enables trame-vtklocal when the import
-    succeeds, and its set-up downloads VTK's WebAssembly files in a background
-    task (a traceback in a later cell when offline).  A ``None`` entry in
-    ``sys.modules`` makes that import fail with ImportError, which pyvista
-    skips.  The entry is removed afterwards; a module already imported on
-    purpose is left alone.
-    """
-    name = "trame.widgets.vtklocal"
-    if name in sys.modules:
-        yield
-        return
-    sys.modules[name] = None  # type: ignore[assignment]
-    try:
-        yield
-    finally:
-        if name in sys.modules and sys.modules[name] is None:
-            del sys.modules[name]
-
-
-def _server_base_url(environ: Mapping[str, str]) -> str | None:
-    """The base URL of the Jupyter server that started this kernel, from its runtime file.
-
-    A Jupyter server writes ``jpserver-<pid>.json`` (with ``base_url``) into
-    the Jupyter runtime folder, and the kernels it starts get its process id
-    in ``JPY_PARENT_PID``.  None when there is no such file (a script, a
-    kernel started by something else) or it cannot be read.
-    """
-    import json
-
-    pid = environ.get("JPY_PARENT_PID", "").strip() or str(os.getppid())
-    if not pid.isdigit():
-        return None
-    runtime = environ.get("JUPYTER_RUNTIME_DIR")
-    if not runtime:
-        try:
-            from jupyter_core.paths import jupyter_runtime_dir
-        except ImportError:  # pragma: no cover - jupyter_core comes with ipykernel
-            return None
-        runtime = jupyter_runtime_dir()
-    try:
-        with open(os.path.join(runtime, f"jpserver-{pid}.json"), encoding="utf-8") as f:
-            info = json.load(f)
-    except (OSError, ValueError):
-        return None
-    base = info.get("base_url") if isinstance(info, dict) else None
-    return base if isinstance(base, str) and base else None
-
-
-def trame_proxy_prefix(environ: Mapping[str, str] | None = None) -> str | None:
-    """The address prefix through which the browser reaches the trame server, or None for direct.
-
-    The 3D view is a trame server on a port of the kernel's machine.  A
-    browser on another machine (JupyterHub, Binder, a server behind a
-    reverse proxy) cannot reach that port, so the iframe's address goes
-    through ``jupyter-server-proxy`` instead: ``<prefix><port>/index.html``.
-    In order:
-
-    1. ``MOCAPLAB_TRAME_PROXY`` (see :data:`PROXY_ENV_VAR`): ``"off"``
-       (also ``"direct"``, ``"none"``, ``"0"``) reaches the port directly;
-       ``"auto"`` or empty uses the rules below; anything else is the prefix
-       itself, a path (``"/user/ann/proxy/"``) or a full address
-       (``"https://lab.example.org/proxy/"``), for other proxies.
-    2. pyvista's ``PYVISTA_TRAME_SERVER_PROXY_PREFIX``, when set: a full
-       address as it is, a path joined to the hub's or server's prefix (as
-       pyvista does under JupyterHub).
-    3. Under JupyterHub (``JUPYTERHUB_SERVICE_PREFIX``, e.g. ``/user/ann/``):
-       ``/user/ann/proxy/``.
-    4. A Jupyter server with a base URL other than ``/`` (read from its
-       runtime file, see :func:`_server_base_url`): ``<base_url>proxy/``.
-    5. Otherwise None: ``http://localhost:<port>/``, browser and kernel on
-       one machine.
-
-    Parameters
-    ----------
-    environ : Mapping[str, str], optional
-        The environment to read (default ``os.environ``).
-
-    Returns
-    -------
-    str or None
-        The prefix, ending in ``/``.
-    """
-    env = os.environ if environ is None else environ
-    value = env.get(PROXY_ENV_VAR, "").strip()
-    if value.lower() in _PROXY_OFF:
-        return None
-    if value and value.lower() != "auto":
-        return value.rstrip("/") + "/"
-    pyvista_prefix = env.get("PYVISTA_TRAME_SERVER_PROXY_PREFIX", "").strip()
-    service = env.get("JUPYTERHUB_SERVICE_PREFIX", "").strip()
-    if pyvista_prefix.startswith("http"):
-        return pyvista_prefix.rstrip("/") + "/"
-    if service:
-        base = service
-    else:
-        base = _server_base_url(env) or "/"
-        if base.strip("/") == "" and not pyvista_prefix:
-            return None
-    tail = (pyvista_prefix or "proxy/").strip("/")
-    return "/" + "/".join(p for p in (base.strip("/"), tail) if p) + "/"
-
-
-def _session_url(src: str) -> str | None:
-    """The websocket address of the trame server behind the iframe address ``src``.
-
-    ``http://localhost:PORT/index.html?ui=...`` serves its websocket at
-    ``ws://localhost:PORT/ws``.  A path (behind jupyter-server-proxy:
-    ``/user/ann/proxy/PORT/index.html``) gives ``ws://USE_HOST/user/ann/proxy/PORT/ws``:
-    the trame page puts the browser's own host and ``ws``/``wss`` (as the page
-    is ``http``/``https``) in place of ``USE_HOST``.  The page lower-cases
-    such an address first, so a path with capitals gets None: the page then
-    finds its websocket by itself, after a request to a launcher that the
-    trame server answers with 405.
-    """
-    parts = urllib.parse.urlsplit(src)
-    path = parts.path.rsplit("/", 1)[0]
-    if not parts.scheme and not parts.netloc and path.startswith("/"):
-        return f"ws://USE_HOST{path}/ws" if path == path.lower() else None
-    if parts.scheme not in ("http", "https") or not parts.netloc:
-        return None
-    scheme = "wss" if parts.scheme == "https" else "ws"
-    return f"{scheme}://{parts.netloc}{path}/ws"
-
-
-def _iframe_widget(viewer: Any, src: str, **kwargs: Any) -> Any:
-    """pyvista's trame iframe widget, its address naming the websocket (no launcher request, no 405) and
-    carrying the server's secret (see "Who may connect" in the module notes)."""
-    from trame_pyvista.jupyter import Widget
-
-    ws = _session_url(src)
-    if ws is not None:
-        src = f"{src}{'&' if '?' in src else '?'}sessionURL={urllib.parse.quote(ws, safe='')}"
-    src = f"{src}{'&' if '?' in src else '?'}secret={urllib.parse.quote(_TRAME_SECRET, safe='')}"
-    return Widget(viewer, src, **kwargs)
-
-
-# The kernel's trame secret (module notes, "Who may connect"): made once per process and never changed.
-# The prefix keeps the trame page from reading it as a number (it converts numeric address parameters).
-_TRAME_SECRET = "mocaplab-" + secrets.token_urlsafe(32)
-
-
-def _secure_trame_server() -> Any:
-    """The kernel's pyvista trame server, set to admit only clients that know :data:`_TRAME_SECRET`.
-
-    Before it starts, the secret becomes the default of trame's ``--authKey``
-    option (what the server reads when it starts); a server that already runs
-    (a plain pyvista plot started it) gets the secret on its running protocol.
-    """
-    import pyvista as pv
-    from trame_pyvista.widgets import get_server
-    from trame_server.protocol import CoreServer
-
-    server = get_server(name=pv.global_theme.trame.jupyter_server_name)
-    server.cli.set_defaults(authKey=_TRAME_SECRET, authKeyFile=None)
-    if CoreServer.authentication_token != _TRAME_SECRET:
-        CoreServer.authentication_token = _TRAME_SECRET  # what a protocol created from now on takes
-        protocol = server.protocol
-        if protocol is not None:
-            protocol.updateSecret(_TRAME_SECRET)
-    return server
-
-
-# The page side of the "client" backend (see "Backends" in the module notes): decodes the clip sent once,
-# steps through it on the browser's clock and hands each frame's small arrays to vtk.js.  Registered as
-# ``trame.utils.mocaplab`` (``utils.mocaplab`` in the page's template expressions).
-_CLIENT_JS = r"""
-(function () {
-  const trame = window.trame;
-  if (trame.utils.mocaplab) { return; }
-  const M = { decoded: {}, players: {} };
-  // WebGL contexts of this page without multisampling: in a browser without a GPU (software WebGL) it
-  // costs several times the picture, as in the kernel's renders (see the module notes).
-  const getContext = HTMLCanvasElement.prototype.getContext;
-  HTMLCanvasElement.prototype.getContext = function (kind, options) {
-    if (typeof kind === "string" && kind.indexOf("webgl") === 0) {
-      options = Object.assign({}, options || {}, { antialias: false });
-    }
-    return getContext.call(this, kind, options);
-  };
-  function bytes(b64) {
-    const bin = atob(b64), out = new Uint8Array(bin.length);
-    for (let i = 0; i < bin.length; i++) { out[i] = bin.charCodeAt(i); }
-    return out.buffer;
-  }
-  function decoded(s) {
-    if (!s) { return null; }
-    let d = M.decoded[s.id];
-    if (d) { return d; }
-    d = { chars: [], overlays: [] };
-    for (const c of s.chars || []) {
-      d.chars.push({ pos: new Float32Array(bytes(c.pos)), index: new Int32Array(bytes(c.index)),
-                     segs: c.segs, n: c.n_points, radius: c.radius, frame: -1, bones: null,
-                     color: c.color, jointRadius: c.joint_radius });
-    }
-    for (const o of s.overlays || []) {
-      d.overlays.push({ pts: new Float32Array(bytes(o.pts)), offsets: new Int32Array(bytes(o.offsets)),
-                        index: new Int32Array(bytes(o.index)), kind: o.kind, closed: o.closed, fill: o.fill });
-    }
-    for (const key of Object.keys(M.decoded)) {
-      if (key.split("/")[0] === s.id.split("/")[0]) { delete M.decoded[key]; }
-    }
-    M.decoded[s.id] = d;
-    return d;
-  }
-  M.joints = function (s, k, f) {
-    const d = decoded(s), c = d && d.chars[k];
-    if (!c) { return new Float32Array(0); }
-    const i = c.index[Math.min(Math.max(f, 0), c.index.length - 1)];
-    return c.pos.subarray(i * c.n * 3, (i + 1) * c.n * 3);
-  };
-  M.bones = function (s, k, f) {
-    const d = decoded(s), c = d && d.chars[k];
-    if (!c) { return { centres: new Float32Array(0), frames: new Float32Array(0) }; }
-    if (c.frame === f && c.bones) { return c.bones; }
-    // each bone: its centre, and the columns of the matrix taking the unit cylinder (axis x) onto it:
-    // the bone itself, then two perpendicular radii
-    const p = M.joints(s, k, f), segs = c.segs, nb = segs.length / 2, r = c.radius;
-    const centres = new Float32Array(nb * 3), frames = new Float32Array(nb * 9);
-    for (let b = 0; b < nb; b++) {
-      const a = 3 * segs[2 * b], e = 3 * segs[2 * b + 1];
-      let dx = p[e] - p[a], dy = p[e + 1] - p[a + 1], dz = p[e + 2] - p[a + 2];
-      const len = Math.hypot(dx, dy, dz);
-      centres[3 * b] = 0.5 * (p[a] + p[e]);
-      centres[3 * b + 1] = 0.5 * (p[a + 1] + p[e + 1]);
-      centres[3 * b + 2] = 0.5 * (p[a + 2] + p[e + 2]);
-      let ax = 0, ay = 1, az = 0;
-      if (len > 1e-9) { ax = dx / len; ay = dy / len; az = dz / len; } else { dx = 0; dy = 1e-6; dz = 0; }
-      const hx = Math.abs(ax) < 0.9 ? 1 : 0, hz = 1 - hx;  // a helper axis not along the bone
-      let ux = ay * hz, uy = az * hx - ax * hz, uz = -ay * hx;  // axis x helper
-      const ul = Math.hypot(ux, uy, uz);
-      ux /= ul; uy /= ul; uz /= ul;
-      const vx = ay * uz - az * uy, vy = az * ux - ax * uz, vz = ax * uy - ay * ux;
-      frames.set([dx, dy, dz, r * ux, r * uy, r * uz, r * vx, r * vy, r * vz], 9 * b);
-    }
-    c.frame = f;
-    c.bones = { centres: centres, frames: frames };
-    return c.bones;
-  };
-  // All characters in two glyph sets (bones, joints) with a colour per glyph: two actors for any crowd.
-  M.crowd = function (s, f) {
-    const d = decoded(s);
-    if (!d) { return null; }
-    if (d.frame === f && d.crowd) { return d.crowd; }
-    let nb = 0, nj = 0;
-    for (const c of d.chars) { nb += c.segs.length / 2; nj += c.n; }
-    const out = { centres: new Float32Array(3 * nb), frames: new Float32Array(9 * nb), joints: new Float32Array(3 * nj) };
-    if (!d.colors) {
-      d.colors = { bones: new Uint8Array(3 * nb), joints: new Uint8Array(3 * nj) };
-      let b = 0, j = 0;
-      for (const c of d.chars) {
-        const rgb = c.color.map(function (x) { return Math.round(255 * x); });
-        for (let i = 0; i < c.segs.length / 2; i++, b++) { d.colors.bones.set(rgb, 3 * b); }
-        for (let i = 0; i < c.n; i++, j++) { d.colors.joints.set(rgb, 3 * j); }
-      }
-    }
-    let b = 0, j = 0;
-    d.chars.forEach(function (c, k) {
-      const bones = M.bones(s, k, f);
-      out.centres.set(bones.centres, 3 * b);
-      out.frames.set(bones.frames, 9 * b);
-      out.joints.set(M.joints(s, k, f), 3 * j);
-      b += c.segs.length / 2;
-      j += c.n;
-    });
-    out.boneColors = d.colors.bones;
-    out.jointColors = d.colors.joints;
-    out.jointRadius = d.chars.length ? d.chars[0].jointRadius : 0;
-    d.frame = f;
-    d.crowd = out;
-    return out;
-  };
-  M.overlay = function (s, k, f) {
-    const d = decoded(s), o = d && d.overlays[k];
-    if (!o) { return { points: new Float32Array(0), lines: null, polys: null }; }
-    const i = o.index[Math.min(Math.max(f, 0), o.index.length - 1)];
-    const a = o.offsets[i], b = o.offsets[i + 1], n = b - a;
-    const points = o.pts.subarray(3 * a, 3 * b);
-    let lines = null, polys = null;
-    if (o.kind !== "points" && n >= 2) {
-      const closed = o.closed && n > 2;
-      lines = new Uint32Array(n + 1 + (closed ? 1 : 0));
-      lines[0] = n + (closed ? 1 : 0);
-      for (let j = 0; j < n; j++) { lines[j + 1] = j; }
-      if (closed) { lines[n + 1] = 0; }
-      if (o.fill && n >= 3) {
-        polys = new Uint32Array(4 * (n - 2));
-        for (let j = 0; j < n - 2; j++) { polys.set([3, 0, j + 1, j + 2], 4 * j); }
-      }
-    }
-    return { points: points, lines: lines || new Uint32Array(0), polys: polys || new Uint32Array(0) };
-  };
-  // The frame each view shows (set by control and by the clock; the template reads it, unwatched).
-  M.frames = {};
-  M.at = function (key, initial) { return key in M.frames ? M.frames[key] : initial; };
-  // Draw frame f of the viewer `key` straight into its vtk.js data (no template update): the glyph
-  // sets and overlays are found by their representation ids.
-  M.draw = function (key, f) {
-    M.frames[key] = f;
-    const comp = trame.refs[key + "_view"];
-    const view = comp && comp.$ && comp.$.provides && comp.$.provides.view;
-    const chars = trame.state.get(key + "_chars"), ovl = trame.state.get(key + "_overlays");
-    if (!view || !chars) { return false; }
-    const crowd = M.crowd(chars, f);
-    for (const actor of view.renderer.getActors()) {
-      const id = String(actor.get("representationId").representationId || "");
-      if (id.indexOf("mocaplab-") !== 0 || !actor.getMapper()) { continue; }
-      const data = actor.getMapper().getInputData(0);
-      if (!data) { continue; }
-      if (id === "mocaplab-bones") {
-        data.getPoints().setData(crowd.centres, 3);
-        const frames = data.getPointData().getArrayByName("frame");
-        if (frames) { frames.setData(crowd.frames, 9); }
-      } else if (id === "mocaplab-joints") {
-        data.getPoints().setData(crowd.joints, 3);
-      } else if (id.indexOf("mocaplab-overlay-") === 0) {
-        const shape = M.overlay(ovl, Number(id.slice(17)), f);
-        data.getPoints().setData(shape.points, 3);
-        data.getLines().setData(shape.lines);
-        data.getPolys().setData(shape.polys);
-      }
-      data.modified();
-    }
-    view.renderer.resetCameraClippingRange();
-    view.renderWindow.render();
-    return true;
-  };
-  // Playback on the page's clock: ctl = {playing, frame, fps, n_frames} from the kernel.
-  M.control = function (key, ctl) {
-    if (!ctl) { return; }
-    const player = M.players[key] || (M.players[key] = { token: 0 });
-    player.token += 1;
-    const token = player.token;
-    M.draw(key, ctl.frame);
-    if (!ctl.playing) { return; }
-    const start = performance.now(), last = ctl.n_frames - 1;
-    function tick(now) {
-      if (player.token !== token) { return; }
-      const f = Math.min(ctl.frame + Math.floor(((now - start) / 1000) * ctl.fps + 1e-9), last);
-      if (M.frames[key] !== f) { M.draw(key, f); }
-      if (f < last) { requestAnimationFrame(tick); }
-    }
-    requestAnimationFrame(tick);
-  };
-  // The fitted camera, set again whenever the view resets its camera (after it mounts, and on request).
-  M.views = {};
-  M.camera = function (ref, view, cam) {
-    view = view || M.views[ref];
-    if (!view || !cam) { return; }
-    M.views[ref] = view;
-    view.getCamera();  // makes the camera the active one, which setCamera changes
-    view.setCamera(cam);
-  };
-  trame.utils.mocaplab = M;
-  // set once the template that loaded this script has rendered (a change during its own render is lost)
-  setTimeout(function () { trame.state.set("mocaplab_ready", true); }, 0);
-})();
-"""
-_CLIENT_COUNTER = iter(range(1, 1 << 62))
-
-
-def _rgb(color: str) -> list[float]:
-    """A colour name or ``#rrggbb`` as three floats in [0, 1]."""
-    import pyvista as pv
-
-    return [float(x) for x in pv.Color(color).float_rgb]
-
-
-def _b64(array: ArrayLike, dtype: str) -> str:
-    """An array's bytes (C order, the given dtype) as base64 text, for the page to decode."""
-    import base64
-
-    return base64.b64encode(np.ascontiguousarray(array, dtype=dtype).tobytes()).decode("ascii")
-
-
-def _main_thread_loop() -> asyncio.AbstractEventLoop | None:
-    """The asyncio loop of the main thread (the kernel's), if one is running.
-
-    Read in the main thread (and remembered for viewers built elsewhere);
-    None in a script or a test without a running loop.
-    """
-    global _MAIN_LOOP
-    if threading.current_thread() is threading.main_thread():
-        try:
-            _MAIN_LOOP = asyncio.get_running_loop()
-        except RuntimeError:
-            return None
-        return _MAIN_LOOP
-    loop = _MAIN_LOOP
-    return loop if loop is not None and not loop.is_closed() else None
-
-
-def _on_main_thread(method: Callable[..., Any]) -> Callable[..., Any]:
-    """Run a scene-changing method in the main thread (queued there when called from another)."""
-
-    @functools.wraps(method)
-    def wrapper(self: MotionViewer, *args: Any, **kwargs: Any) -> Any:
-        if self._queue(functools.partial(method, self, *args, **kwargs)):
-            return None
-        return method(self, *args, **kwargs)
-
-    return wrapper
-
-
 def _error_html(err: BaseException) -> str:
     """An exception as status HTML: its text escaped, wrapped (never cut)."""
     text = html.escape(f"{type(err).__name__}: {err}")
     return f"<pre style='color:#b00;white-space:pre-wrap;overflow-wrap:anywhere;margin:0'>{text}</pre>"
-
-
-def fit_view(
-    corners: ArrayLike,
-    direction: ArrayLike,
-    up: ArrayLike,
-    *,
-    view_angle: float,
-    aspect: float,
-    fill: float = _FILL,
-    top_band: float = 0.0,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Focal point and position of the nearest perspective camera that sees every corner.
-
-    The camera looks along ``-direction`` with ``up`` up.  A point at depth
-    ``z`` in front of it, ``x`` to the right and ``y`` up (camera axes) is
-    inside the picture when ``|x| <= fill * aspect * tan(view_angle / 2) * z``
-    and ``-1 <= y / (fill * tan(view_angle / 2) * z) <= 1 - 2 * top_band``:
-    the top ``top_band`` of the picture's height is kept free (a toolbar lies
-    there).  The camera distance is the smallest for which both ranges hold
-    for every corner (found by bisection: each range only widens with the
-    distance); the focal point then centres the corners between the limits.
-
-    Parameters
-    ----------
-    corners : array_like, shape (n, 3)
-        Points that must be inside the picture (a box's corners).
-    direction : array_like, shape (3,)
-        From the scene towards the camera (any length).
-    up : array_like, shape (3,)
-        The view-up vector.
-    view_angle : float
-        Vertical view angle in degrees (VTK's default is 30).
-    aspect : float
-        Picture width over height.
-    fill : float
-        Largest share of the half-width and half-height a corner may reach.
-    top_band : float
-        Share of the picture's height kept free at its top, in [0, 0.5).
-
-    Returns
-    -------
-    focal_point, position : ndarray, shape (3,)
-    """
-    pts = np.asarray(corners, dtype=float).reshape(-1, 3)
-    w = np.asarray(direction, dtype=float)
-    w = w / np.linalg.norm(w)
-    right = np.cross(-w, np.asarray(up, dtype=float))
-    right /= np.linalg.norm(right)
-    upv = np.cross(right, -w)
-    centre = pts.mean(axis=0)
-    d = pts - centre
-    a, x, y = d @ w, d @ right, d @ upv
-    ty = fill * math.tan(math.radians(view_angle) / 2.0)
-    tx, top = ty * aspect, 1.0 - 2.0 * float(top_band)
-
-    def ranges(dist: float) -> tuple[float, float, float, float]:
-        z = dist - a
-        return (
-            float(np.max(x - tx * z)),
-            float(np.min(x + tx * z)),
-            float(np.max(y - top * ty * z)),
-            float(np.min(y + ty * z)),
-        )
-
-    def fits(dist: float) -> bool:
-        x0, x1, y0, y1 = ranges(dist)
-        return x0 <= x1 and y0 <= y1
-
-    size = float(np.ptp(pts, axis=0).max()) + 1e-3
-    near = float(a.max()) + 1e-6
-    far = near + size
-    while not fits(far):
-        far = near + 2.0 * (far - near)
-    for _ in range(60):
-        mid = 0.5 * (near + far)
-        near, far = (near, mid) if fits(mid) else (mid, far)
-    x0, x1, y0, y1 = ranges(far)
-    focal = centre + 0.5 * (x0 + x1) * right + 0.5 * (y0 + y1) * upv
-    return focal, focal + far * w
 
 
 @dataclass
@@ -784,61 +255,16 @@ class PlayClock:
         return self.frame_at(now) >= self.n_frames - 1
 
 
+
 # --------------------------------------------------------------------------
-# fixed-topology geometry: tubes and spheres whose points move
+# the kernel's meshes (pyvista): the scene's arrays written into VTK
 # --------------------------------------------------------------------------
-def _tube_faces(n_bones: int, sides: int) -> NDArray[np.int64]:
-    """VTK face array of ``n_bones`` open tubes with ``sides`` quads each."""
-    s = np.arange(sides)
-    base = (np.arange(n_bones) * 2 * sides)[:, None]
-    quads = np.stack([base + s, base + (s + 1) % sides, base + sides + (s + 1) % sides, base + sides + s], axis=-1)
-    return np.concatenate([np.full((n_bones, sides, 1), 4), quads], axis=-1).reshape(-1)
+def sphere_set(radius: float, resolution: int = 10) -> SphereSet:
+    """Copies of pyvista's sphere of ``radius`` with ``resolution`` points around (the joints' and points' spheres)."""
+    import pyvista as pv
 
-
-def _tube_points(a: NDArray[np.float64], b: NDArray[np.float64], radius: float, sides: int) -> tuple[Any, Any]:
-    """Points (B*2*S, 3) and normals of open tubes from ``a`` (B, 3) to ``b`` (B, 3)."""
-    d = b - a
-    length = np.linalg.norm(d, axis=-1, keepdims=True)
-    axis = np.where(length > 1e-9, d / np.maximum(length, 1e-12), [0.0, 1.0, 0.0])
-    helper = np.where(np.abs(axis[:, :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
-    u = np.cross(axis, helper)
-    u /= np.linalg.norm(u, axis=-1, keepdims=True)
-    v = np.cross(axis, u)
-    theta = 2 * np.pi * np.arange(sides) / sides
-    ring = np.cos(theta)[None, :, None] * u[:, None] + np.sin(theta)[None, :, None] * v[:, None]  # (B, S, 3)
-    pts = np.stack([a[:, None] + radius * ring, b[:, None] + radius * ring], axis=1)  # (B, 2, S, 3)
-    normals = np.broadcast_to(ring[:, None], pts.shape)
-    return pts.reshape(-1, 3), normals.reshape(-1, 3)
-
-
-@dataclass
-class _SphereSet:
-    """``n`` copies of one sphere mesh, moved by translating each copy."""
-
-    radius: float
-    resolution: int = 10
-    template: NDArray[np.float64] = field(init=False)
-    template_faces: NDArray[np.int64] = field(init=False)
-    template_normals: NDArray[np.float64] = field(init=False)
-
-    def __post_init__(self) -> None:
-        import pyvista as pv
-
-        s = pv.Sphere(radius=1.0, theta_resolution=self.resolution, phi_resolution=max(4, self.resolution - 2))
-        self.template = np.asarray(s.points, dtype=float) * self.radius
-        self.template_normals = np.asarray(s.points, dtype=float)
-        self.template_faces = np.asarray(s.regular_faces, dtype=np.int64)  # (C, 3) triangles
-
-    def faces(self, n: int) -> NDArray[np.int64]:
-        """VTK face array of ``n`` copies of the template sphere."""
-        tris = self.template_faces[None] + (np.arange(n) * len(self.template))[:, None, None]  # (n, C, 3)
-        return np.concatenate([np.full(tris.shape[:2] + (1,), 3), tris], axis=-1).reshape(-1)
-
-    def points(self, centres: NDArray[np.float64]) -> NDArray[np.float64]:
-        return (centres[:, None] + self.template[None]).reshape(-1, 3)
-
-    def normals(self, n: int) -> NDArray[np.float64]:
-        return np.tile(self.template_normals, (n, 1))
+    s = pv.Sphere(radius=1.0, theta_resolution=resolution, phi_resolution=max(4, resolution - 2))
+    return SphereSet.from_unit(np.asarray(s.points, dtype=float), np.asarray(s.regular_faces, dtype=np.int64), radius)
 
 
 def _mesh(points: NDArray[np.float64], faces: NDArray[np.int64], normals: NDArray[np.float64] | None = None) -> Any:
@@ -860,83 +286,6 @@ def _write_points(mesh: Any, points: NDArray[np.float64], normals: NDArray[np.fl
     mesh.Modified()
 
 
-# --------------------------------------------------------------------------
-# characters and overlays
-# --------------------------------------------------------------------------
-@dataclass
-class _Character:
-    motion: Motion
-    color: str
-    label: str
-    positions: NDArray[np.float64]  # (F, J + E, 3): drawn joints then end sites
-    segments: NDArray[np.int64]  # (B, 2) indices into the positions
-    path_joint: int = 0  # index in `positions` of the joint the camera follows (the pelvis role)
-    bones: Any = None  # pyvista.PolyData
-    joints: Any = None  # pyvista.PolyData
-    actors: tuple[Any, ...] = ()
-
-    def frame_at(self, t: float) -> int:
-        return int(min(max(round(t * self.motion.fps), 0), self.motion.n_frames - 1))
-
-    def anchor(self, t: float) -> NDArray[np.float64]:
-        """World position of the path joint at time ``t``, shape (3,)."""
-        return self.positions[self.frame_at(t), self.path_joint]
-
-
-@dataclass
-class _Overlay:
-    name: str
-    kind: str  # "points", "lines", "polygon"
-    data: Any
-    fps: float
-    color: str
-    style: dict[str, Any]
-    mesh: Any = None
-    actor: Any = None
-    count: int = -1
-
-    def at(self, t: float) -> NDArray[np.float64]:
-        """The overlay's points at time ``t``: (k, 3) with NaN rows removed."""
-        if callable(self.data):
-            pts = np.asarray(self.data(float(t)), dtype=float)
-        elif isinstance(self.data, np.ndarray) and self.data.ndim == 2:
-            pts = self.data
-        else:
-            n = len(self.data)
-            i = int(min(max(round(t * self.fps), 0), n - 1))
-            pts = np.asarray(self.data[i], dtype=float)
-        pts = pts.reshape(-1, 3) if pts.size else np.zeros((0, 3))
-        return pts[np.all(np.isfinite(pts), axis=1)]
-
-
-def _check_overlay_data(name: str, data: Any) -> Any:
-    if callable(data):
-        return data
-    if isinstance(data, np.ndarray) or (isinstance(data, Sequence) and data and np.ndim(data[0]) == 1):
-        arr = np.asarray(data, dtype=float)
-        if arr.ndim in (2, 3) and arr.shape[-1] == 3:
-            return arr
-        raise ValueError(
-            f"Expected overlay {name!r} data of shape (F, k, 3) or (k, 3), a list of (k_i, 3) arrays "
-            f"or a callable of time, got an array of shape {arr.shape}"
-        )
-    if isinstance(data, Sequence) and len(data) > 0:
-        frames = [np.asarray(d, dtype=float).reshape(-1, 3) if np.size(d) else np.zeros((0, 3)) for d in data]
-        return frames
-    raise ValueError(
-        f"Expected overlay {name!r} data: (F, k, 3), (k, 3), a list of (k_i, 3) or a callable, got {data!r}"
-    )
-
-
-def _as_motions(motions: Motion | Sequence[Motion]) -> list[Motion]:
-    """``motions`` as a non-empty list of Motion (a single Motion is one character)."""
-    items = [motions] if isinstance(motions, Motion) else list(motions)
-    if not items:
-        raise ValueError("Expected at least one Motion in `motions`, got none")
-    for k, m in enumerate(items):
-        if not isinstance(m, Motion):
-            raise TypeError(f"Expected `motions[{k}]` to be a Motion, got {type(m).__name__}")
-    return items
 
 
 # --------------------------------------------------------------------------
@@ -1028,7 +377,7 @@ class MotionViewer:
         roles: Any = None,
         play_rate: float = 30.0,
     ) -> None:
-        items = _as_motions(motions)
+        items = as_motions(motions)
         if roles is not None and not isinstance(roles, Mapping) and len(roles) != len(items):
             raise ValueError(f"Expected `roles` as one mapping or one per character ({len(items)}), got {len(roles)}")
         self.roles = roles
@@ -1052,10 +401,10 @@ class MotionViewer:
         self.end_sites = bool(end_sites)
         self._colors = tuple(colors or COLORS)
         self._sides = 8
-        self._spheres = _SphereSet(self.joint_radius)
-        self._small_spheres = _SphereSet(self.joint_radius * 0.6, resolution=8)
+        self._spheres = sphere_set(self.joint_radius)
+        self._small_spheres = sphere_set(self.joint_radius * 0.6, resolution=8)
         self.characters = [self._character(k, m, None if labels is None else labels[k]) for k, m in enumerate(items)]
-        self.overlays: dict[str, _Overlay] = {}
+        self.overlays: dict[str, Overlay] = {}
         self._frame = int(np.clip(frame, 0, self.n_frames - 1))
         self._widget: Any = None
         self._view: Any = None  # the embedded pyvista view (trame) or ipywidgets.Image (static)
@@ -1067,7 +416,7 @@ class MotionViewer:
         self._legend: Any = None
         self._status: Any = None
         self._quiet_thread: int | None = None  # the thread moving the controls itself (its echoes are ignored)
-        self._loop = _main_thread_loop()  # where calls from other threads are queued
+        self._loop = main_thread_loop()  # where calls from other threads are queued
         self._lock = threading.Lock()
         self._pending_frame: int | None = None  # newest slider frame not drawn yet (other threads)
         self._render_queued = False
@@ -1096,7 +445,7 @@ class MotionViewer:
         import pyvista as pv
 
         interactive = self.backend in ("trame", "server", "client")
-        with _quiet_vtk():
+        with quiet_vtk():
             self.plotter = pv.Plotter(off_screen=True, notebook=interactive, window_size=list(window_size))
         # no anti-aliasing: on Mesa's llvmpipe 8x MSAA makes a picture ~5x dearer (FXAA is as dear)
         self.plotter.disable_anti_aliasing()
@@ -1128,66 +477,32 @@ class MotionViewer:
 
     def _clock(self, items: Sequence[Motion]) -> tuple[float, int]:
         """The slider clock's rate and frame count for the characters ``items``."""
-        rate = self._fps_option if self._fps_option is not None else max(m.fps for m in items)
-        return rate, int(np.floor(max(m.duration for m in items) * rate + 1e-9)) + 1
+        return clock_of(items, self._fps_option)
 
-    def _character(self, k: int, m: Motion, label: str | None) -> _Character:
-        """Character ``k``: its joint and end-site positions and bone segments.
-
-        Joints above the path joint (a static reference joint at the origin
-        over a travelling pelvis) are not drawn, nor the "bone" from them to
-        the pelvis (the travel over the ground): the body looks the same
-        whatever the skeleton's layout.
-        """
-        sk = m.skeleton
+    def _character(self, k: int, m: Motion, label: str | None) -> Character:
+        """Character ``k``: its drawn points and bones (:func:`~mocaplab.widgets.scene.character_geometry`)."""
         roles = self.roles
         if roles is not None and not isinstance(roles, Mapping):  # one per character
             roles = roles[k] if k < len(roles) else None
-        pj = with_roles(m, roles).path_joint
-        parents = np.asarray(sk.parents)
-        drawn = np.ones(sk.n_joints, bool)
-        j = int(parents[pj])
-        while j >= 0:
-            drawn[j] = False
-            j = int(parents[j])
-        idx = np.flatnonzero(drawn)
-        new = np.full(sk.n_joints, -1, dtype=np.int64)
-        new[idx] = np.arange(len(idx))
-        pos = m.global_positions()[:, idx]
-        child = np.flatnonzero(drawn & (parents >= 0) & drawn[np.maximum(parents, 0)])
-        segs = np.stack([new[parents[child]], new[child]], axis=1)
-        if self.end_sites and sk.end_site_parents.size:
-            esp = np.asarray(sk.end_site_parents)
-            ok = drawn[esp]
-            pos = np.concatenate([pos, m.end_site_positions()[:, ok]], axis=1)
-            ends = np.arange(len(idx), len(idx) + int(ok.sum()))
-            segs = np.concatenate([segs, np.stack([new[esp[ok]], ends], axis=1)])
+        pos, segs, path_joint = character_geometry(m, roles, end_sites=self.end_sites)
         color = self._colors[k % len(self._colors)]
         name = label if label is not None else (m.name or f"character {k}")
-        return _Character(m, color, str(name), pos, segs, int(new[pj]))
+        return Character(m, color, str(name), pos, segs, path_joint)
 
     def _scene_bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Box of every drawn point of every character over its whole clip, grown by the joint radius."""
-        all_pts = np.concatenate([c.positions.reshape(-1, 3) for c in self.characters])
-        pad = max(self.joint_radius, self.bone_radius)
-        return all_pts.min(axis=0) - pad, all_pts.max(axis=0) + pad
+        return scene_bounds(self.characters, max(self.joint_radius, self.bone_radius))
 
     def _update_ground(self, lo: NDArray[np.float64], hi: NDArray[np.float64]) -> None:
         """Lay (or widen) the ground grid under the box ``[lo, hi]``; the actor is kept."""
         import pyvista as pv
 
-        if self._ground_extent is not None:
-            x0, x1, z0, z1 = self._ground_extent
-            if x0 <= lo[0] and hi[0] <= x1 and z0 <= lo[2] and hi[2] <= z1:
-                return
-        margin = 1.0
-        x0, x1 = np.floor(lo[0] - margin), np.ceil(hi[0] + margin)
-        z0, z1 = np.floor(lo[2] - margin), np.ceil(hi[2] + margin)
-        xs = np.linspace(x0, x1, int(round((x1 - x0) / 0.5)) + 1)  # 0.5 m squares
-        zs = np.linspace(z0, z1, int(round((z1 - z0) / 0.5)) + 1)
+        grid = ground_grid(lo, hi, self._ground_extent)
+        if grid is None:
+            return
+        xs, zs, self._ground_extent = grid
         gx, gz = np.meshgrid(xs, zs, indexing="ij")
         plane = pv.StructuredGrid(gx, np.full_like(gx, -0.001), gz)
-        self._ground_extent = (float(x0), float(x1), float(z0), float(z1))
         if self._ground_mesh is None:
             self._ground_mesh = plane
             self._ground = self.plotter.add_mesh(
@@ -1196,12 +511,12 @@ class MotionViewer:
         else:
             self._ground_mesh.copy_from(plane)
 
-    def _add_character_actors(self, k: int, c: _Character) -> None:
+    def _add_character_actors(self, k: int, c: Character) -> None:
         """Make character ``k``'s two meshes (at its first frame) and their actors."""
         n_bones, n_pts = len(c.segments), c.positions.shape[1]
         p0 = c.positions[0]
-        pts, normals = _tube_points(p0[c.segments[:, 0]], p0[c.segments[:, 1]], self.bone_radius, self._sides)
-        c.bones = _mesh(pts, _tube_faces(n_bones, self._sides), normals)
+        pts, normals = tube_points(p0[c.segments[:, 0]], p0[c.segments[:, 1]], self.bone_radius, self._sides)
+        c.bones = _mesh(pts, tube_faces(n_bones, self._sides), normals)
         c.joints = _mesh(self._spheres.points(p0), self._spheres.faces(n_pts), self._spheres.normals(n_pts))
         a1 = self.plotter.add_mesh(c.bones, color=c.color, name=f"bones{k}", smooth_shading=False, reset_camera=False)
         a2 = self.plotter.add_mesh(c.joints, color=c.color, name=f"joints{k}", smooth_shading=False, reset_camera=False)
@@ -1234,7 +549,7 @@ class MotionViewer:
         """
         direction = np.array([1.0, 0.5, 0.9])
         up = np.array([0.0, 1.0, 0.0])
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (floor, top) for z in (lo[2], hi[2])])
+        corners = box_corners(lo, hi, floor, top)
         width, height = self.plotter.window_size
         focal, position = fit_view(
             corners,
@@ -1306,7 +621,7 @@ class MotionViewer:
             text += f"; characters' frames {', '.join(str(f) for f in frames)}"
         return text
 
-    @_on_main_thread
+    @on_main_thread
     def set_frame(self, frame: int) -> None:
         """Show clock frame ``frame`` (also moves the slider; while playing, play on from there)."""
         f = int(frame)
@@ -1316,12 +631,12 @@ class MotionViewer:
             self._play_clock.start(f, now=self._now())
         self._apply_frame(f)
 
-    @_on_main_thread
+    @on_main_thread
     def set_time(self, t: float) -> None:
         """Show the frame nearest to time ``t`` seconds (clamped to the clip)."""
         self.set_frame(int(np.clip(round(float(t) * self.fps), 0, self.n_frames - 1)))
 
-    @_on_main_thread
+    @on_main_thread
     def set_motions(
         self,
         motions: Motion | Sequence[Motion],
@@ -1358,7 +673,7 @@ class MotionViewer:
         goes on from there.  The ground grid is widened if the characters
         walk off it; overlays are left as they are.
         """
-        items = _as_motions(motions)
+        items = as_motions(motions)
         if labels is not None and len(labels) != len(items):
             raise ValueError(f"Expected {len(items)} `labels`, got {len(labels)}")
         same_count = len(items) == len(self.characters)
@@ -1430,7 +745,7 @@ class MotionViewer:
         t = frame / self.fps
         for c in self.characters:
             p = c.positions[c.frame_at(t)]
-            pts, normals = _tube_points(p[c.segments[:, 0]], p[c.segments[:, 1]], self.bone_radius, self._sides)
+            pts, normals = tube_points(p[c.segments[:, 0]], p[c.segments[:, 1]], self.bone_radius, self._sides)
             _write_points(c.bones, pts, normals)
             _write_points(c.joints, self._spheres.points(p))
         error: Exception | None = None
@@ -1465,7 +780,7 @@ class MotionViewer:
         self._controls_at = self._now()
 
     # ------------------------------------------------------------ playback
-    @_on_main_thread
+    @on_main_thread
     def toggle_playback(self) -> None:
         """Start playback, or pause it if it runs (the play button)."""
         if self._playing:
@@ -1473,7 +788,7 @@ class MotionViewer:
         else:
             self.start_playback()
 
-    @_on_main_thread
+    @on_main_thread
     def start_playback(self) -> None:
         """Play in real time from the current frame (from the first one when at the end).
 
@@ -1503,12 +818,12 @@ class MotionViewer:
         self._client_control()  # the page plays on its own clock from here
         self._play_task = loop.create_task(self._play_loop())
 
-    @_on_main_thread
+    @on_main_thread
     def stop_playback(self) -> None:
         """Pause playback on the frame shown."""
         was_playing, self._playing = self._playing, False
         task, self._play_task = self._play_task, None
-        if task is not None and not task.done() and task is not _current_task():
+        if task is not None and not task.done() and task is not current_task():
             task.cancel()
         self._update_play_button()
         if was_playing and self._client is not None:
@@ -1571,7 +886,7 @@ class MotionViewer:
             _log.exception("MotionViewer: playback failed")
             if self._status is not None:
                 self._status.value = _error_html(err)
-        if self._play_task is _current_task():
+        if self._play_task is current_task():
             self._play_task = None
             self.stop_playback()
 
@@ -1738,7 +1053,7 @@ class MotionViewer:
         style = {"width": float(width), "closed": True, "fill": bool(fill), "opacity": float(opacity)}
         self._add_overlay(name, "polygon", points, color, fps, style)
 
-    @_on_main_thread
+    @on_main_thread
     def remove_overlay(self, name: str) -> None:
         """Remove the overlay called ``name``."""
         ov = self.overlays.pop(name, None)
@@ -1756,16 +1071,16 @@ class MotionViewer:
             raise KeyError(f"No overlay named {name!r}; overlays are {list(self.overlays)}") from None
         return ov.at(self.time)
 
-    @_on_main_thread
+    @on_main_thread
     def _add_overlay(
-        self, name: str, kind: str, data: Any, color: str, fps: float | None, style: dict[str, Any]
+        self, name: str, kind: OverlayKind, data: Any, color: str, fps: float | None, style: dict[str, Any]
     ) -> None:
         if name in self.overlays:
             self.remove_overlay(name)
-        ov = _Overlay(
+        ov = Overlay(
             name=str(name),
             kind=kind,
-            data=_check_overlay_data(name, data),
+            data=check_overlay_data(name, data),
             fps=float(fps) if fps is not None else self.characters[0].motion.fps,
             color=color,
             style=style,
@@ -1786,36 +1101,31 @@ class MotionViewer:
         self._client_send(overlays=True)
         self._refresh()
 
-    def _fill_overlay(self, ov: _Overlay, pts: NDArray[np.float64]) -> None:
+    def _fill_overlay(self, ov: Overlay, pts: NDArray[np.float64]) -> None:
         """Rebuild the overlay mesh for ``pts`` (same object; topology may change)."""
         import pyvista as pv
 
         k = len(pts)
         if ov.kind == "points":
-            spheres = ov.style.setdefault("spheres", _SphereSet(ov.style["radius"], resolution=10))
+            spheres = ov.style.setdefault("spheres", sphere_set(ov.style["radius"], resolution=10))
             if k == ov.count and k > 0:
                 _write_points(ov.mesh, spheres.points(pts))
                 return
             new = _mesh(spheres.points(pts), spheres.faces(k), spheres.normals(k)) if k else pv.PolyData()
         else:
-            closed = ov.style.get("closed", False) and k > 2
-            order = np.r_[np.arange(k), 0] if closed else np.arange(k)
             if k == ov.count and k > 0:
                 _write_points(ov.mesh, pts)
                 return
             if k < 2:
                 new = pv.PolyData()
             else:
-                faces = None
-                if ov.style.get("fill") and k >= 3:
-                    tris = np.stack([np.zeros(k - 2, dtype=np.int64), np.arange(1, k - 1), np.arange(2, k)], axis=1)
-                    faces = np.concatenate([np.full((k - 2, 1), 3), tris], axis=1).reshape(-1)
+                lines, faces = overlay_cells(k, closed=bool(ov.style.get("closed", False)), fill=bool(ov.style.get("fill")))
                 # explicit cells: no vertex cell per point
-                new = pv.PolyData(np.array(pts, dtype=float), lines=np.r_[len(order), order], faces=faces)
+                new = pv.PolyData(np.array(pts, dtype=float), lines=lines, faces=faces)
         ov.mesh.copy_from(new)
         ov.count = k
 
-    def _update_overlay(self, ov: _Overlay, t: float) -> None:
+    def _update_overlay(self, ov: Overlay, t: float) -> None:
         self._fill_overlay(ov, ov.at(t))
 
     # ------------------------------------------------------------- output
@@ -1904,22 +1214,20 @@ class MotionViewer:
         return box
 
     def _trame_view(self) -> Any:
-        """pyvista's trame iframe in server-rendering mode (or vtk.js for ``"client"``)."""
+        """pyvista's trame iframe in server-rendering mode."""
         width = int(self.plotter.window_size[0])
         options = {
             "mode": _TRAME_MODES[self.backend],
             "collapse_menu": width < TOOLBAR_WIDTH,
-            "handler": _iframe_widget,
+            "handler": iframe_widget,
         }
-        prefix = trame_proxy_prefix()
+        enabled, prefix = proxy_setting()
+        if enabled is not None:  # else pyvista's theme decides (off unless set with pv.global_theme.trame)
+            options["server_proxy_enabled"] = enabled
         if prefix is not None:
-            options["server_proxy_enabled"] = True
             options["server_proxy_prefix"] = prefix
-        elif os.environ.get(PROXY_ENV_VAR, "").strip().lower() in _PROXY_OFF:
-            options["server_proxy_enabled"] = False
-        # else pyvista's theme decides (off unless set with pv.global_theme.trame.server_proxy_enabled)
-        _secure_trame_server()
-        with _without_vtklocal():
+        secure_trame_server()
+        with without_vtklocal():
             return self.plotter.show(
                 jupyter_backend=_TRAME_MODES[self.backend],
                 return_viewer=True,
@@ -1931,131 +1239,15 @@ class MotionViewer:
     def _client_view(self) -> Any:
         """The "client" backend's view: a trame page drawing the scene with vtk.js in the browser.
 
-        The page gets the whole clip once (each character's drawn points on
-        every frame, float32) with the bone pairs, overlays sampled on the
-        clock, the ground and the fitted camera; it then draws each frame
-        itself (bones as cylinder glyphs, joints as sphere glyphs) and plays
-        on its own clock, told only where to start and whether to play.
+        The page (:mod:`mocaplab.widgets.vtkjs_page`) gets the whole clip
+        once; it then draws each frame itself and plays on its own clock,
+        told only where to start and whether to play.
         """
-        from trame.ui.html import DivLayout
-        from trame.widgets import client, html
-        from trame.widgets import vtk as vtkw
-        from trame_pyvista.jupyter import build_url, elegantly_launch
-
-        server = _secure_trame_server()
-        if not server.running:
-            with _without_vtklocal():
-                elegantly_launch(server, wslink_backend="aiohttp")
+        server = vtkjs_page.start_server()
         names = self._client_attach(server)
-        key = names["key"]
-        chars, ovl, ref = names["chars"], names["overlays"], f"{key}_view"
-        ml = "utils.mocaplab"
-        frame = f"{ml}.at('{key}', {names['start']})"  # not watched: playing never re-renders the template
-        with DivLayout(server, template_name=key, style="position:absolute;inset:0;margin:0;overflow:hidden"):
-            client.Script(_CLIENT_JS)
-            client.ClientStateChange(
-                value=names["ctl"], change=f"{ml} && {ml}.control('{key}', {names['ctl']})", trigger_on_create=True
-            )
-            client.ClientStateChange(
-                value="mocaplab_ready", change=f"mocaplab_ready && {ml}.control('{key}', {names['ctl']})"
-            )
-            client.ClientStateChange(
-                value=names["camera"], change=f"{ml} && {ml}.camera('{ref}', trame.refs['{ref}'], {names['camera']})"
-            )
-            with vtkw.VtkView(
-                ref=ref,
-                v_if="mocaplab_ready",
-                background=("[1, 1, 1]",),
-                __events=[("reset", "resetCamera")],
-                reset=f"{ml}.camera('{ref}', trame.refs['{ref}'], {names['camera']})",
-                style="position:absolute;inset:0",
-            ):
-                ground = names["ground"]
-                with vtkw.VtkGeometryRepresentation(
-                    v_if=ground,
-                    property=("{color: [0.733, 0.733, 0.733], ambient: 1, diffuse: 0}",),
-                ):
-                    vtkw.VtkPolyData("ground", points=(f"{ground}.points",), lines=(f"{ground}.lines",))
-                crowd = f"{ml}.crowd({chars}, {frame})"
-                # kept mounted when new motions come (new arrays, same components): a vtk-polydata with
-                # vtk-data-array children that unmounts logs "instance deleted" (trame-vtk deletes the
-                # dataset before its arrays let go of it)
-                with html.Div(v_if=f"{chars} && {chars}.chars.length"):
-                    with vtkw.VtkGlyphRepresentation(
-                        id="mocaplab-bones",
-                        property=("{interpolation: 1}",),
-                        # a 3x3 matrix per bone; its colour from the uint8 RGB scalars
-                        mapper=(
-                            "{orientationArray: 'frame', orientationMode: 2, "
-                            "colorMode: 0, scalarVisibility: true, scaling: false}",
-                        ),
-                    ):
-                        with vtkw.VtkPolyData("bones", points=(f"{crowd}.centres",)):
-                            with vtkw.VtkPointData():
-                                vtkw.VtkDataArray(
-                                    name="frame", values=(f"{crowd}.frames",), number_of_components=("9",)
-                                )
-                                vtkw.VtkDataArray(
-                                    name="colors",
-                                    registration="setScalars",
-                                    type="Uint8Array",
-                                    values=(f"{crowd}.boneColors",),
-                                    number_of_components=("3",),
-                                )
-                        vtkw.VtkAlgorithm(
-                            vtk_class="vtkCylinderSource",
-                            state=("{height: 1, radius: 1, resolution: 6, capping: false, direction: [1, 0, 0]}",),
-                            port=1,
-                        )
-                    with vtkw.VtkGlyphRepresentation(
-                        id="mocaplab-joints", mapper=("{colorMode: 0, scalarVisibility: true, scaling: false}",)
-                    ):
-                        with vtkw.VtkPolyData("joints", points=(f"{crowd}.joints",)):
-                            with vtkw.VtkPointData():
-                                vtkw.VtkDataArray(
-                                    name="colors",
-                                    registration="setScalars",
-                                    type="Uint8Array",
-                                    values=(f"{crowd}.jointColors",),
-                                    number_of_components=("3",),
-                                )
-                        vtkw.VtkAlgorithm(
-                            vtk_class="vtkSphereSource",
-                            state=(f"{{radius: {self.joint_radius}, thetaResolution: 6, phiResolution: 4}}",),
-                            port=1,
-                        )
-                with html.Div(v_for=f"(o, k) in {ovl}.overlays", key=("k + '/' + o.kind",)):
-                    shape = f"{ml}.overlay({ovl}, k, {frame})"
-                    with vtkw.VtkGlyphRepresentation(
-                        v_if="o.kind === 'points'", id=("'mocaplab-overlay-' + k",), property=("{color: o.color}",)
-                    ):
-                        vtkw.VtkPolyData("points", points=(f"{shape}.points",))
-                        vtkw.VtkAlgorithm(
-                            vtk_class="vtkSphereSource",
-                            state=("{radius: o.radius, thetaResolution: 6, phiResolution: 4}",),
-                            port=1,
-                        )
-                    with vtkw.VtkGeometryRepresentation(
-                        v_else=True,
-                        id=("'mocaplab-overlay-' + k",),
-                        property=("{color: o.color, lineWidth: o.width, opacity: o.opacity, ambient: 0.3}",),
-                    ):
-                        vtkw.VtkPolyData(
-                            "lines",
-                            points=(f"{shape}.points",),
-                            lines=(f"{shape}.lines",),
-                            polys=(f"{shape}.polys",),
-                        )
-        prefix = trame_proxy_prefix()
-        if prefix is not None:
-            enabled: bool | None = True
-        elif os.environ.get(PROXY_ENV_VAR, "").strip().lower() in _PROXY_OFF:
-            enabled = False
-        else:
-            enabled = None  # pyvista's theme decides, as for the server view
-        src = build_url(server, ui=key, server_proxy_enabled=enabled, server_proxy_prefix=prefix)
+        src = vtkjs_page.build_page(server, names, joint_radius=self.joint_radius)
         width, height = self.plotter.window_size
-        return _iframe_widget(None, src, width=f"{int(width)}px", height=f"{int(height)}px")
+        return iframe_widget(None, src, width=f"{int(width)}px", height=f"{int(height)}px")
 
     def _client_attach(self, server: Any) -> dict[str, Any]:
         """Give this viewer its state variables on the trame ``server`` and fill them: the whole scene once.
@@ -2063,9 +1255,8 @@ class MotionViewer:
         Returns the names: ``key`` (the viewer's prefix) and one per part
         (``chars``, ``overlays``, ``ground``, ``camera``, ``ctl``, ``start``).
         """
-        key = f"mocaplab_v{next(_CLIENT_COUNTER)}"
-        names = {part: f"{key}_{part}" for part in ("chars", "overlays", "ground", "camera", "ctl", "start")}
-        self._client = {"server": server, "key": key, **names}
+        names = vtkjs_page.state_names(vtkjs_page.new_key())
+        self._client = {"server": server, **names}
         state = server.state
         state.client_only("mocaplab_ready")
         state.setdefault("mocaplab_ready", False)
@@ -2077,13 +1268,9 @@ class MotionViewer:
     def _client_ctl(self) -> dict[str, Any]:
         """What the page plays: from which frame, whether it runs, at which rate (``seq`` makes each one new)."""
         self._client_seq += 1
-        return {
-            "playing": bool(self._playing),
-            "frame": int(self._frame),
-            "fps": float(self.fps),
-            "n_frames": int(self.n_frames),
-            "seq": self._client_seq,
-        }
+        return vtkjs_page.control_payload(
+            playing=self._playing, frame=self._frame, fps=self.fps, n_frames=self.n_frames, seq=self._client_seq
+        )
 
     def _client_control(self) -> None:
         """Tell the page the frame to show (and, while playing, to play on from)."""
@@ -2103,100 +1290,34 @@ class MotionViewer:
         flush: bool = True,
     ) -> None:
         """Send the parts of the scene that changed to the page (each part a new state value)."""
-        if self._client is None:
+        client = self._client
+        if client is None:
             return
         self._client_seq += 1
-        state = self._client["server"].state
+        key, seq, state = client["key"], self._client_seq, client["server"].state
+        clock = {"n_frames": self.n_frames, "fps": self.fps}
         values: dict[str, Any] = {}
         if chars:
-            values[self._client["chars"]] = self._client_characters()
+            values[client["chars"]] = vtkjs_page.characters_payload(
+                self.characters,
+                key=key,
+                seq=seq,
+                bone_radius=self.bone_radius,
+                joint_radius=self.joint_radius,
+                sides=self._sides,
+                **clock,
+            )
         if overlays:
-            values[self._client["overlays"]] = self._client_overlays()
+            values[client["overlays"]] = vtkjs_page.overlays_payload(self.overlays.values(), key=key, seq=seq, **clock)
         if ground:
-            values[self._client["ground"]] = self._client_ground()
+            values[client["ground"]] = vtkjs_page.ground_payload(self._ground_mesh)
         if camera:
-            cam = self.plotter.camera
-            values[self._client["camera"]] = {
-                "position": [float(x) for x in cam.position],
-                "focalPoint": [float(x) for x in cam.focal_point],
-                "viewUp": [float(x) for x in cam.up],
-                "centerOfRotation": [float(x) for x in cam.focal_point],
-                "seq": self._client_seq,
-            }
+            values[client["camera"]] = vtkjs_page.camera_payload(self.plotter.camera, seq)
         if flush:
             with state:
                 state.update(values)
         else:
             state.update(values)
-
-    def _client_characters(self) -> dict[str, Any]:
-        """Every character's drawn points on each of its frames, its bones and its frame on each clock frame."""
-        clock = np.arange(self.n_frames) / self.fps
-        out = []
-        for c in self.characters:
-            index = [c.frame_at(t) for t in clock]
-            out.append(
-                {
-                    "pos": _b64(c.positions, "<f4"),
-                    "n_points": int(c.positions.shape[1]),
-                    "segs": [int(x) for x in c.segments.reshape(-1)],
-                    "index": _b64(index, "<i4"),
-                    "color": _rgb(c.color),
-                    "radius": self.bone_radius,
-                    "joint_radius": self.joint_radius,
-                    "sides": self._sides,
-                }
-            )
-        return {"id": f"{self._client['key']}_chars/{self._client_seq}", "chars": out}
-
-    def _client_overlays(self) -> dict[str, Any]:
-        """Each overlay's points sampled once (its own frames, or the clock's for a callable), NaN rows left out."""
-        clock = np.arange(self.n_frames) / self.fps
-        out = []
-        for ov in self.overlays.values():
-            if callable(ov.data):
-                samples, index = [ov.at(t) for t in clock], np.arange(self.n_frames)
-            elif isinstance(ov.data, np.ndarray) and ov.data.ndim == 2:
-                samples, index = [ov.at(0.0)], np.zeros(self.n_frames, dtype=np.int64)
-            else:
-                n = len(ov.data)
-                samples = [ov.at(i / ov.fps) for i in range(n)]
-                index = np.clip(np.round(clock * ov.fps), 0, n - 1).astype(np.int64)
-            offsets = np.concatenate([[0], np.cumsum([len(p) for p in samples])])
-            pts = np.concatenate(samples) if samples else np.zeros((0, 3))
-            out.append(
-                {
-                    "kind": ov.kind,
-                    "pts": _b64(pts, "<f4"),
-                    "offsets": _b64(offsets, "<i4"),
-                    "index": _b64(index, "<i4"),
-                    "color": _rgb(ov.color),
-                    "radius": ov.style.get("radius", 0.0),
-                    "width": ov.style.get("width", 1.0),
-                    "opacity": ov.style.get("opacity", 1.0) if ov.style.get("fill") else 1.0,
-                    "closed": bool(ov.style.get("closed", False)),
-                    "fill": bool(ov.style.get("fill", False)),
-                }
-            )
-        return {"id": f"{self._client['key']}_overlays/{self._client_seq}", "overlays": out}
-
-    def _client_ground(self) -> dict[str, Any] | None:
-        """The ground grid (the plotter's mesh) as its grid lines, one polyline per row and column; None without.
-
-        Lines only, on the white background: a filled floor with its edges
-        drawn over it made each picture of software WebGL about twice as dear
-        (headless Chromium, lesson 01: 22 against 12 ms).
-        """
-        if self._ground_mesh is None:
-            return None
-        grid = self._ground_mesh
-        nx, nz = int(grid.dimensions[0]), int(grid.dimensions[1])
-        ids = np.arange(nx * nz).reshape(nz, nx)  # VTK's point order: x fastest
-        rows = [np.r_[nx, ids[k]] for k in range(nz)] + [np.r_[nz, ids[:, k]] for k in range(nx)]
-        return {
-            "points": [round(float(x), 6) for x in np.asarray(grid.points).reshape(-1)],
-            "lines": [int(x) for x in np.concatenate(rows)],
-        }
 
     # plain-value callbacks: each forwards one event to the viewer, its error shown in the status line
     def _on_play(self, _button: Any) -> None:
@@ -2219,7 +1340,7 @@ class MotionViewer:
         if self._status is not None and self._status.value and threading.current_thread() is threading.main_thread():
             self._status.value = ""
 
-    @_on_main_thread
+    @on_main_thread
     def _step_on_main_thread(self, delta: int) -> None:
         self._step(delta)
 
@@ -2260,7 +1381,7 @@ class MotionViewer:
 
         display(self.widget)
 
-    @_on_main_thread
+    @on_main_thread
     def close(self) -> None:
         """Stop playback and release the render window."""
         self.stop_playback()
@@ -2269,10 +1390,3 @@ class MotionViewer:
     def __repr__(self) -> str:
         names = ", ".join(c.label for c in self.characters)
         return f"<MotionViewer [{names}] {self.n_frames} frames at {self.fps:g} fps, backend {self.backend!r}>"
-
-
-def _current_task() -> asyncio.Task[Any] | None:
-    try:
-        return asyncio.current_task()
-    except RuntimeError:  # no running loop in this thread
-        return None

@@ -33,8 +33,11 @@ from mocaplab.staggered import (
     StaggeredTimingWarning,
     UnreachableTargetWarning,
     analyze,
+    exaggerate,
     extract,
     fit,
+    randomize,
+    succession,
 )
 from mocaplab.staggered.noise import jitter
 
@@ -103,15 +106,15 @@ def main() -> None:
     shoulders = [roles["left_shoulder"], roles["right_shoulder"]]
     arms = [roles["left_shoulder"], roles["left_elbow"], roles["right_shoulder"], roles["right_elbow"]]
     cases = {
-        "succession s=0.01, l=2 on the whole body + evaluate": lambda: sm.succession(0.01, 2.0).evaluate(),
-        "succession s=0.03, l=2 below the left shoulder + evaluate": lambda: sm.succession(
-            0.03, 2.0, joint=roles["left_shoulder"]
+        "succession s=0.01, l=2 on the whole body + evaluate": lambda: succession(sm, 0.01, 2.0).evaluate(),
+        "succession s=0.03, l=2 below the left shoulder + evaluate": lambda: succession(
+            sm, 0.03, 2.0, joint=roles["left_shoulder"]
         ).evaluate(),
-        "random tau=0.03 s on every joint + evaluate": lambda: sm.randomize(0.03, seed=1).evaluate(),
-        "exaggerate arms of one pose (w_r=0.5) + evaluate": lambda: sm.exaggerate(
-            0.5, poses=[10], joints=shoulders
+        "random tau=0.03 s on every joint + evaluate": lambda: randomize(sm, 0.03, seed=1).evaluate(),
+        "exaggerate arms of one pose (w_r=0.5) + evaluate": lambda: exaggerate(
+            sm, 0.5, poses=[10], joints=shoulders
         ).evaluate(),
-        "exaggerate arms of every pose (w_r=0.5) + evaluate": lambda: sm.exaggerate(0.5, joints=arms).evaluate(),
+        "exaggerate arms of every pose (w_r=0.5) + evaluate": lambda: exaggerate(sm, 0.5, joints=arms).evaluate(),
         "non-staggered playback (refinements zeroed), evaluate": lambda: sm.evaluate(staggered=False),
     }
     for label, fn in cases.items():
@@ -126,7 +129,7 @@ def main() -> None:
     out_b = sm_b.evaluate()  # type: ignore[union-attr]
     err_b = float(np.abs(out_b.global_positions() - static.global_positions()).max())
     print(f"  {sm_b}\n  reconstruction: max {err_b:.1e} m (joint positions)")
-    wall, cpu, _ = timed(lambda: sm_b.succession(0.01, 2.0).evaluate(), 7)  # type: ignore[union-attr]
+    wall, cpu, _ = timed(lambda: succession(sm_b, 0.01, 2.0).evaluate(), 7)  # type: ignore[union-attr]
     report("succession s=0.01, l=2 on the whole body + evaluate", wall, cpu, EVAL_TARGET)
     figures()
 
@@ -181,7 +184,7 @@ def figures() -> None:
     before = jitter(walk, head)
     print(f"\nhead jitter after whole-body succession s=0.03, l=2 on 16_15 (capture {1000 * before:.2f} mm)")
     for label, options in (("no filter", {"filter_sigma": None}), ("filtered (default)", {})):
-        after = jitter(extract(walk, **options).succession(0.03, 2.0).evaluate(), head)  # type: ignore[arg-type]
+        after = jitter(succession(extract(walk, **options), 0.03, 2.0).evaluate(), head)  # type: ignore[arg-type]
         print(f"  {label:20s} {1000 * after:.2f} mm, {after / before:.2f} x the capture's")
 
     print("\nknees under the walk's legs exaggerated by w_r = 0.5 (signed flexion about the input's hinge)")
@@ -189,7 +192,7 @@ def figures() -> None:
     legs = [limb_joints(sk, sk.roles[f"{s}_ankle"]) for s in ("left", "right")]
     hinges = hinge_axes(walk.global_rotations(), walk.global_positions(), legs)
     sm = extract(walk, constraints=True)
-    edited = sm.exaggerate(0.5, joints=[sk.roles[f"{s}_{p}"] for s in ("left", "right") for p in ("hip", "knee", "ankle")])
+    edited = exaggerate(sm, 0.5, joints=[sk.roles[f"{s}_{p}"] for s in ("left", "right") for p in ("hip", "knee", "ankle")])
     for label, m in (("capture", walk), ("edit, no layer", edited.evaluate(constraints=False)),
                      ("edit + constraint layer", edited.evaluate())):
         flex = knee_flexion(m, legs, hinges)

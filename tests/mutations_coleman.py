@@ -60,7 +60,7 @@ def fixed_stillness(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def no_constraint_layer(monkeypatch: pytest.MonkeyPatch) -> None:
     """The contact constraint layer leaves the motion as it is."""
-    from mocaplab.staggered.edit import ConstraintLayer
+    from mocaplab.staggered.constraints import ConstraintLayer
 
     monkeypatch.setattr(ConstraintLayer, "apply", lambda self, sm, motion, t, staggered=True: motion)
 

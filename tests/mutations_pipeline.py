@@ -78,9 +78,9 @@ def role_names_ignored(monkeypatch: pytest.MonkeyPatch) -> None:
 # ------------------------------------------------------------------ lesson 15
 def no_exaggeration(monkeypatch: pytest.MonkeyPatch) -> None:
     """Exaggerating staggered poses changes nothing (the stylisation stage is the identity)."""
-    from mocaplab.staggered.representation import StaggeredMotion
+    from mocaplab import staggered
 
-    monkeypatch.setattr(StaggeredMotion, "exaggerate", lambda self, *args, **kwargs: self)
+    monkeypatch.setattr(staggered, "exaggerate", lambda sm, *args, **kwargs: sm)
 
 
 CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [

@@ -106,7 +106,8 @@ def _arms(motion: Motion) -> list[str]:
 def _staggered(motion: Motion) -> Motion:
     arms = _arms(motion)
     sm = ml.extract(motion)
-    return sm.exaggerate(0.5, joints=arms, reference="average").succession(0.02, 2.0, joint=arms[::2]).evaluate()
+    styled = ml.staggered.exaggerate(sm, 0.5, joints=arms, reference="average")
+    return ml.staggered.succession(styled, 0.02, 2.0, joint=arms[::2]).evaluate()
 
 
 def _export(motion: Motion) -> Motion:

@@ -170,7 +170,7 @@ def test_refining_the_humanik_file_against_itself_keeps_its_toes(humanik):
 
 
 def test_staggered_constraint_layer_holds_the_foot_through_a_roll_joint(rolled):
-    from mocaplab.staggered import extract
+    from mocaplab.staggered import edit_pose, extract
 
     sm = extract(rolled, max_poses=8, optimize=False, constraints=True)
     roles = rolled.skeleton.roles
@@ -179,7 +179,7 @@ def test_staggered_constraint_layer_holds_the_foot_through_a_roll_joint(rolled):
     e = sm.constraints.joints.index(roles["right_ankle"])
     planted = sm.constraints.masks[:, e]
     k = int(np.argmax(planted[np.round(sm.times * rolled.fps).astype(int)]))
-    edited = sm.edit_pose(k, root_position=sm.root_values[k] + [0.0, -0.05, 0.0])
+    edited = edit_pose(sm, k, root_position=sm.root_values[k] + [0.0, -0.05, 0.0])
     for name in (roles["right_ankle"], roles["right_toe"]):
         j = rolled.skeleton.index(name)
         free = edited.evaluate(constraints=False).global_positions()[:, j]

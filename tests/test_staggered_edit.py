@@ -11,7 +11,14 @@ from mocaplab import quat
 from mocaplab.staggered import (
     StaggeredEditor,
     StaggeredTimingWarning,
+    delete_pose,
+    edit_pose,
+    exaggerate,
     extract,
+    insert_pose,
+    randomize,
+    retime,
+    succession,
     succession_depths,
 )
 from mocaplab.staggered.edit import average_pose, keep_knot_order
@@ -35,11 +42,26 @@ def walk_sm(mocap_dir):
 
 def test_zero_succession_and_no_value_change_return_the_original(walk_sm) -> None:
     walk, sm = walk_sm
-    same = sm.succession(0.0, 2.0).randomize(0.0).exaggerate(0.0)
+    same = exaggerate(randomize(succession(sm, 0.0, 2.0), 0.0), 0.0)
     rot, pos = max_diff(same.evaluate(), walk)
     assert rot < 1e-6 and pos < 1e-6
     assert np.array_equal(same.refinements, sm.refinements)
-    assert sm.succession(0.0) is sm
+    assert succession(sm, 0.0) is sm
+
+
+@pytest.mark.parametrize(
+    "name", ["retime", "succession", "randomize", "edit_pose", "exaggerate", "insert_pose", "delete_pose"]
+)
+def test_the_edits_are_functions_and_the_old_methods_say_what_to_write(walk_sm, name) -> None:
+    from mocaplab import staggered
+
+    _, sm = walk_sm
+    with pytest.raises(AttributeError, match=rf"StaggeredMotion\.{name}\(\) is gone.* write mocaplab\.staggered\.{name}\(sm, "):
+        getattr(sm, name)
+    assert not hasattr(sm, name)
+    assert callable(getattr(staggered, name)) and getattr(staggered, name).__module__ == "mocaplab.staggered.edit"
+    with pytest.raises(AttributeError, match="has no attribute 'no_such_edit'"):
+        sm.no_such_edit  # noqa: B018 (other names fail as usual)
 
 
 def test_succession_depths_below_a_joint(cmu) -> None:
@@ -60,7 +82,7 @@ def test_nonlinear_succession_offsets(walk_sm) -> None:
     s, l = 0.003, 2.0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
-        out = sm.succession(s, l, joint="RightArm")
+        out = succession(sm, s, l, joint="RightArm")
     d = succession_depths(sm.skeleton, "RightArm")
     dr = out.refinements - sm.refinements
     moved = np.isfinite(d)
@@ -72,7 +94,7 @@ def test_nonlinear_succession_offsets(walk_sm) -> None:
 def test_large_succession_warns_and_keeps_knots_ordered(walk_sm) -> None:
     _, sm = walk_sm
     with pytest.warns(StaggeredTimingWarning, match="closer to a neighbouring pose"):
-        out = sm.succession(0.05, 2.0)
+        out = succession(sm, 0.05, 2.0)
     T = out.times[:, None] + out.refinements
     assert np.all(np.diff(T, axis=0) > 0)
     assert out.evaluate().n_frames == sm.n_frames
@@ -93,9 +115,9 @@ def test_random_timing_is_seeded_bounded_and_selective(walk_sm) -> None:
     _, sm = walk_sm
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
-        a = sm.randomize(0.03, joints=["LeftArm", "LeftForeArm"], seed=7)
-        b = sm.randomize(0.03, joints=["LeftArm", "LeftForeArm"], seed=7)
-        c = sm.randomize(0.03, joints=["LeftArm", "LeftForeArm"], seed=8)
+        a = randomize(sm, 0.03, joints=["LeftArm", "LeftForeArm"], seed=7)
+        b = randomize(sm, 0.03, joints=["LeftArm", "LeftForeArm"], seed=7)
+        c = randomize(sm, 0.03, joints=["LeftArm", "LeftForeArm"], seed=8)
     assert np.array_equal(a.refinements, b.refinements) and not np.array_equal(a.refinements, c.refinements)
     dr = a.refinements - sm.refinements
     cols = [sm.variable_index("LeftArm"), sm.variable_index("LeftForeArm")]
@@ -119,8 +141,8 @@ def test_random_timing_per_limb(walk_sm) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
         tau = 0.004  # small: no knot is stopped short by a neighbour, every offset shows whole
-        limb = sm.randomize(tau, seed=3, by="limb")
-        per_var = sm.randomize(tau, seed=3)
+        limb = randomize(sm, tau, seed=3, by="limb")
+        per_var = randomize(sm, tau, seed=3)
     d = (limb.refinements - sm.refinements)[1:-1]
     moving = ~np.all(sm.rotation_values == sm.rotation_values[:1], axis=(0, 2))  # still joints change nothing
     for g in range(len(LIMBS)):
@@ -133,7 +155,7 @@ def test_random_timing_per_limb(walk_sm) -> None:
     assert np.ptp(dv[:, leg], axis=1).max() > 0  # per variable, a limb's joints differ
     assert np.abs(d).max() <= tau + 1e-12
     with pytest.raises(ValueError, match="by"):
-        sm.randomize(0.01, by="joint")  # type: ignore[arg-type]
+        randomize(sm, 0.01, by="joint")  # type: ignore[arg-type]
 
 
 def test_retime_moves_the_pose_and_its_knots(walk_sm) -> None:
@@ -142,7 +164,7 @@ def test_retime_moves_the_pose_and_its_knots(walk_sm) -> None:
     shift = 3 / walk.fps
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
-        out = sm.retime(k, float(sm.times[k] + shift))
+        out = retime(sm, k, float(sm.times[k] + shift))
     assert out.times[k] == pytest.approx(sm.times[k] + shift)
     # the refined knot values are reached at the shifted knot times (the noise layer aside)
     m = out.evaluate(noise=False)
@@ -153,9 +175,9 @@ def test_retime_moves_the_pose_and_its_knots(walk_sm) -> None:
     far = (walk.times < sm.times[k - 1] - 0.3) | (walk.times > sm.times[k + 1] + 0.3)
     assert angle(out.evaluate().rotations[far], walk.rotations[far]).max() < 1e-9
     with pytest.raises(ValueError, match="strictly between"):
-        sm.retime(k, float(sm.times[k + 1] + 0.01))
+        retime(sm, k, float(sm.times[k + 1] + 0.01))
     with pytest.raises(ValueError, match="first pose"):
-        sm.retime(0, 0.1)
+        retime(sm, 0, 0.1)
 
 
 def test_editing_the_true_pose(walk_sm) -> None:
@@ -166,7 +188,7 @@ def test_editing_the_true_pose(walk_sm) -> None:
     j = walk.skeleton.index("LeftArm")
     turn = quat.from_axis_angle([0, 0, 1], 0.3)
     target[j] = quat.mul(rot[j], turn)
-    out = sm.edit_pose(k, rotations=target, root_position=root + [0.0, 0.04, 0.0], which="true")
+    out = edit_pose(sm, k, rotations=target, root_position=root + [0.0, 0.04, 0.0], which="true")
     new_root, new_rot = out.true_pose(k)
     assert angle(new_rot, target).max() < 1e-9
     assert np.allclose(new_root, root + [0.0, 0.04, 0.0], atol=1e-12)
@@ -187,7 +209,7 @@ def test_editing_the_non_staggered_pose_offsets_the_editing_knot(walk_sm) -> Non
     j = walk.skeleton.index("LeftForeArm")
     assert sm.refinements[k, j + 1] != 0.0  # this knot has an editing knot
     new = quat.mul(sm.rotation_values[k, j], quat.from_axis_angle([1, 0, 0], 0.2))
-    out = sm.edit_pose(k, rotations={"LeftForeArm": new})
+    out = edit_pose(sm, k, rotations={"LeftForeArm": new})
     assert angle(out.non_staggered_pose(k)[1][j], new) < 1e-12
     before = sm.true_pose(k)[1][j]
     after = out.true_pose(k)[1][j]
@@ -205,7 +227,7 @@ def test_edit_offsets_blend_with_the_one_ramp(walk_sm) -> None:
     flat = extract(walk, max_poses=14, max_refinement=0.0, optimize=False)
     k, j = 6, walk.skeleton.index("LeftArm")
     turn = quat.from_axis_angle([0, 0, 1], 0.3)
-    out = flat.edit_pose(k, rotations={"LeftArm": quat.mul(flat.rotation_values[k, j], turn)})
+    out = edit_pose(flat, k, rotations={"LeftArm": quat.mul(flat.rotation_values[k, j], turn)})
     t = walk.times[(walk.times > flat.times[k]) & (walk.times < flat.times[k + 1])]
     k0, k1, tn = flat.locate(t)
     s_old = flat.spline_values(k0, k1, tn)[1][:, j]
@@ -221,22 +243,22 @@ def test_relative_exaggeration(walk_sm) -> None:
     arms = ["LeftArm", "RightArm"]
     idx = [walk.skeleton.index(n) for n in arms]
     ref = 3
-    toward = sm.exaggerate(-1.0, reference=ref, joints=arms)
+    toward = exaggerate(sm, -1.0, reference=ref, joints=arms)
     assert angle(toward.rotation_values[:, idx], sm.rotation_values[ref, idx][None]).max() < 1e-9
     # w_r = 1 doubles the angle from the average pose (geodesic extrapolation)
     _, mean = average_pose(sm)
-    out = sm.exaggerate(1.0, joints=arms)
+    out = exaggerate(sm, 1.0, joints=arms)
     a0 = angle(mean[idx][None], sm.rotation_values[:, idx])
     a1 = angle(mean[idx][None], out.rotation_values[:, idx])
     assert np.allclose(a1, np.minimum(2 * a0, 2 * np.pi - 2 * a0), atol=1e-9)
     # the true-pose variant reaches its targets
-    true_out = sm.exaggerate(0.5, joints=arms, poses=[4], which="true", reference="previous")
+    true_out = exaggerate(sm, 0.5, joints=arms, poses=[4], which="true", reference="previous")
     r_prev = sm.true_pose(3)[1]
     r_k = sm.true_pose(4)[1]
     expected = quat.mul(r_k, quat.exp(0.5 * quat.log(quat.mul(quat.inv(r_prev), r_k))))
     assert angle(true_out.true_pose(4)[1][idx], expected[idx]).max() < 1e-9
     with pytest.raises(ValueError, match="reference"):
-        sm.exaggerate(0.5, reference="median")  # type: ignore[arg-type]
+        exaggerate(sm, 0.5, reference="median")  # type: ignore[arg-type]
 
 
 def test_average_pose_ignores_quaternion_signs(walk_sm) -> None:
@@ -254,18 +276,18 @@ def test_insert_and_delete_poses_keep_the_motion(walk_sm) -> None:
     k = 4
     T = sm.knot_times
     t_new = float(0.5 * (T[k].max() + T[k + 1].min()))
-    ins = sm.insert_pose(t_new)
+    ins = insert_pose(sm, t_new)
     assert ins.n_poses == sm.n_poses + 1 and np.isclose(ins.times[k + 1], t_new)
     rot, pos = max_diff(ins.evaluate(), walk)
     assert rot < 1e-6 and pos < 1e-6
-    dele = sm.delete_pose(k)
+    dele = delete_pose(sm, k)
     assert dele.n_poses == sm.n_poses - 1
     rot, pos = max_diff(dele.evaluate(), walk)
     assert rot < 1e-6 and pos < 1e-6
     with pytest.raises(ValueError, match="interior"):
-        sm.delete_pose(0)
+        delete_pose(sm, 0)
     with pytest.raises(ValueError, match="not on a pose"):
-        sm.insert_pose(float(sm.times[3]))
+        insert_pose(sm, float(sm.times[3]))
 
 
 def test_partial_pose_controls_a_subset(walk_sm) -> None:
@@ -273,7 +295,7 @@ def test_partial_pose_controls_a_subset(walk_sm) -> None:
     k = 4
     T = sm.knot_times
     t_new = float(0.5 * (T[k].max() + T[k + 1].min()))
-    part = sm.insert_pose(t_new, joints=["LeftArm", "LeftForeArm"])
+    part = insert_pose(sm, t_new, joints=["LeftArm", "LeftForeArm"])
     row = part.active[k + 1]
     assert row.sum() == 2 and row[part.variable_index("LeftArm")]
     rot, pos = max_diff(part.evaluate(), walk)
@@ -281,7 +303,7 @@ def test_partial_pose_controls_a_subset(walk_sm) -> None:
     # timing and value edits work on it; uncontrolled variables are not refined there
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
-        moved = part.succession(0.02, 1.0, joint="LeftArm")
+        moved = succession(part, 0.02, 1.0, joint="LeftArm")
     assert np.all(moved.refinements[k + 1][~row] == 0.0)
     assert moved.evaluate().n_frames == walk.n_frames
 
@@ -299,7 +321,7 @@ def test_constraint_layer_keeps_planted_feet(cmu) -> None:
     e = sm.constraints.joints.index(roles["right_ankle"])
     planted = sm.constraints.masks[:, e]
     k = int(np.argmax(planted[np.round(sm.times * walk.fps).astype(int)]))
-    edited = sm.edit_pose(k, root_position=sm.root_values[k] + [0.0, -0.05, 0.0])
+    edited = edit_pose(sm, k, root_position=sm.root_values[k] + [0.0, -0.05, 0.0])
     for name in (roles["right_ankle"], roles["right_toe"]):
         j = walk.skeleton.index(name)
         free = edited.evaluate(constraints=False).global_positions()[:, j]
@@ -317,7 +339,7 @@ def test_constraint_layer_holds_the_whole_foot(cmu) -> None:
     sm = extract(walk, max_poses=14, optimize=False, constraints=True)
     layer = sm.constraints
     legs = [walk.skeleton.roles[f"{s}_{p}"] for s in ("left", "right") for p in ("hip", "knee", "ankle")]
-    edited = sm.exaggerate(0.5, joints=legs)
+    edited = exaggerate(sm, 0.5, joints=legs)
     out, free = edited.evaluate(), edited.evaluate(constraints=False)
     w, targets = layer.weights_and_targets(edited, out.times)
     idx = [walk.skeleton.index(n) for n in layer.joints]
@@ -372,7 +394,7 @@ def test_constraint_layer_keeps_the_input_knee_bend(walk_layer) -> None:
     layer = sm.constraints
     assert layer.hinges is not None and np.allclose(layer.hinges[[0, 2]], hinges)  # measured on the input
     roles = walk.skeleton.roles
-    edited = sm.exaggerate(0.5, joints=[roles[f"{s}_{p}"] for s in ("left", "right") for p in ("hip", "knee", "ankle")])
+    edited = exaggerate(sm, 0.5, joints=[roles[f"{s}_{p}"] for s in ("left", "right") for p in ("hip", "knee", "ankle")])
     before = _knee_flexion(walk, hinges, legs)
     free = _knee_flexion(edited.evaluate(constraints=False), hinges, legs)
     held = _knee_flexion(edited.evaluate(), hinges, legs)
@@ -407,7 +429,7 @@ def test_constraint_layer_does_not_fight_succession(walk_layer) -> None:
     walk, sm, legs, hinges = walk_layer
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)  # sparse poses: some knots pass halfway
-        edited = sm.succession(0.01, 1.0)
+        edited = succession(sm, 0.01, 1.0)
     free = _peak_acceleration(_knee_flexion(edited.evaluate(constraints=False), hinges, legs), walk.fps)
     held = _peak_acceleration(_knee_flexion(edited.evaluate(), hinges, legs), walk.fps)
     assert held < 2.0 * free
@@ -426,7 +448,7 @@ def test_unreachable_targets_warn_with_their_frames(walk_layer) -> None:
 
     walk, sm, _, _ = walk_layer
     k = 8
-    raised = sm.edit_pose(k, root_position=sm.root_values[k] + [0.0, 0.15, 0.0])
+    raised = edit_pose(sm, k, root_position=sm.root_values[k] + [0.0, 0.15, 0.0])
     stiff = dataclasses.replace(raised, constraints=dataclasses.replace(sm.constraints, adjust_root=False))
     with pytest.warns(UnreachableTargetWarning, match=r"out of reach on frames \d+-\d+") as caught:
         out = stiff.evaluate()
@@ -447,22 +469,22 @@ def test_unreachable_targets_warn_with_their_frames(walk_layer) -> None:
 def test_constraint_layer_follows_pose_edits_and_structure(walk_layer) -> None:
     walk, sm, _, _ = walk_layer
     roles = walk.skeleton.roles
-    edited = sm.exaggerate(0.5, joints=[roles[f"{s}_{p}"] for s in ("left", "right") for p in ("hip", "knee")])
+    edited = exaggerate(sm, 0.5, joints=[roles[f"{s}_{p}"] for s in ("left", "right") for p in ("hip", "knee")])
     out = edited.evaluate()
     # inserting or deleting a pose leaves the layer where it was in time: the motion is unchanged
     T = edited.knot_times
-    ins = edited.insert_pose(float(0.5 * (T[4].max() + T[5].min())))
+    ins = insert_pose(edited, float(0.5 * (T[4].max() + T[5].min())))
     assert max_diff(ins.evaluate(), out)[0] < 1e-6
     assert np.allclose(ins.constraints.frame_times(ins), sm.constraints.frame_times(sm))
     # retiming a pose carries its contacts; a variable's timing carries them with its knots
     layer = sm.constraints
-    moved = sm.retime(6, float(sm.times[6] + 0.02))
+    moved = retime(sm, 6, float(sm.times[6] + 0.02))
     f = int(round(sm.times[6] * walk.fps))
     assert np.allclose(layer.frame_times(moved)[f], moved.times[6])
     import dataclasses
 
     own = dataclasses.replace(layer, timing=layer.joints)  # each foot joint's own refinements
-    late = sm.succession(0.01, 1.0)
+    late = succession(sm, 0.01, 1.0)
     e = layer.joints.index(roles["left_ankle"])
     i = sm.variable_index(roles["left_ankle"])
     k = 5
@@ -478,7 +500,7 @@ def test_runs_get_a_constraint_layer(cmu) -> None:
     assert max_diff(sm.evaluate(), run)[0] < 1e-6
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
-        edited = sm.succession(0.01, 1.0)
+        edited = succession(sm, 0.01, 1.0)
     w, tg = sm.constraints.weights_and_targets(edited, edited.evaluate().times)
     idx = [run.skeleton.index(n) for n in sm.constraints.joints]
     on = w == 1.0
@@ -531,7 +553,7 @@ def test_editor_drives_the_representation(cmu) -> None:
     # the editor agrees with the pure functions applied in its documented order
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
-        expected = ed.base.exaggerate(0.3).succession(0.02, 2.0).randomize(0.02, seed=3)
+        expected = randomize(succession(exaggerate(ed.base, 0.3), 0.02, 2.0), 0.02, seed=3)
     assert np.array_equal(expected.refinements, ed.current.refinements)
     assert max_diff(expected.evaluate(), ed.evaluate())[0] < 1e-12
     # undoing every edit gives back the clip

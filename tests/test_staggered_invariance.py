@@ -18,7 +18,19 @@ import pytest
 
 from mocaplab import quat
 from mocaplab.motion import Motion, Skeleton
-from mocaplab.staggered import StaggeredEditor, StaggeredTimingWarning, default_joint, extract, succession_depths
+from mocaplab.staggered import (
+    StaggeredEditor,
+    StaggeredTimingWarning,
+    default_joint,
+    delete_pose,
+    edit_pose,
+    exaggerate,
+    extract,
+    insert_pose,
+    retime,
+    succession,
+    succession_depths,
+)
 
 # CMU name -> game-studio name (no CMU word left but Hips, Neck, Head)
 STUDIO = {
@@ -137,10 +149,10 @@ def test_unedited_clips_round_trip_translations_included(clips) -> None:
 @pytest.mark.parametrize(
     "edit",
     [
-        pytest.param(lambda sm: sm.exaggerate(0.5), id="exaggerate"),
-        pytest.param(lambda sm: sm.succession(0.02, 2.0), id="succession"),
-        pytest.param(lambda sm: sm.exaggerate(0.5, reference="previous").succession(0.01, 1.0), id="both"),
-        pytest.param(lambda sm: sm.retime(5, float(sm.times[5] + 0.05)), id="retime"),
+        pytest.param(lambda sm: exaggerate(sm, 0.5), id="exaggerate"),
+        pytest.param(lambda sm: succession(sm, 0.02, 2.0), id="succession"),
+        pytest.param(lambda sm: succession(exaggerate(sm, 0.5, reference="previous"), 0.01, 1.0), id="both"),
+        pytest.param(lambda sm: retime(sm, 5, float(sm.times[5] + 0.05)), id="retime"),
     ],
 )
 def test_edits_give_the_same_joint_positions(clips, edit) -> None:
@@ -162,7 +174,7 @@ def test_the_constraint_layer_gives_the_same_result(clips) -> None:
     assert sm.constraints.joints == names
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
-        edited = sm.exaggerate(0.5).succession(0.01, 1.0)
+        edited = succession(exaggerate(sm, 0.5), 0.01, 1.0)
         ref = edited.evaluate()
         free = edited.evaluate(constraints=False)
         w, targets = sm.constraints.weights_and_targets(edited, ref.times)
@@ -175,7 +187,7 @@ def test_the_constraint_layer_gives_the_same_result(clips) -> None:
         for layout in ("renamed", "static"):
             mo, other = clips[layout]
             assert other.constraints.joints == mo.skeleton.roles.foot_joints()
-            got = other.exaggerate(0.5).succession(0.01, 1.0).evaluate()
+            got = succession(exaggerate(other, 0.5), 0.01, 1.0).evaluate()
             assert np.abs(positions(got, layout) - positions(ref, "cmu")).max() < 1e-6, layout
 
 
@@ -186,7 +198,7 @@ def test_retiming_keeps_the_travel_below_a_static_root(clips) -> None:
         warnings.simplefilter("ignore", StaggeredTimingWarning)
         for layout, s in (("cmu", sm), ("static", smb)):
             # a longer clip (without the constraint layer, which may lower the root where a stretched leg cannot reach)
-            longer[layout] = s.retime(s.n_poses - 1, float(s.times[-1] + 0.25)).evaluate(constraints=False)
+            longer[layout] = retime(s, s.n_poses - 1, float(s.times[-1] + 0.25)).evaluate(constraints=False)
     out = longer["static"]
     assert out.n_frames > mb.n_frames and out.translations is not None
     pelvis = out.global_positions()[:, 1]
@@ -215,23 +227,23 @@ def test_every_joint_translated(cmu) -> None:
     assert np.abs(sm.evaluate().global_positions() - noisy.global_positions()).max() < 1e-9
     # inserting and deleting poses leave the motion unchanged; editing a translation moves that joint
     T = sm.knot_times
-    ins = sm.insert_pose(float(0.5 * (np.nanmax(T[3]) + np.nanmin(T[4]))))
+    ins = insert_pose(sm, float(0.5 * (np.nanmax(T[3]) + np.nanmin(T[4]))))
     assert np.abs(ins.evaluate().translations - tr).max() < 1e-9
-    assert np.abs(sm.delete_pose(3).evaluate().translations - tr).max() < 1e-9
+    assert np.abs(delete_pose(sm, 3).evaluate().translations - tr).max() < 1e-9
     head = noisy.skeleton.index("Head")
     k = 4
     i = sm.variable_index("Head.position")
     target = sm.translation_values[k, i - J - 1] + [0.0, 0.05, 0.0]
-    edited = sm.edit_pose(k, translations={"Head": target})
+    edited = edit_pose(sm, k, translations={"Head": target})
     assert np.allclose(edited.translation_values[k, i - J - 1], target)
     f = int(round((sm.times[k] + sm.refinements[k, i]) * sm.fps))
     assert np.abs(edited.evaluate().translations[f, head] - target).max() < 1e-9
     with pytest.raises(ValueError, match="translation variable"):
-        sm.edit_pose(k, translations={"joint_Root": [0.0, 0.0, 0.0]})
+        edit_pose(sm, k, translations={"joint_Root": [0.0, 0.0, 0.0]})
     # a joint's translation is retimed with its rotation: the same depth below the chosen joint
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
-        moved = sm.succession(0.004, 1.0).refinements - sm.refinements
+        moved = succession(sm, 0.004, 1.0).refinements - sm.refinements
     d = succession_depths(sm.skeleton, translation_joints=sm.translation_joints)
     for name in ("Head", "LeftHand", "RightToeBase"):
         i, j = sm.variable_index(name + ".position"), sm.variable_index(name)
@@ -274,7 +286,7 @@ def test_role_overrides_reach_every_default(cmu) -> None:
     assert default_joint(walk.skeleton, {"pelvis": r["spine"][0]}) == r["spine"][0]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
-        moved = plain.succession(0.01, 1.0, roles={"pelvis": r["spine"][0]}).refinements - plain.refinements
+        moved = succession(plain, 0.01, 1.0, roles={"pelvis": r["spine"][0]}).refinements - plain.refinements
     legs = [plain.variable_index(r[f"{s}_knee"]) for s in ("left", "right")]
     arms = [plain.variable_index(r[f"{s}_elbow"]) for s in ("left", "right")]
     assert np.all(moved[:, legs] == 0.0) and np.all(moved[1:-1, arms] != 0.0)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mocaplab import quat
-from mocaplab.staggered import StaggeredTimingWarning, extract
+from mocaplab.staggered import StaggeredTimingWarning, delete_pose, edit_pose, extract, insert_pose, retime, succession
 from mocaplab.staggered.noise import filter_mask, jitter, orientation_filter
 
 
@@ -75,17 +75,17 @@ def test_noise_follows_the_poses_not_the_refinements(cmu) -> None:
     n0 = sm.noise_values(t)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
-        late = sm.succession(0.03, 2.0)
-        moved = sm.retime(5, float(sm.times[5] + 0.05))
+        late = succession(sm, 0.03, 2.0)
+        moved = retime(sm, 5, float(sm.times[5] + 0.05))
     assert np.array_equal(late.noise_values(t), n0)  # refinements leave it alone
     # a retimed pose carries its noise: the sample of the pose's frame plays at the new pose time
     f = int(round(sm.times[5] * walk.fps))
     assert np.allclose(moved.noise_values([moved.times[5]])[0], n0[f], atol=1e-12)
     # inserting or deleting poses keeps it in place (and the motion, see test_staggered_edit)
     T = sm.knot_times
-    ins = sm.insert_pose(float(0.5 * (T[4].max() + T[5].min())))
+    ins = insert_pose(sm, float(0.5 * (T[4].max() + T[5].min())))
     assert np.allclose(ins.noise_values(t), n0, atol=1e-12)
-    assert np.allclose(sm.delete_pose(4).noise_values(t), n0, atol=1e-12)
+    assert np.allclose(delete_pose(sm, 4).noise_values(t), n0, atol=1e-12)
 
 
 def test_editing_the_true_pose_includes_the_noise(cmu) -> None:
@@ -98,7 +98,7 @@ def test_editing_the_true_pose_includes_the_noise(cmu) -> None:
     target = np.array(rot)
     j = walk.skeleton.index(walk.skeleton.roles["left_shoulder"])
     target[j] = quat.mul(rot[j], quat.from_axis_angle([0, 0, 1], 0.3))
-    out = sm.edit_pose(k, rotations=target, which="true")
+    out = edit_pose(sm, k, rotations=target, which="true")
     assert angle(out.true_pose(k)[1], target).max() < 1e-9
 
 
@@ -110,7 +110,7 @@ def test_timing_edits_do_not_amplify_capture_noise(cmu) -> None:
     assert 0.3e-3 < before < 0.8e-3  # about half a millimetre of capture noise
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StaggeredTimingWarning)
-        filtered = jitter(extract(walk).succession(0.03, 2.0).evaluate(), head)
-        unfiltered = jitter(extract(walk, filter_sigma=None).succession(0.03, 2.0).evaluate(), head)
+        filtered = jitter(succession(extract(walk), 0.03, 2.0).evaluate(), head)
+        unfiltered = jitter(succession(extract(walk, filter_sigma=None), 0.03, 2.0).evaluate(), head)
     assert filtered < 1.5 * before
     assert unfiltered > 3.0 * before  # without the filter the decorrelated noise shows

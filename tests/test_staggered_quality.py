@@ -28,7 +28,7 @@ import pytest
 
 from mocaplab import Motion, Skeleton, ik, quality
 from mocaplab.goals import Goal, solve_goals
-from mocaplab.staggered import extract
+from mocaplab.staggered import exaggerate, extract, succession
 
 
 @pytest.mark.parametrize(("clip", "s"), [("05_02", 0.01), ("49_03", 0.01)])
@@ -36,7 +36,7 @@ def test_layer_adds_no_pops(cmu, clip, s):
     m = cmu(clip)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        out = extract(m, constraints=True).succession(s).evaluate()
+        out = succession(extract(m, constraints=True), s).evaluate()
     report = quality.compare(m, out)
     for row in ("displacement", "angular_acceleration", "hinge_flips"):
         assert not report[row].regressed, report
@@ -82,7 +82,7 @@ def test_layer_adds_no_pops_on_more_clips(cmu, mocap_dir, clip, kind, amount):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sm = extract(m, constraints=True)
-        out = (sm.succession(amount) if kind == "succession" else sm.exaggerate(amount)).evaluate()
+        out = (succession(sm, amount) if kind == "succession" else exaggerate(sm, amount)).evaluate()
     report = quality.compare(m, out)
     for row in ("displacement", "angular_acceleration", "hinge_flips"):
         assert not report[row].regressed, report

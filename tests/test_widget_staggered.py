@@ -174,7 +174,7 @@ def test_undo_redo_reset_buttons_restore_the_sliders(explorer) -> None:
 
 def test_controls_show_the_editors_values_after_an_error(explorer, monkeypatch) -> None:
     """The issue's case: an unexpected error left the slider at 0.8 while the editor kept 0.0."""
-    from mocaplab.staggered import StaggeredMotion
+    from mocaplab.staggered import editor
 
     x = explorer
     monkeypatch.setattr(x.editor, "set_exaggeration", lambda w: (_ for _ in ()).throw(RuntimeError("boom")))
@@ -188,7 +188,7 @@ def test_controls_show_the_editors_values_after_an_error(explorer, monkeypatch) 
     assert "RuntimeError" in x.status.value and x.wr_slider.value == x.editor.w_r == 0.8
     monkeypatch.undo()
     # an edit the editor rejects: its reason in the status line, the slider back at the editor's value
-    monkeypatch.setattr(StaggeredMotion, "succession", lambda *a, **k: (_ for _ in ()).throw(ValueError("<crossing>")))
+    monkeypatch.setattr(editor, "succession", lambda *a, **k: (_ for _ in ()).throw(ValueError("<crossing>")))
     x.s_slider.value = 0.03
     assert "edit rejected" in x.status.value and "&lt;crossing&gt;" in x.status.value
     assert x.s_slider.value == x.editor.s == 0.0

@@ -3,26 +3,26 @@
 >>> from mocaplab import cmu, staggered                   # doctest: +SKIP
 >>> sm = staggered.extract(cmu("16_15"))                  # doctest: +SKIP
 >>> arm = sm.skeleton.roles["left_shoulder"]              # doctest: +SKIP
->>> edited = sm.succession(0.03, 2.0, joint=arm).evaluate()  # doctest: +SKIP
+>>> edited = staggered.succession(sm, 0.03, 2.0, joint=arm).evaluate()  # doctest: +SKIP
 
-Modules: :mod:`.representation` (section 3, the :class:`StaggeredMotion`
-container and its evaluation), :mod:`.features` (section 4.1, locating
-poses and refinements), :mod:`.fit` (section 4.1.1 and Appendix A, splines and
-displacement maps), :mod:`.noise` (section 6, filtering rotations before
-timing edits), :mod:`.edit` (section 5, geometric and timing edits, the
-contact constraint layer and the :class:`StaggeredEditor` used by the widget).
+Modules, each importing only those listed before it:
+:mod:`.representation` (section 3, the :class:`StaggeredMotion` container
+and its evaluation), :mod:`.features` (section 4.1, locating poses and
+refinements), :mod:`.noise` (section 6, filtering rotations before timing
+edits), :mod:`.constraints` (the contact constraint layer of section 3 and
+4.1.2), :mod:`.fit` (section 4.1.1 and Appendix A, splines and displacement
+maps; :func:`extract`), :mod:`.edit` (section 5, geometric and timing edits,
+functions of a :class:`StaggeredMotion`) and :mod:`.editor` (the undoable
+:class:`StaggeredEditor` used by the widget).
 """
 
 from __future__ import annotations
 
+from ..ik import UnreachableTargetWarning
+from .constraints import ConstraintLayer, constraint_joints
 from .edit import (
-    ConstraintLayer,
-    EditorParams,
-    StaggeredEditor,
-    UnreachableTargetWarning,
     apply_knot_deltas,
     average_pose,
-    constraint_joints,
     default_joint,
     delete_pose,
     edit_pose,
@@ -32,10 +32,10 @@ from .edit import (
     limb_groups,
     randomize,
     retime,
-    set_refinements,
     succession,
     succession_depths,
 )
+from .editor import EditorParams, StaggeredEditor
 from .features import NoContactsWarning, PoseAnalysis, analyze
 from .fit import (
     extract,
@@ -55,6 +55,7 @@ from .representation import (
     compose_rotation,
     factor_rotation,
     quat_bezier,
+    set_refinements,
     translation_joints,
     variable_names,
 )

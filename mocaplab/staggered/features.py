@@ -79,6 +79,13 @@ foot strike and toe-off), a jump in place a handful in all; "looser motion often
 more candidate poses, although it remains a sparse set" -- the dance has a
 quarter more than the walk.  A run's contact changes come faster (a stride
 lasts about 0.7 s), so it keeps more poses per second than a walk.
+
+Longer than 800 lines because the module is one pipeline (the seven steps
+above feed each other and :class:`PoseAnalysis` keeps their signals) and
+these notes keep the measurements that chose its rules.  Within the package it
+imports only the representation's variable naming (:mod:`~mocaplab.staggered.representation`);
+the filter (:mod:`~mocaplab.staggered.noise`) and the fit
+(:mod:`~mocaplab.staggered.fit`) build on it.
 """
 
 from __future__ import annotations
@@ -92,6 +99,7 @@ from numpy.typing import NDArray
 
 from .. import quat
 from .._warnings import warn
+from ..contacts import stillness_contacts
 from ..motion import Motion
 from .representation import translation_joints, variable_names
 
@@ -821,8 +829,6 @@ def analyze(
     if isinstance(contacts, str):
         if contacts != "auto":
             raise ValueError(f"Expected `contacts` to be a Contacts, 'auto' or None, got {contacts!r}")
-        from ..contacts import stillness_contacts
-
         contacts = stillness_contacts(motion, joints=contact_joints, roles=roles, min_duration="gait")
         if not contacts.mask.any():
             label = f" {motion.name!r}" if motion.name else ""

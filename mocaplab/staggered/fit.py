@@ -72,6 +72,7 @@ cost of the rest of the extraction.  From the linear start it took 40 s on
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from collections.abc import Mapping
 from typing import Any, Literal
@@ -84,9 +85,10 @@ from .. import quat
 from .._warnings import warn
 from ..motion import Motion
 from ..roles import resolve_roles
-from .features import check_rates
+from .constraints import ConstraintLayer
+from .features import NoContactsWarning, analyze, check_rates
 from .noise import FILTER_SIGMA, orientation_filter
-from .representation import StaggeredMotion, locate, next_active, pose_u, quat_bezier, translation_joints
+from .representation import StaggeredMotion, casteljau, locate, next_active, pose_u, quat_bezier, translation_joints
 
 __all__ = [
     "W_F",
@@ -253,8 +255,6 @@ def _spherical_residuals(
     seg: NDArray[np.int64], tn: Array, q: Array, q1: Array, q2: Array, q3: Array, q4: Array
 ) -> tuple[Array, Array]:
     """Residual rotation vectors ``log(s(t)^-1 q)`` (n, 3) of the samples and the squared error per segment (S,)."""
-    from .representation import casteljau
-
     ctrl = np.stack([q1[seg], q2[seg], q3[seg], q4[seg]], axis=1)  # (n, 4, 4)
     theta = np.arccos(np.clip(np.einsum("...i,...i->...", ctrl[:, :3], ctrl[:, 1:]), -1.0, 1.0))
     r = quat.log(quat.mul(quat.inv(casteljau(ctrl, theta, tn)), q))
@@ -671,8 +671,6 @@ def fit_representation(
 
 
 def _with(sm: StaggeredMotion, **changes: Any) -> StaggeredMotion:
-    import dataclasses
-
     return dataclasses.replace(sm, **changes)
 
 
@@ -721,7 +719,7 @@ def extract(
         (1000 fps).
     constraints : bool
         Attach the contact constraint layer
-        (:class:`~mocaplab.staggered.edit.ConstraintLayer`: the feet of the
+        (:class:`~mocaplab.staggered.constraints.ConstraintLayer`: the feet of the
         analysis' contacts held by the shared goal solver
         :func:`mocaplab.goals.solve_goals`, blended over
         ``constraint_window`` seconds).  It is the identity on the unedited
@@ -751,8 +749,6 @@ def extract(
     >>> sm.n_poses < cmu("16_15").n_frames                    # doctest: +SKIP
     True
     """
-    from .features import analyze
-
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
     if motion.n_frames < 2:
@@ -785,15 +781,11 @@ def extract(
             filter_sigma=filter_sigma,
         )
     if constraints:
-        from .edit import ConstraintLayer
-
         if analysis.contacts is None:
             raise ValueError("`constraints=True` needs contacts: pass `contacts` (or keep 'auto')")
         layer = ConstraintLayer.from_contacts(motion, analysis.contacts, sm.times, window=constraint_window)
         detected_here = isinstance(contacts, str) and not analysis_given  # analyze has warned already
         if not layer.masks.any() and not detected_here:
-            from .features import NoContactsWarning
-
             warn(
                 f"The constraint layer of {motion.name or 'the clip'!r} holds nothing: no contact of "
                 f"{list(layer.joints) or list(analysis.contacts.joints)} in the given contacts",

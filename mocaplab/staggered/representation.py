@@ -91,13 +91,28 @@ stored: its value is always obtained by evaluation (so it is re-created at
 ``t_k`` after every retiming, as in Figure 6c), and geometric edits
 (:mod:`mocaplab.staggered.edit`) use its position to give the editing knot and
 the extreme knot equal changes.
+
+Where this module sits
+----------------------
+It is the ground floor of :mod:`mocaplab.staggered`: it imports only the
+kinematic core, and every other module of the package builds on it
+(:mod:`~mocaplab.staggered.features`, :mod:`~mocaplab.staggered.noise`,
+:mod:`~mocaplab.staggered.constraints`, :mod:`~mocaplab.staggered.fit`,
+:mod:`~mocaplab.staggered.edit`, :mod:`~mocaplab.staggered.editor`).  The
+edits of section 5 are functions up there, not methods here; the only change
+made here is :func:`set_refinements`, which owns the evaluation caches it
+keeps.  Longer than 800 lines because :class:`StaggeredMotion` is one
+container whose evaluation (splines, displacement maps, the noise layer,
+editing knots and the caches that make edits cheap) reads its own arrays
+throughout; splitting the evaluation from the container would spread the one
+equation of section 3 over two files that each need the other's internals.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any, Literal
+from collections.abc import Sequence
+from typing import Any, Literal, NoReturn, overload
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -105,9 +120,6 @@ from numpy.typing import ArrayLike, NDArray
 from .. import quat
 from .._warnings import warn
 from ..motion import Motion, Skeleton, readonly
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .edit import ReferencePose
 
 __all__ = [
     "StaggeredMotion",
@@ -126,6 +138,7 @@ __all__ = [
     "casteljau",
     "pose_u",
     "pose_time",
+    "set_refinements",
 ]
 
 Array = NDArray[np.float64]
@@ -260,13 +273,42 @@ def _frame_times(duration: float, fps: float) -> Array:
     return np.arange(n) / fps
 
 
+class _EditFunction:
+    """A section 5 edit read as a method of :class:`StaggeredMotion`: says which function to call instead.
+
+    The edits live in :mod:`mocaplab.staggered.edit`, above this module, as
+    functions of the representation (``succession(sm, s)``, not
+    ``sm.succession(s)``); reading one on a motion raises an
+    ``AttributeError`` that spells the call.
+    """
+
+    name = ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    @overload
+    def __get__(self, obj: None, owner: type | None = None) -> _EditFunction: ...
+    @overload
+    def __get__(self, obj: object, owner: type | None = None) -> NoReturn: ...
+    def __get__(self, obj: object | None, owner: type | None = None) -> _EditFunction:
+        if obj is None:
+            return self
+        raise AttributeError(
+            f"StaggeredMotion.{self.name}() is gone: the section 5 edits are functions, "
+            f"write mocaplab.staggered.{self.name}(sm, ...)"
+        )
+
+
 # -------------------------------------------------------------- the container
 @dataclasses.dataclass(frozen=True, eq=False)
 class StaggeredMotion:
     """A motion as staggered poses, splines and displacement maps.
 
     Build one with :func:`mocaplab.staggered.extract` (from a clip) rather
-    than by hand.  Every editing method returns a new object.
+    than by hand; edit it with the functions of
+    :mod:`mocaplab.staggered.edit` (``ml.staggered.succession(sm, 0.02)``),
+    which return a new object.
 
     Parameters
     ----------
@@ -302,7 +344,8 @@ class StaggeredMotion:
     name : str
     constraints : ConstraintLayer, optional
         The contact constraint displacement layer (see
-        :class:`mocaplab.staggered.edit.ConstraintLayer`).
+        :class:`mocaplab.staggered.constraints.ConstraintLayer`; evaluation
+        calls its ``apply``, so this module never imports it).
     translation_joints : tuple of int, length T, optional
         Joints (never joint 0) whose local translation is a control variable
         (variable ``J + 1 + m`` for ``translation_joints[m]``).
@@ -873,96 +916,47 @@ class StaggeredMotion:
                 StaggeredTimingWarning,
             )
 
-    # -------------------------------------------------------------- editing
-    # (implemented in mocaplab.staggered.edit; thin methods for discoverability)
+    # ----------------------------------------------------------- refinements
     def with_refinements(self, refinements: ArrayLike) -> StaggeredMotion:
-        """A copy with new timing refinements (shape (K, V)); warns on conflicts."""
-        from . import edit
-
-        return edit.set_refinements(self, refinements)
-
-    def retime(self, k: int, time: float) -> StaggeredMotion:
-        """Move pose ``k`` to ``time`` seconds (section 5.2, 'retiming as a unit')."""
-        from . import edit
-
-        return edit.retime(self, k, time)
+        """A copy with new timing refinements (shape (K, V)); see :func:`set_refinements`."""
+        return set_refinements(self, refinements)
 
     def zero_refinements(self) -> StaggeredMotion:
         """The non-staggered representation: all refinements set to zero."""
-        from . import edit
+        return set_refinements(self, np.zeros_like(self.refinements))
 
-        return edit.set_refinements(self, np.zeros_like(self.refinements))
+    # the section 5 edits are functions of mocaplab.staggered.edit, not methods (that module sits above this one)
+    retime = _EditFunction()
+    succession = _EditFunction()
+    randomize = _EditFunction()
+    edit_pose = _EditFunction()
+    exaggerate = _EditFunction()
+    insert_pose = _EditFunction()
+    delete_pose = _EditFunction()
 
-    def succession(
-        self,
-        s: float,
-        l: float = 1.0,
-        *,
-        joint: str | Sequence[str] | None = None,
-        poses: Sequence[int] | None = None,
-        roles: Mapping[str, Any] | None = None,
-    ) -> StaggeredMotion:
-        """Nonlinear succession ``r + s d(i)^l`` (section 5.2); see :func:`edit.succession`."""
-        from . import edit
 
-        return edit.succession(self, s, l, joint=joint, poses=poses, roles=roles)
+def set_refinements(sm: StaggeredMotion, refinements: ArrayLike) -> StaggeredMotion:
+    """A copy with new refinements, shape (K, V) seconds.
 
-    def randomize(
-        self,
-        tau: float,
-        *,
-        joints: Sequence[str] | None = None,
-        poses: Sequence[int] | None = None,
-        seed: int | None = 0,
-        by: Literal["variable", "limb"] = "variable",
-        roles: Mapping[str, Any] | None = None,
-    ) -> StaggeredMotion:
-        """Bounded random refinement offsets ``rand(-tau, tau)``, per variable or per limb (section 5.2)."""
-        from . import edit
-
-        return edit.randomize(self, tau, joints=joints, poses=poses, seed=seed, by=by, roles=roles)
-
-    def edit_pose(
-        self,
-        k: int,
-        *,
-        root_position: ArrayLike | None = None,
-        rotations: ArrayLike | dict[str, ArrayLike] | None = None,
-        translations: dict[str, ArrayLike] | None = None,
-        which: Literal["true", "non-staggered"] = "non-staggered",
-    ) -> StaggeredMotion:
-        """Set new values for pose ``k`` (section 5.1); see :func:`edit.edit_pose`."""
-        from . import edit
-
-        return edit.edit_pose(
-            self, k, root_position=root_position, rotations=rotations, translations=translations, which=which
-        )
-
-    def exaggerate(
-        self,
-        w_r: float,
-        *,
-        reference: ReferencePose = "average",
-        poses: Sequence[int] | None = None,
-        joints: Sequence[str] | None = None,
-        which: Literal["true", "non-staggered"] = "non-staggered",
-    ) -> StaggeredMotion:
-        """Relative pose editing ``v (+) w_r (v (-) v^r)`` (section 5.1)."""
-        from . import edit
-
-        return edit.exaggerate(self, w_r, reference=reference, poses=poses, joints=joints, which=which)
-
-    def insert_pose(self, time: float, *, joints: Sequence[str] | None = None) -> StaggeredMotion:
-        """Create a (possibly partial) pose at ``time``; the motion is unchanged (section 5.1)."""
-        from . import edit
-
-        return edit.insert_pose(self, time, joints=joints)
-
-    def delete_pose(self, k: int) -> StaggeredMotion:
-        """Remove pose ``k``; displacement maps keep the motion unchanged (section 5.1)."""
-        from . import edit
-
-        return edit.delete_pose(self, k)
+    The one place refinements change (every timing edit of
+    :mod:`~mocaplab.staggered.edit` ends here): the knot values, tangents and
+    displacement maps are unchanged by retiming, so their caches are kept.
+    Raises ``ValueError`` if a variable's refined knots would cross; warns
+    (:class:`StaggeredTimingWarning`) when a knot is closer to a neighbouring
+    pose than to its own.
+    """
+    r = np.asarray(refinements, dtype=float)
+    if r.shape != sm.refinements.shape:
+        raise ValueError(f"Expected `refinements` of shape {sm.refinements.shape}, got {r.shape}")
+    if np.array_equal(r, sm.refinements):
+        return sm
+    out = dataclasses.replace(sm, refinements=np.where(sm.active, r, 0.0))
+    for cached in ("_ctrl", "_static"):  # values, tangents and displacements are unchanged by retiming
+        if cached in sm.__dict__:
+            object.__setattr__(out, cached, sm.__dict__[cached])
+    out._inherit_raw(sm, np.any(r != sm.refinements, axis=0))
+    out._warn_timing()
+    return out
 
 
 # ------------------------------------------------------------------ helpers

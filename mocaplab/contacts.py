@@ -35,8 +35,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import kinematics
+from .anatomy import foot_balls
 from .motion import Motion, readonly
-from .roles import resolve_roles
+from .roles import RolesError, resolve_roles
 
 __all__ = [
     "Contacts",
@@ -381,17 +382,13 @@ def _speeds(pos: NDArray[np.float64], fps: float) -> NDArray[np.float64]:
 
 
 def _balls(motion: Motion, names: tuple[str, ...], roles: Mapping[str, Any] | None) -> dict[str, NDArray[np.float64]]:
-    """Ball positions of the tested ankles whose feet have no toe joint (see :func:`mocaplab.physics.body.foot_balls`)."""
-    from .roles import RolesError
-
+    """Ball positions of the tested ankles whose feet have no toe joint (see :func:`mocaplab.anatomy.foot_balls`)."""
     try:
         feet = resolve_roles(motion, roles).feet()
     except RolesError:
         return {}
     if not any(toe is None and ankle in names for ankle, toe in feet):
         return {}
-    from .physics.body import foot_balls
-
     try:
         balls = foot_balls(motion, roles=roles)
     except RolesError:

@@ -35,16 +35,16 @@ def no_horizontal_acceleration(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def no_ground_adjustment(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every ground adjustment of the touch-up leaves the motion as it is."""
-    from mocaplab.physics import touchup
+    from mocaplab.physics import state  # step() looks _ground_step up there (its home is physics.ground)
 
-    monkeypatch.setattr(touchup, "_ground_step", lambda posed, *args, **kwargs: posed)
+    monkeypatch.setattr(state, "_ground_step", lambda posed, *args, **kwargs: posed)
 
 
 def no_flight_adjustment(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every flight adjustment of the touch-up leaves the motion as it is (the ground ones still run)."""
-    from mocaplab.physics import touchup
+    from mocaplab.physics import state  # step() looks _flight_step up there (its home is physics.flight)
 
-    monkeypatch.setattr(touchup, "_flight_step", lambda posed, *args, **kwargs: posed)
+    monkeypatch.setattr(state, "_flight_step", lambda posed, *args, **kwargs: posed)
 
 
 CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [

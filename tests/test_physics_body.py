@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from mocaplab import quat
+from mocaplab.anatomy import BALL, FOOT_TIP, HAND, HEAD_TOP, TOE_TIP, foot_balls
 from mocaplab.motion import Motion, Skeleton
 from mocaplab.physics import (
     DE_LEVA_MALE,
@@ -20,7 +21,6 @@ from mocaplab.physics import (
     link_positions,
     smoothed_derivatives,
 )
-from mocaplab.physics.body import BALL, FOOT_TIP, HAND, HEAD_TOP, TOE_TIP
 from mocaplab.roles import RolesError
 
 
@@ -101,6 +101,27 @@ def test_points_a_skeleton_lacks_are_estimated_as_documented():
     assert np.allclose(link["left_foot"][1], tip / 2)
     left = [k for k, n in enumerate(body.point_joints) if n == "LeftFoot"]
     assert np.allclose(body.point_offsets[left], [[0, 0, -0.05], BALL * tip, tip])
+
+
+def test_foot_balls_are_the_body_models_balls_carried_by_the_ankles(cmu):
+    """The ball contacts label toe-off by (mocaplab.anatomy.foot_balls) is the body's ball support point."""
+    sk = _stick_figure()
+    turns = quat.from_axis_angle([0.0, 1.0, 0.0], np.linspace(0.0, 1.5, 4))  # the figure turns about y, knees bent
+    rot = np.tile(quat.identity((1, sk.n_joints)), (4, 1, 1))
+    rot[:, 0] = turns
+    rot[:, sk.index("LeftLeg")] = quat.from_axis_angle([1.0, 0.0, 0.0], np.linspace(0.0, 0.6, 4))
+    walk = Motion(sk, rot, np.array([[0.0, 1.0, 0.1 * f] for f in range(4)]), fps=30.0)
+    balls = foot_balls(walk)
+    assert sorted(balls) == ["LeftFoot", "RightFoot"]
+    leg = 0.9
+    g, gr = walk.global_positions(), walk.global_rotations()
+    ankle = sk.index("LeftFoot")
+    ball = BALL * np.array([0.0, -FOOT_TIP[1] * leg, FOOT_TIP[0] * leg])  # ahead (+z) of and below the ankle
+    assert np.allclose(balls["LeftFoot"], g[:, ankle] + quat.rotate(gr[:, ankle], ball))
+    body = Body.from_skeleton(walk, foot_width=0.0)
+    pts, _ = body.support_points(walk, ("LeftFoot", "RightFoot"))  # heel, ball, tip per foot
+    assert np.allclose(pts[:, 1], balls["LeftFoot"]) and np.allclose(pts[:, 4], balls["RightFoot"])
+    assert foot_balls(cmu("16_15")[:3]) == {}  # every CMU foot has a toe joint
 
 
 def test_zeroed_end_sites_give_nearly_the_same_support_polygon(cmu):

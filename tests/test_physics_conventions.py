@@ -11,8 +11,8 @@ mass, the ZMP, the support polygon, :func:`fit_masses` and a short default
   Euler orders, axes, frame rate): 1 mm everywhere, 0.1 % on fitted masses
   (file precision is micrometres);
 * ``zero_end_sites`` removes the end sites, so the top of the head and the
-  toe tips are estimated (:data:`mocaplab.physics.body.HEAD_TOP`,
-  :data:`~mocaplab.physics.body.TOE_TIP`): the head link within 4 mm
+  toe tips are estimated (:data:`mocaplab.anatomy.HEAD_TOP`,
+  :data:`~mocaplab.anatomy.TOE_TIP`): the head link within 4 mm
   [3.2] and the support points within 8 mm [7.6] (the estimates'
   documented accuracy on CMU); the centre of mass [0.22] and the ZMP
   [0.31] still within 1 mm;

@@ -8,7 +8,7 @@ import pytest
 from mocaplab import quat
 from mocaplab.contacts import Contacts, foot_contacts
 from mocaplab.physics import Body, TouchUpSession, angular_momentum, center_of_mass
-from mocaplab.physics.touchup import FlightMeasure, flight_measures
+from mocaplab.physics.flight import FlightMeasure, flight_measures
 
 
 def _thrown(walk, g: float, spin: float = 0.0):

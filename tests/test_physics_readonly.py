@@ -28,7 +28,7 @@ from mocaplab.physics import (
     link_sets,
     touch_up,
 )
-from mocaplab.physics.touchup import LinkSets
+from mocaplab.physics.schedule import LinkSets
 
 #: The physics records whose arrays are checked (other objects they hold,
 #: motions and contacts, are frozen by their own modules).

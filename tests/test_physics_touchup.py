@@ -32,7 +32,9 @@ from mocaplab.physics import (
     step,
     touch_up,
 )
-from mocaplab.physics.touchup import MAX_ANGLE, STALL_TOLERANCE, ZMP_SLACK, _ground_rotation, _posed
+from mocaplab.physics.adjust import MAX_ANGLE, _posed
+from mocaplab.physics.ground import _ground_rotation
+from mocaplab.physics.touchup import STALL_TOLERANCE, ZMP_SLACK
 from mocaplab.physics.zmp import zmp_from_links
 
 
@@ -252,7 +254,7 @@ def test_step_function_and_session_agree_with_touch_up(walk30):
 
 def test_ik_footplants_put_planted_feet_back(walk30):
     """The "ik" goals: planted ankles and toes back where the input has them (the IK layer of refinement)."""
-    from mocaplab.physics.touchup import _footplant_fn, _posed
+    from mocaplab.physics.footplants import _footplant_fn
 
     c = foot_contacts(walk30)
     bent = bend(walk30, 2.0)
@@ -332,7 +334,7 @@ def test_bent_walk_gains_an_inward_lean_and_balance(walk30):
 
 
 def test_smoothing_weighs_end_frames_like_the_others():
-    from mocaplab.physics.touchup import _smooth
+    from mocaplab.physics.adjust import _smooth
 
     n, width = 60, 40.0
     spike = np.zeros((n, 3))
@@ -399,7 +401,7 @@ def test_smoothing_kernel_keeps_frame_noise_out_of_accelerations(rng):
     frame-to-frame noise of the per-frame corrections into the accelerations
     the ZMP depends on (what made repeated passes diverge); cut at 4 std it
     does not."""
-    from mocaplab.physics.touchup import _smooth
+    from mocaplab.physics.adjust import _smooth
 
     fps, width = 120.0, 160.0  # the lower-body kernel at 120 fps
     noise = rng.normal(0.0, 1e-3, (600, 1))  # 1 mm of frame-to-frame noise
@@ -410,7 +412,7 @@ def test_smoothing_kernel_keeps_frame_noise_out_of_accelerations(rng):
 
 def test_momentum_rotation_gives_a_constant_angular_momentum_and_keeps_both_ends(rng):
     """Section 3.4.1: I (omega + d omega) = D on every frame, the integrated rotation 0 at take-off and landing."""
-    from mocaplab.physics.touchup import _momentum_rotation
+    from mocaplab.physics.flight import _momentum_rotation
 
     n, dt = 121, 1 / 240  # smooth in time, so that differences recover the angular velocities
     t = np.linspace(0.0, 1.0, n)[:, None, None]
@@ -429,7 +431,7 @@ def test_momentum_rotation_gives_a_constant_angular_momentum_and_keeps_both_ends
 
 def test_flight_fields_are_carried_into_the_windows_with_their_slope():
     from mocaplab.displacement import blend_ramp
-    from mocaplab.physics.touchup import _carry_into_windows
+    from mocaplab.physics.flight import _carry_into_windows
 
     n, fps, stages, window = 60, 30.0, [(20, 35)], 6
     field = np.zeros((n, 3))
@@ -446,7 +448,7 @@ def test_flight_fields_are_carried_into_the_windows_with_their_slope():
 
 def test_ground_weights_ignore_the_clip_ends_but_not_frames_out_of_reach(walk30):
     """Frames without an exact solution keep their closest approach (section 3.3), only the clip ends count 0."""
-    from mocaplab.physics.touchup import _edge_frames, _ground_weights
+    from mocaplab.physics.ground import _edge_frames, _ground_weights
 
     bent = bend(walk30, 2.0)
     body, c = Body.from_skeleton(walk30), foot_contacts(walk30)
@@ -661,7 +663,7 @@ def test_captured_walks_are_left_alone(cmu, clip):
 def test_default_footplants_leave_the_input_as_it_is(cmu):
     """The default goals put the planted joints where the input has them: on the input, they change nothing;
     the plant goals (one spot per contact) move a captured walk's knees by centimetres."""
-    from mocaplab.physics.touchup import _footplant_fn, _posed
+    from mocaplab.physics.footplants import _footplant_fn
 
     walk = cmu("16_15")
     c = foot_contacts(walk)
@@ -673,7 +675,8 @@ def test_default_footplants_leave_the_input_as_it_is(cmu):
 
 def test_footplant_goals_stay_out_of_flights(cmu):
     """A goal reaching into a flight would pull the airborne legs back after the flight adjustments."""
-    from mocaplab.physics.touchup import _footplant_fn, _Posed
+    from mocaplab.physics.adjust import _Posed
+    from mocaplab.physics.footplants import _footplant_fn
 
     jump = cmu("16_05").resample(30)
     c = foot_contacts(jump)

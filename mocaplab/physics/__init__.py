@@ -19,18 +19,17 @@
 
 from __future__ import annotations
 
+from ..anatomy import RestPoseWarning, standing_pose
 from .body import (
     DE_LEVA_MALE,
     GRAVITY,
     Body,
     LinkSpec,
-    RestPoseWarning,
     angular_momentum,
     center_of_mass,
     linear_momentum,
     link_positions,
     smoothed_derivatives,
-    standing_pose,
 )
 from .masses import MassFit, fit_masses
 from .touchup import (

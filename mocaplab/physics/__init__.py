@@ -31,26 +31,20 @@ from .body import (
     link_positions,
     smoothed_derivatives,
 )
+from .flight import FlightMeasure, flight_measures
 from .masses import MassFit, fit_masses
-from .touchup import (
+from .schedule import (
     FLIGHT_SCHEDULE,
     GROUND_SCHEDULE,
     Adjustment,
-    FlightMeasure,
     LinkSets,
-    TouchUpHistory,
-    TouchUpSession,
-    TouchUpState,
-    TouchUpWarning,
     default_schedule,
-    flight_measures,
     flight_stages,
     link_sets,
     preset_mask,
-    start,
-    step,
-    touch_up,
 )
+from .state import TouchUpState, TouchUpWarning, start, step
+from .touchup import TouchUpHistory, TouchUpSession, touch_up
 from .zmp import Balance, balance, polygon_distance, signed_distance, support_polygon, zmp_distance, zmp_from_links
 
 __all__ = [

@@ -42,6 +42,7 @@ from .roles import RolesError, resolve_roles
 __all__ = [
     "Contacts",
     "foot_contacts",
+    "resolve_contacts",
     "stillness_contacts",
     "default_foot_joints",
     "intervals_from_mask",
@@ -368,6 +369,57 @@ def foot_contacts(
         max_gap=_frames(max_gap, motion.fps, "max_gap"),
     )
     return Contacts(names, mask, motion.fps)
+
+
+def resolve_contacts(
+    contacts: Contacts | Literal["auto"] | None,
+    motion: Motion,
+    *,
+    roles: Mapping[str, Any] | None = None,
+    arg: str = "contacts",
+) -> Contacts | None:
+    """The one meaning of a ``contacts=`` argument anywhere in mocaplab.
+
+    Parameters
+    ----------
+    contacts : "auto", None or Contacts
+        ``"auto"``: :func:`foot_contacts` of ``motion`` (detected);
+        ``None``: no contacts; a :class:`Contacts`: these, checked against
+        ``motion``'s frame count.
+    motion : Motion
+        The motion contacts are detected on (for ``"auto"``): callers pass
+        the motion before an edit when they have it, whose contacts are right.
+    roles : mapping, optional
+        Joint-role overrides for the detection.
+    arg : str
+        The caller's argument name, for the error message.
+
+    Returns
+    -------
+    Contacts or None
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab.motion import Motion, Skeleton
+    >>> m = Motion(Skeleton(["hips"], [-1], [[0.0, 0.0, 0.0]]), np.tile([0.0, 0, 0, 1], (5, 1, 1)), np.zeros((5, 3)), fps=30)
+    >>> resolve_contacts(None, m) is None
+    True
+    >>> resolve_contacts(Contacts(["hips"], np.ones((5, 1), bool), 30.0), m).n_frames
+    5
+    """
+    if isinstance(contacts, str) and contacts == "auto":
+        return foot_contacts(motion, roles=roles)
+    if contacts is None:
+        return None
+    if not isinstance(contacts, Contacts):
+        raise TypeError(
+            f'Expected `{arg}` to be "auto" (detect), None (no contacts) or a mocaplab.contacts.Contacts, '
+            f"got {type(contacts).__name__} {contacts!r}"[:300]
+        )
+    if contacts.n_frames != motion.n_frames:
+        raise ValueError(f"Expected `{arg}` over {motion.n_frames} frames, got {contacts.n_frames}")
+    return contacts
 
 
 #: Floors inclined by less than this (degrees) are taken as level by

@@ -26,6 +26,7 @@ from mocaplab import quat
 from mocaplab.editing import AbsoluteTime, MotionPath, PinPosition, SceneEditor, edit, stationary_segments
 from mocaplab.editing import discrete as D
 from mocaplab.editing.graph import build_graph, frame_features
+from mocaplab.displacement import blend_ramp
 from mocaplab.motion import Motion, Skeleton
 
 FPS = 30.0
@@ -261,7 +262,7 @@ def test_seams_are_blended_in_the_q_exp_d_convention(walk):
     m = D.apply_transformation(
         track, D.Transformation(0, "deletion", (i + 1, j + 1), (0, 0), walk.fps), blend=0.2
     ).motion
-    w = 0.5 * (1.0 + np.cos(np.pi * np.arange(n) / n))
+    w = blend_ramp((n - np.arange(n)) / n)  # the one blend ramp, 1 at the seam
     q = walk.rotations[:, 1:]  # the body joints (joint 0 carries the placement too)
     d = quat.log(quat.mul(quat.inv(q[i + 1]), q[j + 1]))  # expected i + 1, got j + 1
     d_left = quat.log(quat.mul(q[j + 1], quat.inv(q[i + 1])))  # the same jump, pre-multiplied

@@ -166,7 +166,7 @@ def test_entry_point_calls_refine(walk, contacts):
 
 
 def test_refine_rejects_mismatched_inputs(walk, contacts):
-    with pytest.raises(ValueError, match="contacts over 100 frames"):
+    with pytest.raises(ValueError, match="`contacts` over 100 frames"):
         refine(walk[:100], contacts=contacts)
     with pytest.raises(ValueError, match="refine_scene"):
         refine(walk, end_effectors=[EndEffector("RightHand", 10, RelativeTo("RightHand", character=1))])
@@ -180,7 +180,7 @@ def test_world_target_over_an_interval(walk):
     hand = m.skeleton.index("RightHand")
     target = m.global_positions()[:, hand] + [0.05, 0.1, 0.0]  # lift the swinging hand
     ee = EndEffector("RightHand", (100, 140), target, blend=0.25)
-    out = refine(m, end_effectors=[ee], feet=False)
+    out = refine(m, end_effectors=[ee], contacts=None)
     res = end_effector_residuals(out, [ee])[0]
     assert res.shape == (40,) and res.max() < 1.0
     assert max_joint_angle_jump(m, out) < 5.0
@@ -199,7 +199,7 @@ def test_object_frame_and_own_joint_targets(walk):
     # the right hand on the side of the right hip
     hip = EndEffector("RightHand", [150, 151, 152], RelativeTo("RightUpLeg", offset=(-0.2, 0.1, 0.0)))
     ees = [EndEffector("LeftHand", 60, box, blend=0.2), hip]
-    out = refine(m, end_effectors=ees, feet=False, blend=0.2)
+    out = refine(m, end_effectors=ees, contacts=None, blend=0.2)
     for res in end_effector_residuals(out, ees):
         assert res.max() < 1.0
 
@@ -236,7 +236,7 @@ def test_one_way_relative_target_follows_the_refined_other(walk):
         EndEffector("RightHand", 80, RelativeTo("LeftHand", character=1), character=0, blend=0.2),
         EndEffector("LeftHand", 80, hand_b, character=1, blend=0.2),
     ]
-    out = refine_scene([a, b], ees, feet=False)
+    out = refine_scene([a, b], ees, contacts=None)
     assert all(r.max() < 1.0 for r in end_effector_residuals(out, ees))
     # A's hand is where B's hand ended up, not where it was
     ha = out[0].global_positions()[80, a.skeleton.index("RightHand")]
@@ -249,7 +249,7 @@ def test_one_way_relative_target_follows_the_refined_other(walk):
                 EndEffector("RightHand", 80, RelativeTo("LeftHand", character=2), character=1),
                 EndEffector("RightHand", 80, RelativeTo("LeftHand", character=0), character=2),
             ],
-            feet=False,
+            contacts=None,
         )
 
 
@@ -281,15 +281,15 @@ def test_feet_without_toe_joints(mocap_dir):
 def test_end_effectors_that_cannot_apply_fail_before_refining(walk):
     short = walk[:118]
     with pytest.raises(ValueError, match=r"end_effectors\[0\] \('RightHand', frames=500\).*0\.\.117"):
-        refine(short, end_effectors=[EndEffector("RightHand", 500, [0.0, 1.0, 0.0])], feet=False)
+        refine(short, end_effectors=[EndEffector("RightHand", 500, [0.0, 1.0, 0.0])], contacts=None)
     with pytest.raises(ValueError, match=r"end_effectors\[1\] \('Tail'.*\['Tail'\] not in the skeleton"):
         refine(
             short,
             end_effectors=[EndEffector("RightHand", 5, [0.0, 1.0, 0.0]), EndEffector("Tail", 5, [0.0, 1.0, 0.0])],
-            feet=False,
+            contacts=None,
         )
     with pytest.raises(ValueError, match=r"one row per frame"):
-        refine(short, end_effectors=[EndEffector("RightHand", (0, 10), np.zeros((10, 3)))], feet=False)
+        refine(short, end_effectors=[EndEffector("RightHand", (0, 10), np.zeros((10, 3)))], contacts=None)
 
 
 def test_scene_edit_rejects_a_bad_end_effector_at_once(walk):
@@ -309,7 +309,7 @@ def test_an_unreachable_hand_target_warns_once_with_frames_and_distance(walk):
     hand = clip.global_positions()[:, clip.skeleton.index("RightHand")]
     far = hand[40] + [0.0, 0.0, 0.8]  # 0.8 m further than the hand is, the arm cannot reach it
     with pytest.warns(UnreachableTargetWarning, match=r"'RightHand' out of reach on frames 40-49 \(10 frames\)") as rec:
-        out = refine(clip, end_effectors=[EndEffector("RightHand", (40, 50), far)], feet=False)
+        out = refine(clip, end_effectors=[EndEffector("RightHand", (40, 50), far)], contacts=None)
     assert len(rec) == 1
     missed = np.linalg.norm(out.global_positions()[40:50, clip.skeleton.index("RightHand")] - far, axis=-1)
     assert f"missed by up to {1000 * missed.max():.0f} mm" in str(rec[0].message)
@@ -319,4 +319,22 @@ def test_an_unreachable_hand_target_warns_once_with_frames_and_distance(walk):
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", UnreachableTargetWarning)
-        refine(clip, end_effectors=[EndEffector("RightHand", (40, 50), hand[40] + [0.0, 0.05, 0.05])], feet=False)
+        refine(clip, end_effectors=[EndEffector("RightHand", (40, 50), hand[40] + [0.0, 0.05, 0.05])], contacts=None)
+
+
+def test_one_contacts_vocabulary(walk, contacts):
+    # "auto" detects (on the reference when given), None plants no feet, a Contacts is used as given
+    m = walk[:120]
+    bent = m.transformed(yaw=0.2)
+    assert np.array_equal(refine(bent, reference=m).rotations, refine(bent, reference=m, contacts="auto").rotations)
+    assert np.array_equal(
+        refine(bent, reference=m).rotations,
+        refine(bent, reference=m, contacts=foot_contacts(m)).rotations,
+    )
+    assert np.array_equal(refine(bent, contacts=None).rotations, bent.rotations)  # nothing to meet
+    with pytest.raises(TypeError, match="contacts=None"):
+        refine(bent, feet=False)
+    with pytest.raises(TypeError, match='"auto"'):
+        refine(bent, contacts="detect")
+    with pytest.raises(TypeError, match="no longer takes `feet`"):
+        refine_scene([bent], feet=False)

@@ -24,14 +24,14 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .. import quat
 from .._warnings import warn
-from ..contacts import Contacts, foot_contacts
+from ..contacts import Contacts, resolve_contacts
 from ..goals import EndEffector, Goal, RelativeTo, effector_goals, enforce_goals, foot_goals, world_targets
 from ..ik import UnreachableTargetWarning, unreachable_message
 from ..motion import Motion
@@ -49,27 +49,34 @@ JointRef = str | int
 
 
 # ------------------------------------------------------------------ refine
-def _contacts_for(
-    motion: Motion, contacts: Contacts | None, reference: Motion | None, roles: Mapping[str, Any] | None = None
-) -> Contacts:
-    if contacts is not None:
-        return contacts
-    return foot_contacts(reference if reference is not None else motion, roles=roles)
+#: Spellings of earlier versions, and what to write instead.
+_RENAMED = {
+    "feet": "refine(..., feet=False) is refine(..., contacts=None) (plant no feet); feet=True is the default "
+    "contacts='auto'",
+}
+
+
+def _old_spellings(function: str, given: Mapping[str, Any], allowed: Sequence[str]) -> None:
+    for name in given:
+        if name in _RENAMED:
+            raise TypeError(f"{function}() no longer takes `{name}`: {_RENAMED[name]}")
+    if given:
+        raise TypeError(f"{function}() got unexpected options {sorted(given)}; allowed: {sorted(allowed)}")
 
 
 def refine(
     motion: Motion,
     *,
-    contacts: Contacts | None = None,
+    contacts: Contacts | Literal["auto"] | None = "auto",
     end_effectors: Sequence[EndEffector] = (),
     reference: Motion | None = None,
-    feet: bool = True,
     blend: float = 0.1,
     spacing: float = 0.25,
     levels: int = 3,
     adjust_root: bool = True,
     dls_options: dict[str, Any] | None = None,
     roles: Mapping[str, Any] | None = None,
+    **removed: Any,
 ) -> Motion:
     """Clean foot skate and enforce end-effector constraints (Kim et al. 2009 s4.3).
 
@@ -77,17 +84,16 @@ def refine(
     ----------
     motion : Motion
         The edited motion.
-    contacts : Contacts, optional
-        Foot contacts to plant.  Default: :func:`~mocaplab.contacts.foot_contacts`
-        of ``reference`` when given (the motion before editing, whose
-        contacts are right), else of ``motion``.
+    contacts : "auto", None or Contacts
+        Foot contacts to plant (:func:`mocaplab.contacts.resolve_contacts`):
+        ``"auto"`` detects them on ``reference`` when given (the motion
+        before editing, whose contacts are right), else on ``motion``;
+        ``None`` plants no feet (only end effectors).
     end_effectors : sequence of EndEffector
         Extra constraints (``character`` must be 0 and any
         :class:`RelativeTo` must refer to this character).
     reference : Motion, optional
         The motion before editing, with the same number of frames.
-    feet : bool
-        Plant the feet (``False``: only end effectors).
     blend : float
         Blending window on each side of every constraint, seconds.
     spacing, levels : float, int
@@ -114,6 +120,7 @@ def refine(
     >>> bent = walk.transformed(yaw=0.3)                       # doctest: +SKIP
     >>> clean = ml.refine(bent, reference=walk)                # doctest: +SKIP
     """
+    _old_spellings("refine", removed, _ALLOWED)
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
     if reference is not None and not isinstance(reference, Motion):
@@ -127,7 +134,7 @@ def refine(
         ee.check(motion, label=f"end_effectors[{k}] ({ee.joint!r}, frames={ee.frames!r})")
     targets = [world_targets(ee, [motion]) for ee in end_effectors]
     return _refine_one(
-        motion, end_effectors, targets, contacts=contacts, reference=reference, feet=feet, blend=blend,
+        motion, end_effectors, targets, contacts=contacts, reference=reference, blend=blend,
         spacing=spacing, levels=levels, adjust_root=adjust_root, dls_options=dls_options, roles=roles,
     )
 
@@ -137,9 +144,8 @@ def _refine_one(
     end_effectors: Sequence[EndEffector],
     targets: Sequence[Array],
     *,
-    contacts: Contacts | None,
+    contacts: Contacts | Literal["auto"] | None,
     reference: Motion | None,
-    feet: bool,
     blend: float,
     spacing: float,
     levels: int,
@@ -148,8 +154,8 @@ def _refine_one(
     roles: Mapping[str, Any] | None = None,
 ) -> Motion:
     goals: list[Goal] = []
-    if feet:
-        c = _contacts_for(motion, contacts, reference, roles)
+    c = resolve_contacts(contacts, reference if reference is not None else motion, roles=roles)
+    if c is not None:
         goals += foot_goals(motion, c, reference=reference, blend=blend)
     goals += effector_goals(motion, end_effectors, targets, blend=blend)
     out = enforce_goals(
@@ -197,7 +203,7 @@ def refine_scene(
     motions: Sequence[Motion],
     end_effectors: Sequence[EndEffector] = (),
     *,
-    contacts: Sequence[Contacts | None] | None = None,
+    contacts: Sequence[Contacts | Literal["auto"] | None] | Literal["auto"] | None = "auto",
     references: Sequence[Motion | None] | None = None,
     **options: Any,
 ) -> list[Motion]:
@@ -210,7 +216,10 @@ def refine_scene(
     end_effectors : sequence of EndEffector
         ``character`` says whose joint is constrained; a :class:`RelativeTo`
         target with ``character=k`` follows character ``k``'s joint.
-    contacts, references : sequences, optional
+    contacts : "auto", None, or a sequence of them and Contacts
+        As in :func:`refine`: one value for every character, or one per
+        character.
+    references : sequence of Motion or None, optional
         Per character, as in :func:`refine`.
     **options
         Passed to :func:`refine` (``blend``, ``spacing``, ``levels``,
@@ -232,6 +241,8 @@ def refine_scene(
     if not motions or not all(isinstance(m, Motion) for m in motions):
         raise TypeError("Expected `motions` to be a non-empty sequence of Motion")
     n_chars = len(motions)
+    if contacts is None or isinstance(contacts, str):
+        contacts = [contacts] * n_chars
     for name, seq in (("contacts", contacts), ("references", references)):
         if seq is not None and len(seq) != n_chars:
             raise ValueError(f"Expected `{name}` with one entry per character ({n_chars}), got {len(seq)}")
@@ -283,21 +294,20 @@ def refine_scene(
             tg.append(mutual[k] if k in mutual else world_targets(ees[k], current))
         current[c] = _refine_one(
             motions[c], [ees[k] for k in mine], tg,
-            contacts=None if contacts is None else contacts[c],
+            contacts=contacts[c],
             reference=None if references is None else references[c],
             **_options(options),
         )
     return current
 
 
+_ALLOWED = ("blend", "spacing", "levels", "adjust_root", "dls_options", "roles")
+
+
 def _options(options: dict[str, Any]) -> dict[str, Any]:
-    allowed = {"feet", "blend", "spacing", "levels", "adjust_root", "dls_options", "roles"}
-    unknown = set(options) - allowed
-    if unknown:
-        raise TypeError(f"Unknown refine options {sorted(unknown)}; allowed: {sorted(allowed)}")
+    _old_spellings("refine_scene", {k: v for k, v in options.items() if k not in _ALLOWED}, _ALLOWED)
     defaults: dict[str, Any] = {
-        "feet": True, "blend": 0.1, "spacing": 0.25, "levels": 3, "adjust_root": True, "dls_options": None,
-        "roles": None,
+        "blend": 0.1, "spacing": 0.25, "levels": 3, "adjust_root": True, "dls_options": None, "roles": None,
     }
     defaults.update(options)
     return defaults

@@ -854,3 +854,23 @@ def test_a_touch_up_never_leaves_the_ground_worse_balanced(cmu):
     # every accepted pass keeps the ground frames within the slack
     n = len(first.schedule)
     assert all(s.mean_zmp_distance <= first.mean_zmp_distance + ZMP_SLACK for s in h.states[n::n])
+
+
+def test_contacts_vocabulary_is_the_package_one():
+    # "auto" detects, a Contacts is used, None (no contacts) cannot be balanced and says so
+    import mocaplab as ml
+    from mocaplab.contacts import foot_contacts
+
+    walk = ml.cmu("16_15")[:200].resample(30)
+    auto = ml.physics.balance(walk)
+    given = ml.physics.balance(walk, contacts=foot_contacts(walk))
+    assert np.array_equal(auto.distance, given.distance, equal_nan=True)
+    for call in (
+        lambda: ml.physics.balance(walk, contacts=None),
+        lambda: ml.touch_up(walk, contacts=None, iterations=1),
+        lambda: ml.physics.fit_masses(walk, contacts=None),
+    ):
+        with pytest.raises(ValueError, match='contacts="auto"'):
+            call()
+    with pytest.raises(TypeError, match='"auto"'):
+        ml.physics.balance(walk, contacts="detect")

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,7 +40,7 @@ from scipy.optimize import OptimizeResult, minimize
 from ..motion import Motion
 from ..roles import resolve_roles
 from .body import GRAVITY, Body, link_positions, paper_width, smoothed_derivatives
-from .zmp import _check_contacts, default_contacts, polygon_distance
+from .zmp import _check_contacts, ground_contacts, polygon_distance
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..contacts import Contacts
@@ -135,7 +135,7 @@ def fit_masses(
     motions: Motion | Sequence[Motion],
     body: Body | None = None,
     *,
-    contacts: Contacts | Sequence[Contacts] | None = None,
+    contacts: Contacts | Sequence[Contacts] | Literal["auto"] | None = "auto",
     symmetric: bool = True,
     regularization: float = 0.01,
     smoothing: float = 0.005,
@@ -152,8 +152,9 @@ def fit_masses(
     body : Body, optional
         Initial guess (default :meth:`Body.from_skeleton` of the first clip, measured
         in its standing pose when the rest pose does not stand).
-    contacts : Contacts or sequence of Contacts, optional
-        One per clip (default :func:`mocaplab.contacts.foot_contacts`).
+    contacts : "auto", Contacts or sequence of Contacts
+        One per clip; ``"auto"`` (default) detects each clip's
+        (:func:`mocaplab.contacts.foot_contacts`).
     symmetric : bool
         Tie left and right links to one mass.
     regularization : float
@@ -188,10 +189,10 @@ def fit_masses(
     for k, m in enumerate(clips):
         if not isinstance(m, Motion):
             raise TypeError(f"Expected Motion objects in `motions`, got {type(m).__name__} at position {k}")
-    known = resolve_roles(clips[0], roles) if body is None or contacts is None else None
+    known = resolve_roles(clips[0], roles) if body is None or isinstance(contacts, str) else None
     body = Body.from_skeleton(clips[0], roles=known) if body is None else body
-    if contacts is None:
-        cons = [default_contacts(m, roles=known) for m in clips]
+    if contacts is None or isinstance(contacts, str):
+        cons = [ground_contacts(contacts, m, roles=known) for m in clips]
     elif hasattr(contacts, "mask"):
         cons = [contacts]  # type: ignore[list-item]
     else:

@@ -32,7 +32,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,7 +46,7 @@ from .flight import FLIGHT_WINDOW, FlightMeasure, _ballistic, _flight_step, flig
 from .footplants import Footplants, _footplant_fn
 from .ground import _edge_frames, _edge_width, _ground_step
 from .schedule import Adjustment, LinkSets, _as_schedule, flight_stages, link_sets
-from .zmp import Balance, _check_contacts, _rebalance, balance, default_contacts
+from .zmp import Balance, _check_contacts, _rebalance, balance, ground_contacts
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..contacts import Contacts
@@ -265,7 +265,7 @@ def start(
     *,
     body: Body | None = None,
     schedule: str | Adjustment | Sequence[Adjustment] = "default",
-    contacts: Contacts | None = None,
+    contacts: Contacts | Literal["auto"] | None = "auto",
     flight_window: float = FLIGHT_WINDOW,
     footplants: Footplants = "auto",
     roles: Mapping[str, Any] | None = None,
@@ -297,7 +297,7 @@ def start(
     if not isinstance(body, Body):
         raise TypeError(f"Expected `body` to be a Body, got {type(body).__name__}")
     body.check(motion)
-    contacts = default_contacts(motion, roles=known) if contacts is None else contacts
+    contacts = ground_contacts(contacts, motion, roles=known)
     _check_contacts(contacts, motion)
     if not (np.isfinite(flight_window) and flight_window >= 0):
         raise ValueError(f"Expected `flight_window` >= 0 seconds, got {flight_window!r}")

@@ -81,7 +81,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -236,7 +236,7 @@ def touch_up(
     *,
     body: Body | None = None,
     schedule: str | Adjustment | Sequence[Adjustment] = "default",
-    contacts: Contacts | None = None,
+    contacts: Contacts | Literal["auto"] | None = "auto",
     iterations: int = ITERATIONS,
     tol: float | None = STALL_TOLERANCE,
     flight_window: float = FLIGHT_WINDOW,
@@ -260,10 +260,11 @@ def touch_up(
         ``"default"``: the paper's flight schedule followed by its ground
         schedule when the clip has flight frames (each pass ends balancing
         the ground frames, landings included), else the ground schedule.
-    contacts : Contacts, optional
-        Planted joints of the input (default
-        :func:`mocaplab.contacts.foot_contacts`); they decide ground versus
-        flight frames and the support polygons.
+    contacts : "auto" or Contacts
+        Planted joints of the input; they decide ground versus flight
+        frames and the support polygons.  ``"auto"`` (default) detects them
+        (:func:`mocaplab.contacts.foot_contacts`); ``None`` (no contacts)
+        raises ValueError: nothing would stand on the ground.
     iterations : int
         Passes over the schedule, at most (default :data:`ITERATIONS`).
         Each pass is a line search: a pass that would raise

@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, QhullError
 
 from .. import quat
+from ..contacts import resolve_contacts
 from ..motion import Motion, _freeze, _owned, _take, readonly
 from ..roles import resolve_roles
 from .body import GRAVITY, Body, _positions_and_accelerations, paper_width
@@ -58,7 +59,7 @@ __all__ = [
     "Balance",
     "balance",
     "zmp_distance",
-    "default_contacts",
+    "ground_contacts",
 ]
 
 Array = NDArray[np.float64]
@@ -320,11 +321,21 @@ def signed_distance(point: ArrayLike, polygon: ArrayLike) -> float:
 
 
 # --------------------------------------------------------------- per clip
-def default_contacts(motion: Motion, *, roles: Mapping[str, Any] | None = None) -> Contacts:
-    """Foot contacts of ``motion`` by :func:`mocaplab.contacts.foot_contacts` (ankles and toes from the roles)."""
-    from ..contacts import foot_contacts
+def ground_contacts(
+    contacts: Contacts | Literal["auto"] | None, motion: Motion, *, roles: Mapping[str, Any] | None = None
+) -> Contacts:
+    """The contacts a balance is measured on: ``contacts=`` read as everywhere (:func:`mocaplab.contacts.resolve_contacts`).
 
-    return foot_contacts(motion, roles=roles)
+    ``"auto"`` detects the feet's contacts; ``None`` (no contacts) leaves no
+    support polygon and no take-off or landing, so it raises ValueError.
+    """
+    found = resolve_contacts(contacts, motion, roles=roles)
+    if found is None:
+        raise ValueError(
+            'contacts=None means no contacts: nothing stands on the ground to balance; give contacts="auto" '
+            "(detected) or a mocaplab.contacts.Contacts"
+        )
+    return found
 
 
 def _check_contacts(contacts: Contacts, motion: Motion) -> None:
@@ -427,7 +438,7 @@ def balance(
     motion: Motion,
     body: Body | None = None,
     *,
-    contacts: Contacts | None = None,
+    contacts: Contacts | Literal["auto"] | None = "auto",
     width: float | None = None,
     fk: tuple[Array, Array] | None = None,
     roles: Mapping[str, Any] | None = None,
@@ -441,8 +452,10 @@ def balance(
     body : Body, optional
         Default :meth:`Body.from_skeleton` of the motion (measured in its
         standing pose when the skeleton's rest pose does not stand).
-    contacts : Contacts, optional
-        Planted joints; default :func:`mocaplab.contacts.foot_contacts`.
+    contacts : "auto" or Contacts
+        Planted joints: ``"auto"`` (default) detects the feet's
+        (:func:`mocaplab.contacts.foot_contacts`); ``None`` (no contacts)
+        raises ValueError.
     width : float, optional
         Gaussian width in frames for the accelerations (default: 5 frames at
         30 fps, scaled to the clip's rate).
@@ -472,10 +485,9 @@ def balance(
     >>> round(1000 * balance(cmu("16_15")).mean_distance)  # doctest: +SKIP
     13
     """
-    if body is None or contacts is None:
-        known = resolve_roles(motion, roles)
-        body = Body.from_skeleton(motion, roles=known) if body is None else body
-        contacts = default_contacts(motion, roles=known) if contacts is None else contacts
+    known = resolve_roles(motion, roles) if body is None or isinstance(contacts, str) else None
+    body = Body.from_skeleton(motion, roles=known) if body is None else body
+    contacts = ground_contacts(contacts, motion, roles=known)
     _check_contacts(contacts, motion)
     w = paper_width(5.0, motion.fps) if width is None else float(width)
     body.check(motion)
@@ -682,7 +694,7 @@ def zmp_distance(
     motion: Motion,
     body: Body | None = None,
     *,
-    contacts: Contacts | None = None,
+    contacts: Contacts | Literal["auto"] | None = "auto",
     roles: Mapping[str, Any] | None = None,
 ) -> Array:
     """Distance of the ZMP outside the support polygon, shape (F,); 0 inside, NaN in flight.

@@ -35,7 +35,7 @@ _ENTRY_POINTS = {
     "extract": ("mocaplab.staggered", "extract"),
 }
 _SUBMODULES = (
-    "contacts", "data", "displacement", "editing", "goals", "ik", "io", "kinematics", "lessons", "motion", "physics",
+    "anatomy", "contacts", "data", "displacement", "editing", "goals", "ik", "io", "kinematics", "lessons", "motion", "physics",
     "quality", "quat", "roles", "staggered", "undo",
     # the views (ipywidgets, matplotlib, pyvista): imported only when ``mocaplab.widgets`` is first used,
     # so ``import mocaplab`` never loads a UI package

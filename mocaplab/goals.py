@@ -49,6 +49,8 @@ Examples
 >>> walk = ml.cmu("16_15")                                         # doctest: +SKIP
 >>> goals = ml.goals.foot_goals(walk, ml.contacts.foot_contacts(walk))  # doctest: +SKIP
 >>> planted = ml.goals.enforce_goals(walk, goals)                 # doctest: +SKIP
+
+Longer than 800 lines because it is one mechanism: the goal types, the weights, the foot plants and the solver's steps (root lowering, chains, limbs, feet, smoothing) share private helpers over the same per-frame arrays, and every paper calls it as one.
 """
 
 from __future__ import annotations

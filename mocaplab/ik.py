@@ -48,6 +48,8 @@ Examples
 >>> walk = ml.cmu("16_15")                                   # doctest: +SKIP
 >>> ankle = walk.global_positions()[:, walk.skeleton.index("LeftFoot")]  # doctest: +SKIP
 >>> lifted = reach(walk, "LeftFoot", ankle + [0, 0.1, 0])    # doctest: +SKIP
+
+Longer than 800 lines because analytic two-bone IK, its hinge, swivel and straight-limb rules, and damped least squares share the limb helpers and fades defined here.
 """
 
 from __future__ import annotations

@@ -80,6 +80,8 @@ Examples
 ('LowerLeg_L', 'Hips', ('Spine',))
 >>> "left_toe" in sk.roles
 False
+
+Longer than 800 lines because the naming table and the topology rules are one inference: names propose, the tree checks and completes, and the mirror map reuses both.
 """
 
 from __future__ import annotations

@@ -86,6 +86,8 @@ joints : sequence of str, or one per character, optional
     refinement (``refine``, :meth:`EditResult.refined`).  Default: the
     ankle and toe of each foot of the roles
     (:func:`~mocaplab.editing.paths.contact_joints`).
+
+Longer than 800 lines because the scene editor, its result and its incremental refinement cache share the editor's state (factorisations, clocks, per-character caches) and are tested together against the one-shot :func:`edit`.
 """
 
 from __future__ import annotations

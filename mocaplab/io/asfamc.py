@@ -65,6 +65,8 @@ Paths and limits
 * **Overflow.** Values that overflow once converted to metres are reported
   on the line that holds them: an AMC root translation on its AMC line, a
   bone's direction and length on the ASF line that begins the bone.
+
+Longer than 800 lines because the ASF and AMC readers and the writer share one grammar, its error positions (file, line, what was expected) and the unit and axis conventions.
 """
 
 from __future__ import annotations

@@ -53,6 +53,8 @@ afterwards (row by row only when something is wrong, to name the line), and
 the rotations are built in the component-major layout forward kinematics
 uses, so reading CMU 49_03 (1504 frames) and computing its joint positions
 takes a few times less than pure-Python readers (``benchmarks/bench_io.py``).
+
+Longer than 800 lines because the reader and the writer share one grammar, its error positions (file, line, what was expected), the channel-order conventions and the memory bounds of a hostile file.
 """
 
 from __future__ import annotations

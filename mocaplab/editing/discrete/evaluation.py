@@ -69,6 +69,8 @@ A candidate's energy does not depend on which others are evaluated with
 it; with ``far=0`` the evaluation is exact (every part re-solved), which
 the tests compare with.  Phase 2's right-hand side (equation 7) is
 recomputed exactly for every part that moved.
+
+Longer than 800 lines because the evaluation of every candidate transformation is one vectorised pipeline over shared per-candidate arrays (spliced paths, sparse rows, the linearised solve, the cost terms); its stages read each other's intermediate arrays.
 """
 
 from __future__ import annotations

@@ -23,10 +23,10 @@ import numpy as np
 import pytest
 
 from mocaplab import quat
+from mocaplab.displacement import blend_ramp
 from mocaplab.editing import AbsoluteTime, MotionPath, PinPosition, SceneEditor, edit, stationary_segments
 from mocaplab.editing import discrete as D
 from mocaplab.editing.graph import build_graph, frame_features
-from mocaplab.displacement import blend_ramp
 from mocaplab.motion import Motion, Skeleton
 
 FPS = 30.0

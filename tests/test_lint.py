@@ -1,4 +1,4 @@
-"""The code base stays lint-clean (ruff) and the core type-checks (mypy), both configured in pyproject.toml."""
+"""The code base stays lint-clean (ruff) and the core and widgets type-check (mypy), both configured in pyproject.toml."""
 
 from __future__ import annotations
 
@@ -20,10 +20,10 @@ def test_ruff_is_clean() -> None:
     assert out.returncode == 0, out.stdout + out.stderr
 
 
-def test_mypy_passes_on_the_core(tmp_path: Path) -> None:
-    """The typed core (configured in pyproject.toml: ``files = ["mocaplab"]``) type-checks (its cache outside the checkout)."""
+def test_mypy_passes_on_the_core_and_the_widgets(tmp_path: Path) -> None:
+    """The core and the widgets (pyproject.toml: ``files = ["mocaplab", "widgets"]``) type-check (cache outside the checkout)."""
     mypy = shutil.which("mypy") or str(Path(sys.executable).parent / "mypy")
     if not Path(mypy).exists():
         pytest.skip("mypy is not installed (pip install -e '.[dev]')")
-    out = subprocess.run([mypy, "--no-incremental", "--cache-dir", str(tmp_path / "mypy"), "-p", "mocaplab"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    out = subprocess.run([mypy, "--no-incremental", "--cache-dir", str(tmp_path / "mypy")], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stdout + out.stderr

@@ -84,7 +84,7 @@ class HistoryButtons:
         editor: Any,
         after: Callable[[], None],
         *,
-        guard: Callable[[Callable[[], None]], None] | None = None,
+        guard: Callable[[Callable[[], object]], None] | None = None,
     ) -> None:
         self.editor = editor
         self._after = after
@@ -145,7 +145,7 @@ class ExportControl:
         motions: Callable[[], Motion | Sequence[Motion]],
         *,
         default: str = "edited.bvh",
-        guard: Callable[[Callable[[], None]], None] | None = None,
+        guard: Callable[[Callable[[], object]], None] | None = None,
     ) -> None:
         self._motions = motions
         self._guard = guard or (lambda action: action())

@@ -451,7 +451,7 @@ class DragView:
         """Extra status text after an undo, redo or reset (subclasses add to it)."""
         return ""
 
-    def _guard(self, action: Callable[[], None]) -> None:
+    def _guard(self, action: Callable[[], object]) -> None:
         """Run a button's action; an exception is shown and the view resynced (as :func:`guarded`)."""
         try:
             action()
@@ -661,7 +661,7 @@ def as_scene_editor(
 
 def _export_name(editor: Any) -> str:
     """Default export file: ``<first clip's name>_edited.bvh`` (letters, digits, ``._-`` only)."""
-    characters = getattr(editor, "characters", None) or ()
+    characters: Sequence[Any] = getattr(editor, "characters", None) or ()
     name = str(getattr(characters[0], "name", "") or "") if len(characters) else ""
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "motion"
     return f"{stem}_edited.bvh"

@@ -210,7 +210,7 @@ class StaggeredExplorer:
         self.history = HistoryButtons(self.editor, self._after_history, guard=self._run)
         self.export = ExportControl(self.editor.evaluate, default="staggered_edit.bvh", guard=self._run)
 
-    def _run(self, action: Callable[[], None]) -> None:
+    def _run(self, action: Callable[[], object]) -> None:
         """Run a widget action; an error goes to the status line, and the controls show the editor's values."""
         try:
             action()

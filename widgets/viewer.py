@@ -452,7 +452,7 @@ class MotionViewer:
         if self.plotter.render_window is not None:
             self.plotter.render_window.SetMultiSamples(0)
         self.plotter.theme.allow_empty_mesh = True  # overlays may be empty on some frames
-        self.plotter.set_background("white")
+        self.plotter.set_background("white")  # type: ignore[arg-type]  # pyvista's decorator hides `self`
         lo, hi = self._scene_bounds()
         self._bounds = (lo, hi)
         self._ground: Any = None
@@ -690,7 +690,7 @@ class MotionViewer:
         else:
             for k in range(len(self.characters)):
                 for name in (f"bones{k}", f"joints{k}"):
-                    self.plotter.remove_actor(name, render=False)
+                    self.plotter.remove_actor(name, render=False)  # type: ignore[arg-type]  # as set_background
             for k, c in enumerate(new):
                 self._add_character_actors(k, c)
         self.characters = new
@@ -1295,7 +1295,6 @@ class MotionViewer:
             return
         self._client_seq += 1
         key, seq, state = client["key"], self._client_seq, client["server"].state
-        clock = {"n_frames": self.n_frames, "fps": self.fps}
         values: dict[str, Any] = {}
         if chars:
             values[client["chars"]] = vtkjs_page.characters_payload(
@@ -1305,10 +1304,13 @@ class MotionViewer:
                 bone_radius=self.bone_radius,
                 joint_radius=self.joint_radius,
                 sides=self._sides,
-                **clock,
+                n_frames=self.n_frames,
+                fps=self.fps,
             )
         if overlays:
-            values[client["overlays"]] = vtkjs_page.overlays_payload(self.overlays.values(), key=key, seq=seq, **clock)
+            values[client["overlays"]] = vtkjs_page.overlays_payload(
+                self.overlays.values(), key=key, seq=seq, n_frames=self.n_frames, fps=self.fps
+            )
         if ground:
             values[client["ground"]] = vtkjs_page.ground_payload(self._ground_mesh)
         if camera:

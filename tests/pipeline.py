@@ -126,8 +126,8 @@ def step_functions(motion: Motion) -> dict[str, Callable[[Motion], Motion]]:
         "squeeze": lambda m: _edit(m, squeeze=squeeze_chord),
         "squeeze+refine": lambda m: _refine(_edit(m, squeeze=squeeze_chord), m),
         "refine": lambda m: _refine(m, m),
-        "touch_up": lambda m: ml.touch_up(m).final,
-        "bend+refine+touch_up": lambda m: ml.touch_up(m).final,
+        "touch_up": lambda m: ml.touch_up(m).motion,
+        "bend+refine+touch_up": lambda m: ml.touch_up(m).motion,
         "staggered": _staggered,
         "export": _export,
     }

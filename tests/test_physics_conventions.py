@@ -215,10 +215,10 @@ def test_default_touch_up(converted, reference, clip, convention):
     np.testing.assert_array_equal(hist.dropped, hist0.dropped)
     assert np.abs(hist.errors - hist0.errors).max() < tol["mean"]
     cols = _columns(m, name_map, ref.skeleton.names)
-    moved = np.abs(hist.final.global_positions()[:, cols] - hist0.final.global_positions()).max()
+    moved = np.abs(hist.motion.global_positions()[:, cols] - hist0.motion.global_positions()).max()
     assert moved < tol["touch"], moved
     # and the touch-up did something on the original (so agreeing is not trivial)
-    assert np.abs(hist0.final.global_positions() - ref.global_positions()).max() > 2 * tol["touch"]
+    assert np.abs(hist0.motion.global_positions() - ref.global_positions()).max() > 2 * tol["touch"]
 
 
 @pytest.mark.parametrize("clip", CLIPS)
@@ -367,12 +367,12 @@ def test_a_static_reference_root_stays_static(converted, cmu, clip):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         hist, hist0 = touch_up(m), touch_up(ref)
-    out = hist.final
+    out = hist.motion
     assert hist.best > 0
     np.testing.assert_array_equal(out.root_positions, m.root_positions)
     np.testing.assert_array_equal(out.rotations[:, 0], m.rotations[:, 0])
     np.testing.assert_array_equal(out.translations[:, 0], m.translations[:, 0])
     assert out.carrier_joint == m.carrier_joint
     cols = _columns(m, name_map, ref.skeleton.names)
-    assert np.abs(out.global_positions()[:, cols] - hist0.final.global_positions()).max() < 1 * MM
+    assert np.abs(out.global_positions()[:, cols] - hist0.motion.global_positions()).max() < 1 * MM
     np.testing.assert_allclose(hist.errors, hist0.errors, atol=1e-6)

@@ -188,7 +188,7 @@ def test_s3_keeps_its_global_orientation_and_s1_stays(walk30):
     body = Body.from_skeleton(walk30)
     sk = walk30.skeleton
     h = touch_up(walk30, body=body, schedule=GROUND_SCHEDULE[0], iterations=1, footplants=None)
-    before, after = walk30.global_rotations(), h.final.global_rotations()
+    before, after = walk30.global_rotations(), h.motion.global_rotations()
     upper = preset_mask(sk, "upper_body")
     d = quat.angle(quat.mul(quat.inv(before[:, upper]), after[:, upper]))
     assert d.max() < 1e-6
@@ -196,8 +196,8 @@ def test_s3_keeps_its_global_orientation_and_s1_stays(walk30):
     assert lower_moved.max() > 1e-3
     h2 = touch_up(walk30, body=body, schedule=GROUND_SCHEDULE[1], iterations=1, footplants=None)
     lower = preset_mask(sk, "lower_body")
-    assert np.allclose(h2.final.global_positions()[:, lower], walk30.global_positions()[:, lower], atol=1e-9)
-    assert not np.allclose(h2.final.global_positions()[:, upper], walk30.global_positions()[:, upper], atol=1e-4)
+    assert np.allclose(h2.motion.global_positions()[:, lower], walk30.global_positions()[:, lower], atol=1e-9)
+    assert not np.allclose(h2.motion.global_positions()[:, upper], walk30.global_positions()[:, upper], atol=1e-4)
 
 
 # ------------------------------------------------------------ state, history
@@ -219,7 +219,9 @@ def test_touch_up_is_pure_and_records_every_step(walk30):
     h = touch_up(walk30, iterations=2, tol=None)
     assert np.array_equal(walk30.rotations, rot) and np.array_equal(walk30.root_positions, root)
     assert len(h) == len(h.motions) == 7 and h.passes == 2 and h.stopped == "iterations"
-    assert h.motions[0] is walk30 and h.last is h.motions[-1] and h.final is h.motions[h.best]
+    assert h.motions[0] is walk30 and h.last is h.motions[-1] and h.motion is h.motions[h.best]
+    with pytest.raises(AttributeError, match=r"TouchUpHistory.final is gone: read \.motion"):
+        h.final  # noqa: B018  (the old name says what to read)
     assert h.zmp_distance.shape == (7, walk30.n_frames)
     assert np.allclose(h.mean_zmp_distance, np.nanmean(h.zmp_distance, axis=1))
     assert h.labels[0] == "input" and h.labels[1] == GROUND_SCHEDULE[0].label
@@ -236,7 +238,7 @@ def test_step_function_and_session_agree_with_touch_up(walk30):
         assert np.allclose(state.motion.rotations, h.motions[k + 1].rotations)
     s = TouchUpSession(walk30, footplants="ik")
     s.run(3)
-    assert np.allclose(s.current.motion.rotations, h.final.rotations)
+    assert np.allclose(s.current.motion.rotations, h.motion.rotations)
     s.back()
     first = s.back()
     assert first.index == 1 and s.index == 1
@@ -258,7 +260,7 @@ def test_ik_footplants_put_planted_feet_back(walk30):
 
     c = foot_contacts(walk30)
     bent = bend(walk30, 2.0)
-    moved = touch_up(bent, contacts=c, schedule=GROUND_SCHEDULE[0], iterations=1, footplants=None).final
+    moved = touch_up(bent, contacts=c, schedule=GROUND_SCHEDULE[0], iterations=1, footplants=None).motion
     fixed = _footplant_fn("ik", c, bent)(_posed(moved)).motion
     sk = walk30.skeleton
     for ankle, toe in (("LeftFoot", "LeftToeBase"), ("RightFoot", "RightToeBase")):
@@ -321,7 +323,7 @@ def test_touch_up_does_not_depend_on_names_or_a_static_root(cmu, layout):
                 and np.array_equal(np.delete(m.translations, 1, axis=1), np.delete(other.translations, 1, axis=1))
                 for m in h1.motions
             )
-        assert np.abs(h0.final.global_positions() - motion.global_positions()).max() > 0.01  # it did something
+        assert np.abs(h0.motion.global_positions() - motion.global_positions()).max() > 0.01  # it did something
 
 
 # ------------------------------------------------------------------- claims
@@ -330,7 +332,7 @@ def test_bent_walk_gains_an_inward_lean_and_balance(walk30):
     c = foot_contacts(walk30)
     h = touch_up(bent, contacts=c, iterations=3)
     assert h.states[h.best].mean_zmp_distance <= 0.5 * h.mean_zmp_distance[0]
-    assert inward_lean_degrees(h.final) > inward_lean_degrees(bent) + 1.5
+    assert inward_lean_degrees(h.motion) > inward_lean_degrees(bent) + 1.5
 
 
 def test_smoothing_weighs_end_frames_like_the_others():
@@ -374,14 +376,14 @@ def test_flight_gets_a_parabola_and_steady_angular_momentum(cmu):
     bent = bend(jump, 1.0)
     body = Body.from_skeleton(jump)
     h = touch_up(bent, contacts=c, iterations=2)
-    g = _flight_gravity(h.final, body, stages)
+    g = _flight_gravity(h.motion, body, stages)
     assert np.all(np.abs(g - 9.81) < 0.02 * 9.81)
     a, b = stages[0]
     spread = [np.linalg.norm(hm[a:b] - hm[a:b].mean(axis=0), axis=1).mean() for hm in
-              (angular_momentum(bent, body), angular_momentum(h.final, body))]
+              (angular_momentum(bent, body), angular_momentum(h.motion, body))]
     assert spread[1] < 0.6 * spread[0]
     # the bent horizontal flight path is straightened (ballistic)
-    com = center_of_mass(h.final, body)[a:b][:, [0, 2]]
+    com = center_of_mass(h.motion, body)[a:b][:, [0, 2]]
     fit = np.column_stack([np.arange(b - a), np.ones(b - a)])
     resid = com - fit @ np.linalg.lstsq(fit, com, rcond=None)[0]
     # within 11 mm: a pass may not raise the ground frames' mean ZMP distance by more than ZMP_SLACK
@@ -494,7 +496,7 @@ def test_more_passes_never_make_the_result_worse(cmu, clip, share):
     assert e12 <= e3 and e12 <= 0.5 * start_error
     assert h12.errors[h12.best] <= h3.errors[h3.best]
     # no drift: the joints stay within a plausible lean of the bent input
-    moved = np.linalg.norm(h12.final.global_positions() - bent.global_positions(), axis=-1)
+    moved = np.linalg.norm(h12.motion.global_positions() - bent.global_positions(), axis=-1)
     assert moved.max() < 0.3
 
 
@@ -607,7 +609,7 @@ def test_no_pass_that_helps_returns_the_input_with_a_reason(walk30):
     assert len(texts) == 1 and record[-1].filename == __file__  # it points at the caller's line
     text = texts[0]
     assert "x0.0625 of each rho (MIN_STEP" in text and "MAX_ANGLE" in text and "worst frames are 1" in text
-    assert len(h) == 1 and h.final is bouncing and h.best == 0 and h.stopped == "stalled"
+    assert len(h) == 1 and h.motion is bouncing and h.best == 0 and h.stopped == "stalled"
     # a touch-up that helps says nothing of the kind
     with warnings.catch_warnings():
         warnings.simplefilter("error", TouchUpWarning)
@@ -644,7 +646,7 @@ def test_the_best_pass_is_kept_and_a_stall_stops(walk30):
     # a pass that makes things worse is not the result
     worse = touch_up(bent, contacts=c, schedule=(Adjustment(("arms",), rho=1.0, sigma=0.05),), iterations=3, tol=None)
     assert worse.errors[worse.best] <= worse.errors[0]
-    assert worse.final is worse.motions[worse.best]
+    assert worse.motion is worse.motions[worse.best]
 
 
 # --------------------------------------------------------- good motion alone
@@ -656,7 +658,7 @@ def test_captured_walks_are_left_alone(cmu, clip):
         warnings.simplefilter("error", TouchUpWarning)  # a captured walk raises no suspicion
         h = touch_up(walk)
     assert h.states[h.best].mean_zmp_distance <= h.mean_zmp_distance[0]
-    moved = np.linalg.norm(h.final.global_positions() - walk.global_positions(), axis=-1)
+    moved = np.linalg.norm(h.motion.global_positions() - walk.global_positions(), axis=-1)
     assert moved.mean() < 0.01 and moved.max() < 0.06
 
 
@@ -726,7 +728,7 @@ def test_slowed_flights_fly_ballistic_again(cmu, clip, factor, raise_by):
     g0, spread0 = _flight_figures(motion, body, flight)
     assert abs(g0 - 9.81) > 0.05 * 9.81  # the input really is off
     h = touch_up(motion, contacts=c)
-    g, spread = _flight_figures(h.final, body, flight)
+    g, spread = _flight_figures(h.motion, body, flight)
     assert abs(g - 9.81) < 0.03 * 9.81
     assert spread <= spread0
     # every flight adjustment's per-frame turn is clamped like the ground ones (a turn of 43 degrees before)

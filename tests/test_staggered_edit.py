@@ -49,6 +49,15 @@ def test_zero_succession_and_no_value_change_return_the_original(walk_sm) -> Non
     assert succession(sm, 0.0) is sm
 
 
+def test_an_edit_gives_its_motion_as_every_result_does(walk_sm) -> None:
+    from mocaplab.staggered import succession
+
+    edited = succession(walk_sm, 0.02)
+    assert edited.motion is edited.motion  # computed once
+    assert np.array_equal(edited.motion.rotations, edited.evaluate().rotations)
+    assert not np.array_equal(edited.motion.rotations, walk_sm.motion.rotations)
+
+
 @pytest.mark.parametrize(
     "name", ["retime", "succession", "randomize", "edit_pose", "exaggerate", "insert_pose", "delete_pose"]
 )
@@ -56,7 +65,7 @@ def test_the_edits_are_functions_and_the_old_methods_say_what_to_write(walk_sm, 
     from mocaplab import staggered
 
     _, sm = walk_sm
-    with pytest.raises(AttributeError, match=rf"StaggeredMotion\.{name}\(\) is gone.* write mocaplab\.staggered\.{name}\(sm, "):
+    with pytest.raises(AttributeError, match=rf"StaggeredMotion\.{name} is gone.* write mocaplab\.staggered\.{name}\(sm, "):
         getattr(sm, name)
     assert not hasattr(sm, name)
     assert callable(getattr(staggered, name)) and getattr(staggered, name).__module__ == "mocaplab.staggered.edit"

@@ -1,6 +1,6 @@
 """The physical touch-up judged by :mod:`mocaplab.quality`: it must not add artefacts to the motion it balances.
 
-``compare(input, touch_up(input).final)`` on the shared real-world files and on captured CMU walks, with
+``compare(input, touch_up(input).motion)`` on the shared real-world files and on captured CMU walks, with
 default options.  Each measure must stay within its default limit (:data:`mocaplab.quality.LIMITS`); the
 table below says which measures are checked and why.
 
@@ -51,7 +51,7 @@ def _report(motion):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # notes about the input (rest pose, sliding feet)
         history = ml.touch_up(motion)
-        return history, quality.compare(motion, history.final)
+        return history, quality.compare(motion, history.motion)
 
 
 @pytest.fixture(scope="module")

@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import quat
+from .._api import reject_keywords
 from .._warnings import warn
 from ..contacts import Contacts, resolve_contacts
 from ..goals import EndEffector, Goal, RelativeTo, effector_goals, enforce_goals, foot_goals, world_targets
@@ -49,19 +50,11 @@ JointRef = str | int
 
 
 # ------------------------------------------------------------------ refine
-#: Spellings of earlier versions, and what to write instead.
+#: Keywords of earlier versions, and what to write instead.
 _RENAMED = {
     "feet": "refine(..., feet=False) is refine(..., contacts=None) (plant no feet); feet=True is the default "
     "contacts='auto'",
 }
-
-
-def _old_spellings(function: str, given: Mapping[str, Any], allowed: Sequence[str]) -> None:
-    for name in given:
-        if name in _RENAMED:
-            raise TypeError(f"{function}() no longer takes `{name}`: {_RENAMED[name]}")
-    if given:
-        raise TypeError(f"{function}() got unexpected options {sorted(given)}; allowed: {sorted(allowed)}")
 
 
 def refine(
@@ -120,7 +113,7 @@ def refine(
     >>> bent = walk.transformed(yaw=0.3)                       # doctest: +SKIP
     >>> clean = ml.refine(bent, reference=walk)                # doctest: +SKIP
     """
-    _old_spellings("refine", removed, _ALLOWED)
+    reject_keywords("refine", removed, _RENAMED, _ALLOWED + ("contacts", "end_effectors", "reference"))
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
     if reference is not None and not isinstance(reference, Motion):
@@ -305,7 +298,7 @@ _ALLOWED = ("blend", "spacing", "levels", "adjust_root", "dls_options", "roles")
 
 
 def _options(options: dict[str, Any]) -> dict[str, Any]:
-    _old_spellings("refine_scene", {k: v for k, v in options.items() if k not in _ALLOWED}, _ALLOWED)
+    reject_keywords("refine_scene", {k: v for k, v in options.items() if k not in _ALLOWED}, _RENAMED, _ALLOWED)
     defaults: dict[str, Any] = {
         "blend": 0.1, "spacing": 0.25, "levels": 3, "adjust_root": True, "dls_options": None, "roles": None,
     }

@@ -86,6 +86,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from .._api import Gone
 from .._warnings import warn
 from ..contacts import intervals_from_mask
 from ..motion import Motion, readonly
@@ -175,9 +176,11 @@ class TouchUpHistory:
         return best
 
     @property
-    def final(self) -> Motion:
+    def motion(self) -> Motion:
         """The touched-up motion: the :attr:`best` state's (more passes never make it worse)."""
         return self.states[self.best].motion
+
+    final = Gone("read .motion (the touched-up motion, as every result in mocaplab gives its output)")
 
     @property
     def last(self) -> Motion:
@@ -299,7 +302,7 @@ def touch_up(
         ``.mean_zmp_distance``, ``.errors``) along the accepted passes (the
         passes the line search rejected are not recorded), so the error at
         the end of each pass is lower than at the end of the one before;
-        ``.final`` is the best complete pass (``.best``: the last one, or
+        ``.motion`` is the best complete pass (``.best``: the last one, or
         the input when no pass helped), ``.last`` the last state.
         ``.interior_errors`` and ``.mean_zmp_distance_interior`` are the
         same means without the first and last

@@ -112,12 +112,14 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from typing import Any, Literal, NoReturn, overload
+from functools import cached_property
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import quat
+from .._api import Gone
 from .._warnings import warn
 from ..motion import Motion, Skeleton, readonly
 
@@ -271,33 +273,6 @@ def translation_joints(motion: Motion) -> tuple[int, ...]:
 def _frame_times(duration: float, fps: float) -> Array:
     n = int(np.floor(duration * fps + 1e-9)) + 1
     return np.arange(n) / fps
-
-
-class _EditFunction:
-    """A section 5 edit read as a method of :class:`StaggeredMotion`: says which function to call instead.
-
-    The edits live in :mod:`mocaplab.staggered.edit`, above this module, as
-    functions of the representation (``succession(sm, s)``, not
-    ``sm.succession(s)``); reading one on a motion raises an
-    ``AttributeError`` that spells the call.
-    """
-
-    name = ""
-
-    def __set_name__(self, owner: type, name: str) -> None:
-        self.name = name
-
-    @overload
-    def __get__(self, obj: None, owner: type | None = None) -> _EditFunction: ...
-    @overload
-    def __get__(self, obj: object, owner: type | None = None) -> NoReturn: ...
-    def __get__(self, obj: object | None, owner: type | None = None) -> _EditFunction:
-        if obj is None:
-            return self
-        raise AttributeError(
-            f"StaggeredMotion.{self.name}() is gone: the section 5 edits are functions, "
-            f"write mocaplab.staggered.{self.name}(sm, ...)"
-        )
 
 
 # -------------------------------------------------------------- the container
@@ -641,6 +616,16 @@ class StaggeredMotion:
         """Displacements of the position variables, shape (N, P, 3): root first."""
         return np.concatenate([self.root_displacement[:, None], self.translation_displacement], axis=1)
 
+    @cached_property
+    def motion(self) -> Motion:
+        """The motion this representation stands for: :meth:`evaluate` with its defaults, computed once.
+
+        As every result in mocaplab gives its output (``EditResult.motions``,
+        ``TouchUpHistory.motion``), an edited ``StaggeredMotion`` gives its
+        motion as ``.motion``; :meth:`evaluate` takes other times or layers.
+        """
+        return self.evaluate()
+
     def evaluate(
         self,
         times: ArrayLike | None = None,
@@ -926,13 +911,13 @@ class StaggeredMotion:
         return set_refinements(self, np.zeros_like(self.refinements))
 
     # the section 5 edits are functions of mocaplab.staggered.edit, not methods (that module sits above this one)
-    retime = _EditFunction()
-    succession = _EditFunction()
-    randomize = _EditFunction()
-    edit_pose = _EditFunction()
-    exaggerate = _EditFunction()
-    insert_pose = _EditFunction()
-    delete_pose = _EditFunction()
+    retime = Gone("the section 5 edits are functions, write mocaplab.staggered.retime(sm, ...)")
+    succession = Gone("the section 5 edits are functions, write mocaplab.staggered.succession(sm, ...)")
+    randomize = Gone("the section 5 edits are functions, write mocaplab.staggered.randomize(sm, ...)")
+    edit_pose = Gone("the section 5 edits are functions, write mocaplab.staggered.edit_pose(sm, ...)")
+    exaggerate = Gone("the section 5 edits are functions, write mocaplab.staggered.exaggerate(sm, ...)")
+    insert_pose = Gone("the section 5 edits are functions, write mocaplab.staggered.insert_pose(sm, ...)")
+    delete_pose = Gone("the section 5 edits are functions, write mocaplab.staggered.delete_pose(sm, ...)")
 
 
 def set_refinements(sm: StaggeredMotion, refinements: ArrayLike) -> StaggeredMotion:

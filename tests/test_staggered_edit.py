@@ -50,12 +50,11 @@ def test_zero_succession_and_no_value_change_return_the_original(walk_sm) -> Non
 
 
 def test_an_edit_gives_its_motion_as_every_result_does(walk_sm) -> None:
-    from mocaplab.staggered import succession
-
-    edited = succession(walk_sm, 0.02)
+    _, sm = walk_sm
+    edited = succession(sm, 0.02)
     assert edited.motion is edited.motion  # computed once
     assert np.array_equal(edited.motion.rotations, edited.evaluate().rotations)
-    assert not np.array_equal(edited.motion.rotations, walk_sm.motion.rotations)
+    assert not np.array_equal(edited.motion.rotations, sm.motion.rotations)
 
 
 @pytest.mark.parametrize(

@@ -39,9 +39,10 @@ imports only the kinematic core (:mod:`~mocaplab.motion`,
 
 Conventions: frame intervals are half-open ``(start, stop)`` (as
 :attr:`mocaplab.contacts.Contacts.intervals`); ``window`` arguments of
-:func:`interval_weights` and :func:`blend_weights` are frames (they take a
-frame count because their callers already work in frames); every other
-duration here (``blend``, ``spacing``, ``drop_window``) is seconds.
+:func:`interval_weights` and :func:`blend_weights` are frames, as their
+keyword ``window_frames`` says (their callers already work in frames);
+every other duration here (``blend``, ``spacing``, ``drop_window``) is
+seconds.
 
 Examples
 --------
@@ -64,6 +65,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import minimum_filter1d
 
 from . import kinematics, quat
+from ._api import reject_keywords
 from .contacts import Contacts, intervals_from_mask
 from .displacement import DisplacementMap, blend_ramp, displacement_between
 from .ik import (
@@ -111,16 +113,32 @@ def _check_intervals(intervals: Sequence[tuple[int, int]], n_frames: int) -> lis
     return out
 
 
-def interval_weights(n_frames: int, intervals: Sequence[tuple[int, int]], *, window: int) -> Array:
+#: The frame-count window's old keyword (every other window of mocaplab is in seconds).
+_WINDOW_RENAMED = {"window": "the window is a number of frames: write window_frames=..."}
+
+
+def interval_weights(
+    n_frames: int, intervals: Sequence[tuple[int, int]], *, window_frames: int | None = None, **removed: Any
+) -> Array:
     """One blending bump per interval, shape (K, F).
 
     Row ``k`` is 1 on frames ``start_k .. stop_k - 1`` and ramps
-    (:func:`blend_ramp`) to 0 over ``window`` frames on each side: the
-    ``window`` frames before ``start`` and after ``stop - 1`` get weights
-    strictly between 0 and 1, the frames beyond are 0.
+    (:func:`~mocaplab.displacement.blend_ramp`) to 0 over ``window_frames``
+    frames on each side: the ``window_frames`` frames before ``start`` and
+    after ``stop - 1`` get weights strictly between 0 and 1, the frames
+    beyond are 0.
+
+    Examples
+    --------
+    >>> interval_weights(6, [(2, 3)], window_frames=1).round(2).tolist()
+    [[0.0, 0.5, 1.0, 0.5, 0.0, 0.0]]
     """
+    reject_keywords("interval_weights", removed, _WINDOW_RENAMED, ("window_frames",))
+    if window_frames is None:
+        raise TypeError("interval_weights() needs `window_frames`: the blending window, a number of frames")
+    window = window_frames
     if int(window) != window or window < 0:
-        raise ValueError(f"Expected `window` to be an integer >= 0 frames, got {window!r}")
+        raise ValueError(f"Expected `window_frames` to be an integer >= 0 frames, got {window!r}")
     ivs = _check_intervals(intervals, n_frames)
     i = np.arange(n_frames, dtype=float)
     if not ivs:
@@ -131,21 +149,27 @@ def interval_weights(n_frames: int, intervals: Sequence[tuple[int, int]], *, win
     return np.minimum(blend_ramp((i - (a - w)) / w), blend_ramp(((b - 1 + w) - i) / w))
 
 
-def blend_weights(n_frames: int, intervals: Sequence[tuple[int, int]], *, window: int) -> Array:
+def blend_weights(
+    n_frames: int, intervals: Sequence[tuple[int, int]], *, window_frames: int | None = None, **removed: Any
+) -> Array:
     """Constraint weight per frame in [0, 1], shape (F,).
 
     1 inside the half-open ``intervals``, ramping smoothly to 0 over
-    ``window`` frames on each side (see :func:`interval_weights`);
-    overlapping ramps add up, clipped at 1.
+    ``window_frames`` frames on each side (see :func:`interval_weights`);
+    overlapping ramps add up, clipped at 1.  (A window in frames, as its
+    name says: every other window of mocaplab is in seconds.)
 
     Examples
     --------
-    >>> blend_weights(8, [(3, 5)], window=2).round(3).tolist()
+    >>> blend_weights(8, [(3, 5)], window_frames=2).round(3).tolist()
     [0.0, 0.21, 0.79, 1.0, 1.0, 0.79, 0.21, 0.0]
     """
+    reject_keywords("blend_weights", removed, _WINDOW_RENAMED, ("window_frames",))
+    if window_frames is None:
+        raise TypeError("blend_weights() needs `window_frames`: the blending window, a number of frames")
     if n_frames < 1:
         raise ValueError(f"Expected `n_frames` >= 1, got {n_frames}")
-    return np.clip(interval_weights(n_frames, intervals, window=window).sum(axis=0), 0.0, 1.0)
+    return np.clip(interval_weights(n_frames, intervals, window_frames=window_frames).sum(axis=0), 0.0, 1.0)
 
 
 # -------------------------------------------------------------------- goals
@@ -1159,7 +1183,7 @@ def effector_goals(
         mask = np.zeros(n, dtype=bool)
         for a, b in ivs:
             mask[a:b] = True
-        weights = blend_weights(n, ivs, window=window)
+        weights = blend_weights(n, ivs, window_frames=window)
         pos = motion.global_positions()[:, motion.skeleton.index(ee.joint)]
         out.append(Goal(ee.joint, _window_targets(pos, np.asarray(tgt, dtype=float), mask, weights), weights, chain=ee.chain))
     return out

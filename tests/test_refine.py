@@ -47,7 +47,7 @@ def contacts(walk):
 
 # ------------------------------------------------------------------ blending
 def test_blend_weights_ramp_smoothly():
-    w = blend_weights(40, [(15, 25)], window=6)
+    w = blend_weights(40, [(15, 25)], window_frames=6)
     assert np.all(w[15:25] == 1.0)
     assert np.all(w[:8] == 0.0) and np.all(w[32:] == 0.0)
     assert np.all((w[9:15] > 0) & (w[9:15] < 1)) and np.all((w[25:31] > 0) & (w[25:31] < 1))
@@ -57,18 +57,20 @@ def test_blend_weights_ramp_smoothly():
 
 
 def test_overlapping_ramps_add_up_and_clip():
-    bumps = interval_weights(30, [(5, 10), (14, 20)], window=5)
+    bumps = interval_weights(30, [(5, 10), (14, 20)], window_frames=5)
     assert bumps.shape == (2, 30)
-    w = blend_weights(30, [(5, 10), (14, 20)], window=5)
+    w = blend_weights(30, [(5, 10), (14, 20)], window_frames=5)
     np.testing.assert_allclose(w, np.clip(bumps.sum(axis=0), 0, 1))
     assert np.all(w[10:14] > 0.5)
 
 
 def test_blend_weights_validate():
     with pytest.raises(ValueError, match="0 <= start < stop <= 10"):
-        blend_weights(10, [(3, 12)], window=2)
-    with pytest.raises(ValueError, match="`window`"):
-        blend_weights(10, [(3, 5)], window=-1)
+        blend_weights(10, [(3, 12)], window_frames=2)
+    with pytest.raises(ValueError, match="`window_frames`"):
+        blend_weights(10, [(3, 5)], window_frames=-1)
+    with pytest.raises(TypeError, match="write window_frames="):
+        blend_weights(10, [(3, 5)], window=2)  # the old keyword says it counts frames
 
 
 # ---------------------------------------------------------------- measures

@@ -199,7 +199,7 @@ def test_one_interval_convention_across_the_papers():
     span = (10, 20)
     frames = np.arange(*span)
     assert intervals_from_mask(mask_from_intervals([span], 40)) == [span]
-    assert np.flatnonzero(interval_weights(40, [span], window=0) == 1.0).tolist() == frames.tolist()
+    assert np.flatnonzero(interval_weights(40, [span], window_frames=0) == 1.0).tolist() == frames.tolist()
     assert EndEffector("hand", span, (0.0, 1.0, 0.0)).intervals(40) == [span]
     assert EndEffectorConstraint(0, joint="hand", frames=span, target=(0.0, 1.0, 0.0)).constraint.intervals(40) == [span]
     pin = PinPosition(0, position=(0.0, 0.0), frames=span)

@@ -116,7 +116,7 @@ def _reference_goals(reference: Motion, contacts: Contacts, *, blend: float) -> 
         planted = intervals_from_mask(mask[:, cols].any(axis=1))
         if not planted:
             continue
-        weights = blend_weights(reference.n_frames, planted, window=window)
+        weights = blend_weights(reference.n_frames, planted, window_frames=window)
         for k in cols:
             kind: Literal["foot", "toe"] = "foot" if names[k] == ankle else "toe"
             goals.append(Goal(names[k], pos[:, sk.index(names[k])], weights, kind=kind))
@@ -140,7 +140,7 @@ def _outside_flights(goals: Sequence[Goal], contacts: Contacts, fps: float) -> l
     if not stages:
         return list(goals)
     n = contacts.n_frames
-    keep = 1.0 - blend_weights(n, stages, window=int(round(PLANT_BLEND * fps)))
+    keep = 1.0 - blend_weights(n, stages, window_frames=int(round(PLANT_BLEND * fps)))
     return [dataclasses.replace(g, weights=np.asarray(g.weights) * keep) for g in goals]
 
 

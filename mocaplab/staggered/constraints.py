@@ -345,7 +345,7 @@ class ConstraintLayer:
         same = t.shape == grid.shape and np.array_equal(t, grid)
         for e, tau in enumerate(self.frame_times(sm, staggered=staggered).T):
             inside = np.interp(np.interp(grid, tau, n), n, self.masks[:, e].astype(float)) >= 0.5
-            w_grid = blend_weights(grid.size, intervals_from_mask(inside), window=window)
+            w_grid = blend_weights(grid.size, intervals_from_mask(inside), window_frames=window)
             w[:, e] = w_grid if same else np.interp(t, grid, w_grid)
             at = np.interp(t, tau, n)
             tg[:, e] = np.stack([np.interp(at, n, self.targets[:, e, c]) for c in range(3)], axis=-1)

@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
+from types import MappingProxyType
 from typing import Any, Literal, overload
 
 import numpy as np
@@ -114,7 +115,7 @@ def _check_intervals(intervals: Sequence[tuple[int, int]], n_frames: int) -> lis
 
 
 #: The frame-count window's old keyword (every other window of mocaplab is in seconds).
-_WINDOW_RENAMED = {"window": "the window is a number of frames: write window_frames=..."}
+_WINDOW_RENAMED = MappingProxyType({"window": "the window is a number of frames: write window_frames=..."})
 
 
 def interval_weights(

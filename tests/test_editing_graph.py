@@ -168,7 +168,7 @@ def test_several_clips_share_one_graph():
 
 
 def test_input_errors(walk):
-    with pytest.raises(ValueError, match="at least one clip"):
+    with pytest.raises(ValueError, match="at least one motion"):
         build_graph([])
     with pytest.raises(ValueError, match="fps"):
         build_graph([walk, walk.resample(60)])
@@ -178,6 +178,6 @@ def test_input_errors(walk):
         build_graph([walk], threshold=0)
     with pytest.raises(ValueError, match="chunk"):
         build_graph([walk], chunk=0)
-    with pytest.raises(TypeError, match=r"clips\[1\]"):
+    with pytest.raises(TypeError, match=r"motions\[1\]"):
         build_graph([walk, "walk"])
     assert isinstance(build_graph(walk), MotionGraph)  # a single Motion is accepted

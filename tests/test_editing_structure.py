@@ -81,6 +81,11 @@ def test_each_module_imports_alone(name):
         for k in [k for k in sys.modules if k == "mocaplab.editing" or k.startswith("mocaplab.editing.")]:
             del sys.modules[k]
         sys.modules.update(saved)
+        # a re-import rebinds each submodule on its parent package: point them back at the saved modules
+        for k, mod in saved.items():
+            parent, _, child = k.rpartition(".")
+            if parent in sys.modules:
+                setattr(sys.modules[parent], child, mod)
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -10,7 +10,7 @@ API summary (names are stable; lessons and widgets code against them)
 --------------------------------------------------------------------
 Conventions: ground positions are ``(x, z)`` in metres, times in seconds on a
 shared *reference clock*, frames are indices into each character's own clip,
-characters are indices into the ``characters`` sequence.  Directions on the
+characters are indices into the ``motions`` sequence.  Directions on the
 ground are 2-vectors ``(x, z)`` or yaw angles in radians (``atan2(x, z)``, the
 convention of :func:`mocaplab.quat.yaw`).  Local frames are ``(forward, left)``:
 forward along the path tangent, left along the normal ``R t`` (tangent turned
@@ -71,13 +71,13 @@ Constraints (:mod:`mocaplab.editing.constraints`), frozen dataclasses
     ones are accepted, their rows left out and checked: ``EditResult.notes``).
 
 Editing (:mod:`mocaplab.editing.scene`)
-    ``edit(characters, constraints, *, discrete=False, **options) -> EditResult``
-    (``discrete``: see below), ``make_editor(characters, constraints, *,
+    ``edit(motions, constraints, *, discrete=False, **options) -> EditResult``
+    (``discrete``: see below), ``make_editor(motions, constraints, *,
     discrete=False, **options)`` (a SceneEditor, or a DiscreteEditor),
-    ``SceneEditor(characters, constraints=(), **options)`` (continuous only) with
+    ``SceneEditor(motions, constraints=(), **options)`` (continuous only) with
     ``.drag(constraint_index, new_target) -> EditResult``, ``.add(constraint) -> int``,
     ``.remove(index) -> EditResult``, ``.replace(index, constraint) -> EditResult``,
-    ``.set_constraints(constraints) -> EditResult``, ``.evaluate(characters,
+    ``.set_constraints(constraints) -> EditResult``, ``.evaluate(motions,
     constraints) -> EditResult`` (fresh, state untouched), ``.result``,
     ``.constraints``, ``.characters``, ``.paths`` (input MotionPaths),
     ``.segments`` (rigid stationary segments), ``.options``,
@@ -116,13 +116,13 @@ Energy (:mod:`mocaplab.editing.energy`)
     ``deformation_energy(result, *, cs=1.0, ct=1.0, reference=None) -> float`` (eq. 10).
 
 Discrete editing (section 5; :mod:`mocaplab.editing.graph`, the package :mod:`mocaplab.editing.discrete`)
-    ``build_graph(clips, *, weights=None, threshold=0.1, window=0.5, min_gap=0.3,
+    ``build_graph(motions, *, weights=None, threshold=0.1, window=0.5, min_gap=0.3,
     chunk=1024, roles=None) -> MotionGraph`` (frame similarity of joint angles, root height and
     orientation, joint and root velocities; local minima below ``threshold`` kept,
     stored sparsely, built in row chunks), ``MotionGraph`` with ``.clips``,
     ``.offsets``, ``.pairs (M, 2)``, ``.costs (M,)``, ``.n_frames``,
     ``.transitions() -> (src, dst, cost)``, ``.clip_index(motion)``.
-    ``DiscreteEditor(characters, constraints, discrete=True or DiscreteOptions(...),
+    ``DiscreteEditor(motions, constraints, discrete=True or DiscreteOptions(...),
     **options)`` (the SceneEditor interface) or ``edit(..., discrete=True)``
     runs the greedy Algorithm 1 after every constraint update: at most one
     transformation per update, the best of all pruned candidates by the
@@ -219,12 +219,12 @@ __all__ = [
 ]
 
 
-def make_editor(characters: Any, constraints: Sequence[Any] = (), *, discrete: Any = False, **options: Any) -> Any:
+def make_editor(motions: Any, constraints: Sequence[Any] = (), *, discrete: Any = False, **options: Any) -> Any:
     """An interactive editor: a :class:`SceneEditor`, or a :class:`~mocaplab.editing.discrete.DiscreteEditor`.
 
     Parameters
     ----------
-    characters : Motion or sequence of Motion
+    motions : Motion or sequence of Motion
     constraints : sequence of constraints
     discrete : bool or DiscreteOptions
         False: continuous editing only; True or a
@@ -233,16 +233,16 @@ def make_editor(characters: Any, constraints: Sequence[Any] = (), *, discrete: A
         Options of :class:`SceneEditor` (:mod:`mocaplab.editing.scene`).
     """
     if discrete is False or discrete is None:
-        return SceneEditor(characters, constraints, **options)
+        return SceneEditor(motions, constraints, **options)
     from .discrete import DiscreteEditor
 
-    return DiscreteEditor(characters, constraints, discrete=discrete, **options)
+    return DiscreteEditor(motions, constraints, discrete=discrete, **options)
 
 
-def edit(characters: Any, constraints: Sequence[Any] = (), *, discrete: Any = False, **options: Any) -> EditResult:
-    """Edit the paths and timing of ``characters`` under ``constraints`` (one shot).
+def edit(motions: Any, constraints: Sequence[Any] = (), *, discrete: Any = False, **options: Any) -> EditResult:
+    """Edit the paths and timing of the characters ``motions`` under ``constraints`` (one shot).
 
-    ``make_editor(characters, constraints, discrete=discrete, **options).result``:
+    ``make_editor(motions, constraints, discrete=discrete, **options).result``:
     continuous Laplacian editing (:func:`mocaplab.editing.scene.edit`), and
     with ``discrete`` on, Algorithm 1 run to convergence (up to
     ``DiscreteOptions.max_initial`` transformations).
@@ -252,8 +252,8 @@ def edit(characters: Any, constraints: Sequence[Any] = (), *, discrete: Any = Fa
     >>> res = edit([walk], [PinPosition(0, 0, (0, 0), hard=True), PinPosition(0, 200, (1.0, 3.0))])  # doctest: +SKIP
     """
     if discrete is False or discrete is None:
-        return _continuous_edit(characters, constraints, **options)
-    return make_editor(characters, constraints, discrete=discrete, **options).result
+        return _continuous_edit(motions, constraints, **options)
+    return make_editor(motions, constraints, discrete=discrete, **options).result
 
 
 def __getattr__(name: str) -> Any:

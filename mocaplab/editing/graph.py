@@ -378,7 +378,7 @@ class MotionGraph:
 
 
 def build_graph(
-    clips: Motion | Sequence[Motion],
+    motions: Motion | Sequence[Motion],
     *,
     weights: SimilarityWeights | None = None,
     threshold: float = 0.1,
@@ -391,7 +391,7 @@ def build_graph(
 
     Parameters
     ----------
-    clips : Motion or sequence of Motion
+    motions : Motion or sequence of Motion
         Same skeleton (joint names) and frame rate.
     weights : SimilarityWeights, optional
     threshold : float
@@ -411,20 +411,20 @@ def build_graph(
     -------
     MotionGraph
     """
-    if isinstance(clips, Motion):
-        clips = (clips,)
-    clips = tuple(clips)
+    if isinstance(motions, Motion):
+        motions = (motions,)
+    motions = tuple(motions)
     if roles is not None:
-        clips = tuple(with_roles(m, roles) if isinstance(m, Motion) else m for m in clips)
-    if not clips:
-        raise ValueError("Expected at least one clip in `clips`, got none")
-    for k, m in enumerate(clips):
+        motions = tuple(with_roles(m, roles) if isinstance(m, Motion) else m for m in motions)
+    if not motions:
+        raise ValueError("Expected at least one motion in `motions`, got none")
+    for k, m in enumerate(motions):
         if not isinstance(m, Motion):
-            raise TypeError(f"Expected clips[{k}] to be a Motion, got {type(m).__name__}")
-        if m.skeleton.names != clips[0].skeleton.names:
-            raise ValueError(f"clips[{k}] has a different skeleton (joint names) from clips[0]")
-        if abs(m.fps - clips[0].fps) > 1e-6 * clips[0].fps:
-            raise ValueError(f"clips[{k}] runs at {m.fps:g} fps, clips[0] at {clips[0].fps:g} fps: resample first")
+            raise TypeError(f"Expected motions[{k}] to be a Motion, got {type(m).__name__}")
+        if m.skeleton.names != motions[0].skeleton.names:
+            raise ValueError(f"motions[{k}] has a different skeleton (joint names) from motions[0]")
+        if abs(m.fps - motions[0].fps) > 1e-6 * motions[0].fps:
+            raise ValueError(f"motions[{k}] runs at {m.fps:g} fps, motions[0] at {motions[0].fps:g} fps: resample first")
     w = SimilarityWeights() if weights is None else weights
     threshold = float(threshold)
     if not threshold > 0:
@@ -434,11 +434,11 @@ def build_graph(
     chunk = int(chunk)
     if chunk < 1:
         raise ValueError(f"Expected `chunk` >= 1, got {chunk}")
-    fps = float(clips[0].fps)
-    feats = np.concatenate([frame_features(m, w) for m in clips])
-    offsets = np.concatenate([[0], np.cumsum([m.n_frames for m in clips])]).astype(np.int64)
+    fps = float(motions[0].fps)
+    feats = np.concatenate([frame_features(m, w) for m in motions])
+    offsets = np.concatenate([[0], np.cumsum([m.n_frames for m in motions])]).astype(np.int64)
     N = int(offsets[-1])
-    clip_of = np.repeat(np.arange(len(clips)), [m.n_frames for m in clips])
+    clip_of = np.repeat(np.arange(len(motions)), [m.n_frames for m in motions])
     r = int(round(window * fps))
     gap = int(np.ceil(min_gap * fps))
     sq = np.einsum("ij,ij->i", feats, feats)
@@ -479,4 +479,4 @@ def build_graph(
     pairs.flags.writeable = False
     costs.flags.writeable = False
     offsets.flags.writeable = False
-    return MotionGraph(clips, offsets, pairs, costs, threshold, float(window), float(min_gap), w)
+    return MotionGraph(motions, offsets, pairs, costs, threshold, float(window), float(min_gap), w)

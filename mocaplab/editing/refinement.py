@@ -24,6 +24,7 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from types import MappingProxyType
 from typing import Any, Literal
 
 import numpy as np
@@ -31,9 +32,19 @@ from numpy.typing import NDArray
 
 from .. import quat
 from .._api import reject_keywords
+from .._checks import real
 from .._warnings import warn
 from ..contacts import Contacts, resolve_contacts
-from ..goals import EndEffector, Goal, RelativeTo, effector_goals, enforce_goals, foot_goals, world_targets
+from ..goals import (
+    EndEffector,
+    Goal,
+    RelativeTo,
+    effector_goals,
+    enforce_goals,
+    foot_goals,
+    map_options,
+    world_targets,
+)
 from ..ik import UnreachableTargetWarning, unreachable_message
 from ..motion import Motion
 
@@ -51,10 +62,10 @@ JointRef = str | int
 
 # ------------------------------------------------------------------ refine
 #: Keywords of earlier versions, and what to write instead.
-_RENAMED = {
+_RENAMED = MappingProxyType({
     "feet": "refine(..., feet=False) is refine(..., contacts=None) (plant no feet); feet=True is the default "
     "contacts='auto'",
-}
+})
 
 
 def refine(
@@ -88,10 +99,10 @@ def refine(
     reference : Motion, optional
         The motion before editing, with the same number of frames.
     blend : float
-        Blending window on each side of every constraint, seconds.
+        Blending window on each side of every constraint, seconds (>= 0).
     spacing, levels : float, int
-        Coarsest knot spacing (seconds) and number of levels of the
-        displacement map.
+        Coarsest knot spacing (seconds, > 0) and number of levels of the
+        displacement map (1 to :data:`mocaplab.goals.MAX_LEVELS`).
     adjust_root : bool
         Lower the root where a leg cannot reach its plant.
     dls_options : dict, optional
@@ -114,6 +125,7 @@ def refine(
     >>> clean = ml.refine(bent, reference=walk)                # doctest: +SKIP
     """
     reject_keywords("refine", removed, _RENAMED, _ALLOWED + ("contacts", "end_effectors", "reference"))
+    blend, spacing, levels = _checked(blend, spacing, levels)
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
     if reference is not None and not isinstance(reference, Motion):
@@ -230,6 +242,7 @@ def refine_scene(
     are resolved against the *refined* other character, so characters are
     refined in dependency order; a longer cycle raises ValueError.
     """
+    opts = _options(options)  # checked before any work
     motions = list(motions)
     if not motions or not all(isinstance(m, Motion) for m in motions):
         raise TypeError("Expected `motions` to be a non-empty sequence of Motion")
@@ -289,7 +302,7 @@ def refine_scene(
             motions[c], [ees[k] for k in mine], tg,
             contacts=contacts[c],
             reference=None if references is None else references[c],
-            **_options(options),
+            **opts,
         )
     return current
 
@@ -303,7 +316,15 @@ def _options(options: dict[str, Any]) -> dict[str, Any]:
         "blend": 0.1, "spacing": 0.25, "levels": 3, "adjust_root": True, "dls_options": None, "roles": None,
     }
     defaults.update(options)
+    defaults["blend"], defaults["spacing"], defaults["levels"] = _checked(
+        defaults["blend"], defaults["spacing"], defaults["levels"]
+    )
     return defaults
+
+
+def _checked(blend: Any, spacing: Any, levels: Any) -> tuple[float, float, int]:
+    """refine's numeric options, checked before any contact is detected (TypeError/ValueError naming the option)."""
+    return (real(blend, "blend", low=0.0, unit="seconds"), *map_options(spacing, levels))
 
 
 # ----------------------------------------------------------------- measures

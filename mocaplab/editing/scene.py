@@ -1,6 +1,6 @@
 """Edit a scene of characters: :func:`edit` and the interactive :class:`SceneEditor`.
 
-``edit(characters, constraints)`` deforms every character's root path
+``edit(motions, constraints)`` deforms every character's root path
 (:mod:`~mocaplab.editing.laplacian`) and time warp
 (:mod:`~mocaplab.editing.timewarp`) under the given constraints and returns an
 :class:`EditResult`.  :class:`SceneEditor` keeps the factorised systems
@@ -324,20 +324,20 @@ def _is_names(value: Any) -> bool:
     )
 
 
-def _characters(characters: Any) -> tuple[Motion, ...]:
-    if isinstance(characters, Motion):
-        characters = (characters,)
+def _characters(motions: Any) -> tuple[Motion, ...]:
+    if isinstance(motions, Motion):
+        motions = (motions,)
     try:
-        chars = tuple(characters)
+        chars = tuple(motions)
     except TypeError:
-        raise TypeError(f"Expected `characters` as a sequence of Motion, got {type(characters).__name__}") from None
+        raise TypeError(f"Expected `motions` as a sequence of Motion, got {type(motions).__name__}") from None
     if not chars:
-        raise ValueError("Expected at least one character in `characters`, got none")
+        raise ValueError("Expected at least one character in `motions`, got none")
     for k, m in enumerate(chars):
         if not isinstance(m, Motion):
-            raise TypeError(f"Expected characters[{k}] to be a Motion, got {type(m).__name__}")
+            raise TypeError(f"Expected motions[{k}] to be a Motion, got {type(m).__name__}")
         if m.n_frames < 3:
-            raise ValueError(f"Expected characters[{k}] to have at least 3 frames, got {m.n_frames}")
+            raise ValueError(f"Expected motions[{k}] to have at least 3 frames, got {m.n_frames}")
     return chars
 
 
@@ -421,7 +421,7 @@ class SceneEditor(Undoable):
 
     Parameters
     ----------
-    characters : Motion or sequence of Motion
+    motions : Motion or sequence of Motion
         The input clips (never modified).
     constraints : sequence of constraints
         :mod:`~mocaplab.editing.constraints` objects.
@@ -461,7 +461,7 @@ class SceneEditor(Undoable):
     True
     """
 
-    def __init__(self, characters: Any, constraints: Sequence[Any] = (), **options: Any) -> None:
+    def __init__(self, motions: Any, constraints: Sequence[Any] = (), **options: Any) -> None:
         if options.get("discrete"):
             raise TypeError(
                 "SceneEditor is continuous-only: for discrete editing (section 5) use "
@@ -477,7 +477,7 @@ class SceneEditor(Undoable):
         flip_step(opts["flip_rate"], 1.0, name="flip_rate")  # a bad rate fails here, not when a heading is first asked for
         _check_clock_fps(opts["clock_fps"])
         self.options = opts
-        chars = _characters(characters)
+        chars = _characters(motions)
         K = len(chars)
         roles = _per_character(opts["roles"], K, "roles", lambda v: isinstance(v, Mapping))
         self.characters = tuple(with_roles(m, r) for m, r in zip(chars, roles, strict=True))
@@ -784,9 +784,9 @@ class SceneEditor(Undoable):
         """The tangent-operator rows of the input paths (``row(k, i) -> (columns, weights)``), cached."""
         return self._space.tangent_rows
 
-    def evaluate(self, characters: Any, constraints: Sequence[Any]) -> EditResult:
+    def evaluate(self, motions: Any, constraints: Sequence[Any]) -> EditResult:
         """A fresh continuous edit of other characters/constraints with this editor's options (state untouched)."""
-        return SceneEditor(characters, constraints, **self.options).result
+        return SceneEditor(motions, constraints, **self.options).result
 
     def _check_index(self, index: Any) -> int:
         n = len(self._constraints)
@@ -889,12 +889,12 @@ def _path_jumps(result: EditResult) -> list[str]:
     return out
 
 
-def edit(characters: Any, constraints: Sequence[Any] = (), **options: Any) -> EditResult:
-    """Edit the paths and timing of ``characters`` under ``constraints``.
+def edit(motions: Any, constraints: Sequence[Any] = (), **options: Any) -> EditResult:
+    """Edit the paths and timing of the characters ``motions`` under ``constraints``.
 
     Parameters
     ----------
-    characters : Motion or sequence of Motion
+    motions : Motion or sequence of Motion
     constraints : sequence of constraints
     **options
         See :mod:`mocaplab.editing.scene`.
@@ -919,7 +919,7 @@ def edit(characters: Any, constraints: Sequence[Any] = (), **options: Any) -> Ed
         Where a soft :class:`~mocaplab.editing.constraints.Relative` asks
         for what hard constraints fix (:attr:`EditResult.conflicts`).
     """
-    result = SceneEditor(characters, constraints, **options).result
+    result = SceneEditor(motions, constraints, **options).result
     for message in _path_jumps(result):
         warn(message, PathJumpWarning)
     for note in result.notes:

@@ -224,7 +224,7 @@ class DiscreteEditor(Undoable):
 
     Parameters
     ----------
-    characters : Motion or sequence of Motion
+    motions : Motion or sequence of Motion
         The input clips (never modified).
     constraints : sequence of constraints
         On the input clips' frames.
@@ -278,11 +278,11 @@ class DiscreteEditor(Undoable):
     """
 
     def __init__(
-        self, characters: Any, constraints: Sequence[Any] = (), *, discrete: Any = True, **options: Any
+        self, motions: Any, constraints: Sequence[Any] = (), *, discrete: Any = True, **options: Any
     ) -> None:
         self.discrete_options = _options(discrete)
         o = self.discrete_options
-        scene = SceneEditor(characters, constraints, **options)
+        scene = SceneEditor(motions, constraints, **options)
         self.characters = scene.characters
         self.options = dict(scene.options)
         graphs: dict[int, MotionGraph] = {}

@@ -67,6 +67,7 @@ from scipy.ndimage import minimum_filter1d
 
 from . import kinematics, quat
 from ._api import reject_keywords
+from ._checks import integer, real
 from .contacts import Contacts, intervals_from_mask
 from .displacement import DisplacementMap, blend_ramp, displacement_between
 from .ik import (
@@ -612,6 +613,38 @@ def _leg_weight(g_ankle: Goal | None, toe: tuple[int, Goal] | None, n: int) -> A
     return w if toe is None else np.maximum(w, toe[1].weights)
 
 
+MAX_LEVELS = 16
+"""Most levels of a displacement map (:func:`enforce_goals`, ``levels``).
+
+Each level halves the knot spacing down to one frame; past that a level
+only refits the same residual, so more levels buy nothing but work."""
+
+MAX_WINDOW = 10.0
+"""Longest blending window over frames, seconds: the root lowering's ``drop_window`` (:func:`solve_goals`)
+and the touch-up's ``flight_window`` (:func:`mocaplab.physics.touch_up`).
+
+The defaults are 0.1 to 0.5 s; a window of several seconds already spreads
+one change over a whole walk cycle, and a bound keeps ``seconds * fps``
+a frame count (1e308 s is infinitely many frames)."""
+
+
+def map_options(spacing: Any, levels: Any) -> tuple[float, int]:
+    """The displacement map's ``spacing`` (seconds, > 0) and ``levels`` (1 to :data:`MAX_LEVELS`), checked.
+
+    Raises TypeError or ValueError naming the option; the one check of these
+    options for :func:`enforce_goals` and Kim's refine.
+
+    Examples
+    --------
+    >>> map_options(0.25, 3)
+    (0.25, 3)
+    """
+    return (
+        real(spacing, "spacing", low=0.0, low_open=True, unit="seconds"),
+        integer(levels, "levels", low=1, high=MAX_LEVELS, why="each level halves the knot spacing"),
+    )
+
+
 def _lower_envelope(need: Array, half: int) -> Array:
     """A smooth curve below ``need`` (F,): erosion then a Hann average.
 
@@ -689,11 +722,11 @@ def solve_goals(
         Fraction of the leg's full length the root adjustment aims for: a
         little short of straight, where the knee angle is very sensitive to
         the ankle's position.  A leg already straighter than that may stay
-        as straight as it is, up to ``max_reach``.
+        as straight as it is, up to ``max_reach``.  In (0, 1].
     max_drop : float
-        Largest root lowering, metres.
+        Largest root lowering, metres (>= 0).
     drop_window : float
-        The lowering is a smooth lower envelope of the per-frame need over
+        Seconds, from 0 to :data:`MAX_WINDOW`.  The lowering is a smooth lower envelope of the per-frame need over
         this many seconds on each side (never less than the need), because
         near full extension a small jump of the hip is a large jump of the
         knee angle.
@@ -715,7 +748,7 @@ def solve_goals(
         full extension the knee angle goes as the square root of the
         distance left, so a target that brushes past straight makes the
         knee dip and come back in a few frames; a cap below 1 lowers the
-        root (smoothly, by ``drop_window``) instead.
+        root (smoothly, by ``drop_window``) instead.  In (0, 1].
     return_fk : bool
         Also return the new motion's forward kinematics
         ``(global_rotations (F, J, 4), global_positions (F, J, 3))``.  They
@@ -753,6 +786,10 @@ def solve_goals(
     >>> np.round(out.global_positions()[0, 2], 3).tolist()
     [0.2, 0.3, 0.0]
     """
+    reach = real(reach, "reach", low=0.0, high=1.0, low_open=True, unit="of the leg's length")
+    max_reach = real(max_reach, "max_reach", low=0.0, high=1.0, low_open=True, unit="of the leg's length")
+    max_drop = real(max_drop, "max_drop", low=0.0, unit="metres")
+    drop_window = real(drop_window, "drop_window", low=0.0, high=MAX_WINDOW, unit="seconds")
     out = _solve_goals(
         motion, goals, adjust_root=adjust_root, reach=reach, max_drop=max_drop, drop_window=drop_window,
         dls_options=dls_options, fk=fk, hinges=hinges, max_reach=max_reach,
@@ -940,9 +977,9 @@ def enforce_goals(
     motion : Motion
     goals : sequence of Goal
     spacing : float
-        Knot spacing of the coarsest displacement-map level, seconds.
+        Knot spacing of the coarsest displacement-map level, seconds (> 0).
     levels : int
-        Number of levels (each halves the spacing).
+        Number of levels (each halves the spacing), 1 to :data:`MAX_LEVELS`.
     exact : bool
         Run the IK layer once more on the smoothed motion, aiming each goal
         joint at its position in the per-frame solution with the same
@@ -955,6 +992,7 @@ def enforce_goals(
     -------
     Motion
     """
+    spacing, levels = map_options(spacing, levels)
     if not goals:
         return motion
     solved = solve_goals(motion, goals, adjust_root=adjust_root, dls_options=dls_options)

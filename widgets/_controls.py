@@ -20,7 +20,71 @@ import ipywidgets as W
 from mocaplab.io import save_bvh
 from mocaplab.motion import Motion
 
-__all__ = ["HistoryButtons", "ExportControl", "export_paths", "error_html"]
+__all__ = ["HistoryButtons", "ExportControl", "export_paths", "error_html", "row", "keep_width"]
+
+#: Widgets kept at their own width in a :func:`row`: controls (a squeezed one reads "..."), pictures and boxes.
+_FIXED = (
+    W.Button,
+    W.ToggleButton,
+    W.Checkbox,
+    W.Dropdown,
+    W.Text,
+    W.BoundedFloatText,
+    W.Select,
+    W.Label,
+    W.FloatSlider,
+    W.IntSlider,
+    W.Image,
+    W.Box,
+)
+
+
+def keep_width(*widgets: W.Widget) -> None:
+    """Never let a flex row shrink these widgets below their own width (``flex: 0 0 auto``).
+
+    A widget whose layout already says how it flexes (a slider that may
+    grow) is left as it is.
+    """
+    for widget in widgets:
+        if not widget.layout.flex:
+            widget.layout.flex = "0 0 auto"
+
+
+def row(children: Sequence[W.Widget], *, align: str = "center") -> W.HBox:
+    """A row that wraps onto the next line when the notebook is too narrow, instead of squeezing or overflowing.
+
+    Controls (buttons, toggles, boxes, sliders) keep their width
+    (:func:`keep_width`); text (HTML, labels) takes what is left and wraps;
+    boxes keep their width and move to the next line as a whole (a 3D view
+    drops below the plot when there is no room beside it).
+
+    Parameters
+    ----------
+    children : sequence of ipywidgets.Widget
+    align : str
+        CSS ``align-items`` of the row.
+
+    Returns
+    -------
+    ipywidgets.HBox
+        ``flex-flow: row wrap``; also the class ``mocaplab-row``.
+
+    Examples
+    --------
+    >>> import ipywidgets as W
+    >>> r = row([W.Button(description="step"), W.HTML("mean 3 mm")])
+    >>> r.layout.flex_flow, r.children[0].layout.flex
+    ('row wrap', '0 0 auto')
+    """
+    for child in children:
+        if isinstance(child, _FIXED):
+            keep_width(child)
+        elif not child.layout.flex:
+            child.layout.flex = "1 1 auto"
+            child.layout.min_width = child.layout.min_width or "120px"
+    box = W.HBox(list(children), layout=W.Layout(flex_flow="row wrap", align_items=align))
+    box.add_class("mocaplab-row")
+    return box
 
 
 def _text(get: Callable[[], str], what: str) -> str:
@@ -98,7 +162,7 @@ class HistoryButtons:
         for button, name in ((self.undo, "undo"), (self.redo, "redo"), (self.reset, "reset")):
             button.add_class(f"mocaplab-{name}")
             button.on_click(lambda _b, name=name: self._run(name))
-        self.box = W.HBox([self.undo, self.redo, self.reset])
+        self.box = row([self.undo, self.redo, self.reset])
         self.sync()
 
     def _run(self, name: str) -> None:
@@ -157,7 +221,7 @@ class ExportControl:
         self.label.add_class("mocaplab-export-status")
         self.written: list[Path] = []
         self.button.on_click(lambda _b: self._guard(self.export))
-        self.box = W.HBox([self.path, self.button, self.label])
+        self.box = row([self.path, self.button, self.label])
 
     def export(self, path: str | os.PathLike[str] | None = None) -> list[Path]:
         """Write the current motions (to ``path`` or the box's name); returns the files written.

@@ -73,7 +73,7 @@ from numpy.typing import NDArray
 
 from mocaplab import editing
 
-from ._controls import ExportControl, HistoryButtons
+from ._controls import ExportControl, HistoryButtons, row
 
 Backend = Literal["auto", "ipympl", "agg"]
 
@@ -254,15 +254,9 @@ class DragView:
         self.refine.observe(self._on_refine_toggle, names="value")
         self.history_buttons = HistoryButtons(self.editor, self._after_history, guard=self._guard)
         self.export_control = ExportControl(self._export_motions, default=_export_name(self.editor), guard=self._guard)
-        self.controls = W.HBox(
-            [self.history_buttons.box, self.refine, self.export_control.box], layout=W.Layout(flex_flow="row wrap")
-        )
+        # a row that wraps: the "wrote ..." note goes under the button when it does not fit beside it
+        self.controls = row([self.history_buttons.box, self.refine, self.export_control.box])
         self.controls.add_class("mocaplab-edit-controls")
-        # the "wrote ..." note goes under the button when it does not fit beside it (never squeezing it)
-        self.export_control.box.layout.flex_flow = "row wrap"
-        self.export_control.button.layout.flex = "0 0 auto"
-        self.export_control.path.layout.flex = "0 0 auto"
-        self.export_control.label.layout.flex = "1 1 auto"
 
     # -- public
     def on_edit(self, callback: Callable[[Any], None]) -> None:

@@ -81,6 +81,7 @@ from mocaplab import editing
 from mocaplab.contacts import foot_contacts, intervals_from_mask
 from mocaplab.plot import literal
 
+from ._controls import row
 from ._drag import (
     Backend,
     Drag,
@@ -288,7 +289,8 @@ class PathEditor(DragView):
         self._viewer_box = W.Box([self._viewer_widget()] if self.viewer is not None else [])
         left = W.VBox([self._view.widget, self.time, self.status, self.controls, self.handles_info])
         self._open(
-            W.HBox([left, self._viewer_box]),
+            # the 3D view drops below the plot when the notebook has no room beside it (never over it)
+            row([left, self._viewer_box], align="flex-start"),
             "press a path to pin it; drag a pin to move it; click a pin to unpin; shift-drag for a direction",
         )
 

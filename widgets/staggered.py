@@ -62,7 +62,7 @@ from mocaplab.motion import Motion
 from mocaplab.plot import literal
 from mocaplab.staggered import StaggeredEditor
 
-from ._controls import ExportControl, HistoryButtons, error_html
+from ._controls import ExportControl, HistoryButtons, error_html, row
 from ._drag import TOOLBAR_PX, make_canvas
 
 __all__ = ["StaggeredExplorer"]
@@ -399,7 +399,7 @@ class StaggeredExplorer:
             canvas = self.canvas if self.interactive else self.image
             controls = W.VBox(
                 [
-                    W.HBox([self.toggle, self.constraints_check, self.joint_dropdown]),
+                    row([self.toggle, self.constraints_check, self.joint_dropdown]),
                     self.s_slider,
                     self.l_slider,
                     self.succession_dropdown,
@@ -411,8 +411,15 @@ class StaggeredExplorer:
                     self.history.box,
                 ]
             )
+            # the controls drop below the curves when the notebook has no room beside them
             self._box = W.VBox(
-                [W.HBox([canvas, controls]), self.view_box, self.status, self.export.box, self.curves_info]
+                [
+                    row([canvas, controls], align="flex-start"),
+                    self.view_box,
+                    self.status,
+                    self.export.box,
+                    self.curves_info,
+                ]
             )
             self._box.add_class("mocaplab-staggered-explorer")
         return self._box

@@ -56,7 +56,7 @@ from mocaplab.motion import Motion
 from mocaplab.physics import Adjustment, TouchUpSession
 from mocaplab.plot import literal
 
-from ._controls import ExportControl, error_html
+from ._controls import ExportControl, error_html, row
 from ._drag import TOOLBAR_PX
 
 __all__ = ["TouchUpStepper", "plot_zmp_distance", "plot_mean_distance", "plot_balance_top"]
@@ -138,7 +138,7 @@ class _Row:
             layout=W.Layout(width="250px"),
         )
         self.stage = W.Dropdown(options=["ground", "flight"], value=adj.stage, layout=W.Layout(width="90px"))
-        self.box = W.HBox([W.Label(f"{k + 1}."), self.s2, self.s3, self.sigma, self.rho, self.stage])
+        self.box = row([W.Label(f"{k + 1}."), self.s2, self.s3, self.sigma, self.rho, self.stage])
 
     def set(self, adj: Adjustment) -> None:
         self.s2.value = ", ".join(adj.s2)
@@ -329,9 +329,9 @@ class TouchUpStepper:
         self.export = ExportControl(lambda: self.session.current.motion, default="touched_up.bvh", guard=self._guard)
 
         self.rows = [_Row(k, adj) for k, adj in enumerate(self.session.schedule)]
-        for row in self.rows:
-            for ctl in (row.s2, row.s3, row.sigma, row.rho, row.stage):
-                ctl.observe(lambda change, r=row: self._on_row(r), names="value")
+        for line in self.rows:
+            for ctl in (line.s2, line.s3, line.sigma, line.rho, line.stage):
+                ctl.observe(lambda change, r=line: self._on_row(r), names="value")
         self._syncing = False
 
         self.figure8, self._ax8 = self._figure(4.6, 2.6)
@@ -342,14 +342,12 @@ class TouchUpStepper:
 
         self.viewer: Any = self._make_viewer() if viewer else None
         self._viewer_box = W.Box([self.viewer.widget] if self.viewer is not None else [])
-        controls = W.HBox(
-            [self.back_button, self.step_button, self.iteration_button, self.reset_button, self.mean_label]
-        )
+        controls = row([self.back_button, self.step_button, self.iteration_button, self.reset_button, self.mean_label])
         schedule = W.VBox(
             [W.HTML("<b>schedule</b> (S1 = the other joints; an edit applies from the current step on)")]
             + [r.box for r in self.rows]
         )
-        plots = W.HBox([self._plot8.widget, self._plot9.widget])
+        plots = row([self._plot8.widget, self._plot9.widget], align="flex-start")
         self.widget = W.VBox(
             [
                 controls,

@@ -1,0 +1,231 @@
+"""The editors fit a laptop: JupyterLab at 1366x768 and 1440x900 with the file browser open (headless Chromium).
+
+Issue #28: on a laptop with JupyterLab's default layout (the file browser
+open on the left) the path editor's 3D view covered the plot and cut its
+status line, and the staggered explorer pushed its controls past the right
+edge, its toggle and Undo/Redo/Reset squeezed to "...".  This test opens a
+notebook (written here, building each widget the way its lesson does:
+03's path editor with a 3D view, 04's time tracks, 10's touch-up stepper,
+13's staggered explorer) in the real JupyterLab of ``test_browser.py``,
+opens the file browser, and measures in the DOM at both window sizes:
+
+* overflow: how far (CSS px) any visible element of a widget reaches past
+  the right edge of the notebook's content box (its cell's output area);
+* squeezed controls: buttons, toggles, text boxes and labels whose text is
+  cut (``scrollWidth > clientWidth``, the "..." a person sees), and any
+  control narrower than :data:`MIN_CONTROL_PX`;
+* overlap: the area shared by the plot, the 3D view and every control,
+  status line or legend outside them (a 3D view drawn over the plot).
+
+Everything must be 0.  The figures are printed (``-s`` shows them).
+
+Run: ``pytest -m browser tests/test_browser_layout.py``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from browser_support import LessonPage
+
+# the lab, the browser and the screenshots folder live there
+from test_browser import browser, lab, shots_dir  # noqa: F401 - fixtures are used by name
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(420)]
+
+#: Window sizes of the laptops the course is taught on (CSS px).
+SIZES = ((1366, 768), (1440, 900))
+
+#: No button, toggle or slider may be narrower than this (CSS px).
+MIN_CONTROL_PX = 28
+
+#: Overlaps smaller than this on either side are borders touching, not one element over another (CSS px).
+TOUCH_PX = 2
+
+# One cell per widget, built as its lesson builds it; each root gets a class the measurement finds.
+CELLS = {
+    "setup": """
+import numpy as np
+from mocaplab import data
+from mocaplab.contacts import foot_contacts
+from mocaplab.editing import AbsoluteTime, PinPosition, Sync
+from mocaplab.physics import Body
+from mocaplab.widgets import PathEditor, StaggeredExplorer, TimeTrackEditor, TouchUpStepper
+
+walk = data.cmu("16_15").resample(30)
+P = walk.pelvis_positions[:, [0, 2]]
+F = walk.n_frames
+""",
+    "path": """
+path_editor = PathEditor(walk, [PinPosition(0, 0, P[0], hard=True), PinPosition(0, F - 1, P[-1], hard=True)],
+                         viewer_options={"window_size": (420, 340)})
+path_editor.widget.add_class("layout-path")
+path_editor
+""",
+    "time": """
+other = data.cmu("02_01").resample(30)
+h = walk.dt
+time_editor = TimeTrackEditor([walk, other], [AbsoluteTime(0, 90, 90 * h), AbsoluteTime(0, 0, 0.0, hard=True),
+                                              AbsoluteTime(1, 0, 0.5, hard=True), Sync(1, 60, 0, 90, hard=True)])
+time_editor.widget.add_class("layout-time")
+time_editor
+""",
+    "stepper": """
+jump = data.cmu("16_05").resample(30)
+stepper = TouchUpStepper(jump, body=Body.from_skeleton(jump), contacts=foot_contacts(jump),
+                         viewer_options={"window_size": (640, 400)})
+stepper.widget.add_class("layout-stepper")
+stepper.widget
+""",
+    "explorer": """
+explorer = StaggeredExplorer(data.cmu("16_15")[3:], max_poses=12, curve_joint="LeftForeArm", joint="LeftArm")
+explorer.widget.add_class("layout-explorer")
+explorer.widget
+""",
+}
+
+_MEASURE_JS = """
+([cls, minControl, touch]) => {
+  const root = document.querySelector('.' + cls);
+  if (!root) return {found: false};
+  const area = root.closest('.jp-OutputArea-output') || root.closest('.jp-Cell') || root.parentElement;
+  const box = area.getBoundingClientRect();
+  const visible = (el) => {
+    const s = getComputedStyle(el);
+    if (s.display === 'none' || s.visibility === 'hidden') return false;
+    const r = el.getBoundingClientRect();
+    return r.width > 0 && r.height > 0;
+  };
+  const label = (el) => {
+    const text = (el.textContent || el.getAttribute('title') || '').trim().replace(/\\s+/g, ' ').slice(0, 40);
+    return (el.className && typeof el.className === 'string' ? el.className.split(' ')[0] : el.tagName) +
+      (text ? ' "' + text + '"' : '');
+  };
+  const all = Array.from(root.querySelectorAll('*')).filter(visible);
+  // 1. overflow past the right edge of the output area
+  let overflow = 0;
+  const past = [];
+  for (const el of all) {
+    const over = el.getBoundingClientRect().right - box.right;
+    if (over > 1) { past.push(label(el) + ' +' + Math.round(over)); }
+    overflow = Math.max(overflow, over);
+  }
+  // 2. squeezed controls: cut text, or narrower than minControl
+  const controls = all.filter((el) => el.matches(
+    'button, input[type=text], select, .widget-readout, .widget-label, .widget-toggle-button, .widget-slider'));
+  const squeezed = [];
+  for (const el of controls) {
+    const r = el.getBoundingClientRect();
+    const cut = el.scrollWidth > el.clientWidth + 1 && getComputedStyle(el).overflowX !== 'visible';
+    const thin = el.matches('button, .widget-toggle-button, .widget-slider') && r.width < minControl;
+    if (cut || thin) squeezed.push(label(el) + ' ' + Math.round(r.width) + 'px' + (cut ? ' cut' : ' thin'));
+  }
+  // 3. overlap of the plot, the 3D view and the controls / status / legend outside them
+  const big = [];
+  root.querySelectorAll('.jupyter-matplotlib-canvas-div, .widget-image').forEach((el) => {
+    if (visible(el)) big.push(['plot', el]);
+  });
+  root.querySelectorAll('iframe').forEach((el) => { if (visible(el)) big.push(['3D view', el]); });
+  const inside = (el) => big.some(([, b]) => b !== el && b.contains(el)) || el.closest('.jupyter-matplotlib');
+  const small = all.filter((el) => !inside(el) && el.matches(
+    'button, .widget-slider, .widget-dropdown, .widget-checkbox, .widget-toggle-button, .widget-text, ' +
+    '.widget-html, .widget-select'));
+  const overlaps = [];
+  let shared = 0;
+  const meet = (a, b) => {
+    const ra = a.getBoundingClientRect(), rb = b.getBoundingClientRect();
+    const w = Math.min(ra.right, rb.right) - Math.max(ra.left, rb.left);
+    const h = Math.min(ra.bottom, rb.bottom) - Math.max(ra.top, rb.top);
+    return (w > touch && h > touch) ? w * h : 0;
+  };
+  for (let i = 0; i < big.length; i++) {
+    for (let j = i + 1; j < big.length; j++) {
+      const a = meet(big[i][1], big[j][1]);
+      if (a > 0) { overlaps.push(big[i][0] + ' x ' + big[j][0] + ' ' + Math.round(a) + 'px2'); shared += a; }
+    }
+    for (const el of small) {
+      if (big[i][1].contains(el) || el.contains(big[i][1])) continue;
+      const a = meet(big[i][1], el);
+      if (a > 0) { overlaps.push(big[i][0] + ' x ' + label(el) + ' ' + Math.round(a) + 'px2'); shared += a; }
+    }
+  }
+  return {found: true, overflow: Math.max(0, Math.round(overflow)), past: past.length, past_examples: past.slice(0, 8),
+          squeezed, overlap_px2: Math.round(shared), overlaps: overlaps.slice(0, 8), area_width: Math.round(box.width),
+          big: big.map(([n, el]) => n + ' ' + JSON.stringify(el.getBoundingClientRect()))};
+}
+"""
+
+
+def _notebook(path: Path) -> Path:
+    cells = [
+        {"cell_type": "code", "execution_count": None, "metadata": {}, "outputs": [], "source": src.strip()}
+        for src in CELLS.values()
+    ]
+    nb = {
+        "cells": cells,
+        "metadata": {"kernelspec": {"display_name": "Python 3", "language": "python", "name": "python3"}},
+        "nbformat": 4,
+        "nbformat_minor": 5,
+    }
+    path.write_text(json.dumps(nb, indent=1) + "\n")
+    return path
+
+
+def _open_file_browser(lesson: LessonPage) -> float:
+    """Open JupyterLab's file browser on the left (the default layout); returns its width in CSS px."""
+    lesson.page.evaluate("() => window.jupyterapp.commands.execute('filebrowser:activate')")
+    lesson.page.wait_for_timeout(800)
+    width = lesson.page.evaluate(
+        "() => { const b = document.querySelector('.jp-FileBrowser');"
+        " return b ? b.getBoundingClientRect().width : 0; }"
+    )
+    assert width > 150, f"the file browser did not open (width {width} px)"
+    return float(width)
+
+
+def measure(lesson: LessonPage, cls: str) -> dict[str, Any]:
+    """Overflow, squeezed controls and overlap of the widget with class ``cls`` (see the module docstring)."""
+    return lesson.page.evaluate(_MEASURE_JS, [cls, MIN_CONTROL_PX, TOUCH_PX])
+
+
+def test_editors_fit_a_laptop_with_the_file_browser_open(lab: Any, browser: Any, shots_dir: Path) -> None:  # noqa: F811
+    notebook = _notebook(lab.root_dir / "layout_check.ipynb")
+    width, height = SIZES[0]
+    context = browser.new_context(viewport={"width": width, "height": height})
+    lesson = LessonPage(context, lab, notebook.name, shots_dir)
+    failures: list[str] = []
+    try:
+        lesson.open()
+        lesson.run_all(timeout=300)
+        lesson.wait_idle(settle=2.0)
+        for width, height in SIZES:
+            lesson.page.set_viewport_size({"width": width, "height": height})
+            browser_px = _open_file_browser(lesson)
+            lesson.page.wait_for_timeout(2000)  # JupyterLab lays the panels out again
+            for name in ("path", "time", "stepper", "explorer"):
+                cls = f"layout-{name}"
+                root = lesson.page.locator(f".{cls}").first
+                root.wait_for(timeout=60000)
+                root.scroll_into_view_if_needed()
+                lesson.page.wait_for_timeout(500)
+                m = measure(lesson, cls)
+                assert m["found"], f"{name}: no element with class {cls}"
+                lesson.screenshot(f"{width}x{height}-{name}")
+                print(
+                    f"\n{width}x{height} (file browser {browser_px:.0f} px, output {m['area_width']} px) {name}: "
+                    f"overflow {m['overflow']} px ({m['past']} elements past the edge), "
+                    f"squeezed {len(m['squeezed'])}, overlap {m['overlap_px2']} px2"
+                )
+                if m["overflow"] or m["squeezed"] or m["overlap_px2"]:
+                    failures.append(
+                        f"{width}x{height} {name}: overflow {m['overflow']} px over {m['past']} elements "
+                        f"{m['past_examples']}; squeezed {m['squeezed'][:8]}; overlap {m['overlap_px2']} px2 "
+                        f"{m['overlaps']}"
+                    )
+    finally:
+        lesson.close()
+        context.close()
+    assert not failures, "widgets do not fit a laptop with the file browser open:\n" + "\n".join(failures)

@@ -753,8 +753,9 @@ def solve_goals(
         Also return the new motion's forward kinematics
         ``(global_rotations (F, J, 4), global_positions (F, J, 3))``.  They
         come cheaply: joints the IK layer did not turn keep their
-        transforms (shifted by the root lowering, if any), the legs'
-        subtrees are recomputed once.
+        transforms (shifted by the root lowering, if any; a static
+        reference root above the pelvis stays where it is, as in the
+        motion), the legs' subtrees are recomputed once.
 
     Returns
     -------
@@ -956,7 +957,15 @@ def _solve_goals(
         new_motion = motion.replace(rotations=_owned(rot))
     else:
         # the drop as a ground-frame translation: onto the pelvis below a static reference root
-        new_motion = motion.replace(rotations=_owned(rot)).transformed(translation=root - motion.root_positions)
+        turned = motion.replace(rotations=_owned(rot))
+        new_motion = turned.transformed(translation=root - motion.root_positions)
+        top = turned.carrier_joint
+        if top != 0:
+            # the static joints above the pelvis did not move in the motion, so not in its kinematics either (the
+            # forward kinematics above lowered joint 0 with the rest; a touch-up reading them placed the pelvis wrong)
+            static = sk.chain(0, top)[:-1]
+            gpos = np.array(gpos, copy=True)
+            gpos[:, static, 1] -= drop[:, None]
     return new_motion, (grot, gpos)
 
 

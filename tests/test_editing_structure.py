@@ -2,45 +2,21 @@
 
 from __future__ import annotations
 
-import ast
 import importlib
 import sys
 import types
-from pathlib import Path
 
 import numpy as np
 import pytest
+from test_structure import GRAPH, MODS  # the one import graph of the package (every import counts)
 
-import mocaplab.editing as editing
 from mocaplab.editing import DiscreteEditor, PinPosition, SceneEditor, edit, make_editor
 
-ROOT = Path(editing.__file__).resolve().parent
-MODULES = sorted(
-    "mocaplab.editing" + ("." + ".".join(p.relative_to(ROOT).with_suffix("").parts) if p.name != "__init__.py" or p.parent != ROOT else "")
-    for p in ROOT.rglob("*.py")
+MODULES = sorted(m for m in GRAPH if m == "mocaplab.editing" or m.startswith("mocaplab.editing."))
+CONTINUOUS = (
+    "mocaplab.editing.scene", "mocaplab.editing.laplacian", "mocaplab.editing.spatial", "mocaplab.editing.lsq",
+    "mocaplab.editing.flips", "mocaplab.editing.timewarp", "mocaplab.editing.graph", "mocaplab.editing.refinement",
 )
-MODULES = [m.removesuffix(".__init__") for m in MODULES]
-
-
-def _module_imports(name: str) -> set[str]:
-    """Modules of mocaplab.editing that ``name`` imports at module level (not inside functions)."""
-    mod = importlib.import_module(name)
-    path = Path(mod.__file__)
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    out = set()
-    for node in ast.parse(path.read_text()).body:  # top level only: lazy imports inside functions are not counted
-        if isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                parts = package.split(".")
-                parent = ".".join(parts[: len(parts) - node.level + 1])
-                base = f"{parent}.{base}" if base else parent
-            for alias in node.names:
-                full = f"{base}.{alias.name}"
-                out.add(full if full in MODULES else base)
-        elif isinstance(node, ast.Import):
-            out |= {a.name for a in node.names}
-    return {m for m in out if m in MODULES and m != name}
 
 
 def test_there_are_the_modules():
@@ -48,26 +24,10 @@ def test_there_are_the_modules():
     assert "mocaplab.editing.discrete" in MODULES and all(not m.endswith("__init__") for m in MODULES)
 
 
-def test_no_import_cycles():
-    graph = {m: _module_imports(m) for m in MODULES}
-    # the continuous modules never import the discrete package (it wraps them, not the other way round)
-    for m in ("mocaplab.editing.scene", "mocaplab.editing.laplacian", "mocaplab.editing.spatial", "mocaplab.editing.lsq",
-              "mocaplab.editing.flips", "mocaplab.editing.timewarp", "mocaplab.editing.graph"):
-        assert not {d for d in graph[m] if d.startswith("mocaplab.editing.discrete")}, m
-    state: dict[str, int] = {}
-
-    def visit(m: str, stack: list[str]) -> None:
-        state[m] = 1
-        for d in graph[m]:
-            if state.get(d) == 1:
-                raise AssertionError(f"import cycle: {' -> '.join(stack + [m, d])}")
-            if d not in state:
-                visit(d, stack + [m])
-        state[m] = 2
-
-    for m in MODULES:
-        if m not in state:
-            visit(m, [])
+def test_the_continuous_modules_never_import_the_discrete_package():
+    # the discrete package wraps the continuous editor, not the other way round (cycles: tests/test_structure.py)
+    for m in CONTINUOUS:
+        assert not {d for d in GRAPH[m] if d.startswith("mocaplab.editing.discrete")}, m
 
 
 @pytest.mark.parametrize("name", MODULES)
@@ -103,7 +63,7 @@ def test_no_module_level_mutable_state(name):
 
 
 def test_no_class_name_checks():
-    for path in ROOT.rglob("*.py"):
+    for path in (MODS[m] for m in MODULES):
         src = path.read_text()
         assert "__name__ ==" not in src and '__name__ !=' not in src, path
 

@@ -138,17 +138,6 @@ def _apply_layout(sets: LinkSets) -> dict[str, NDArray[np.int64]]:
     return {k: readonly(v) for k, v in out.items()}
 
 
-#: Left-multiplication matrix of a quaternion (x, y, z, w): (q g)_i = sum_j
-#: _SIGN[i, j] q[_INDEX[i, j]] g_j.
-_INDEX = np.array([[3, 2, 1, 0], [2, 3, 0, 1], [1, 0, 3, 2], [0, 1, 2, 3]])
-_SIGN = np.array([[1.0, -1.0, 1.0, 1.0], [1.0, 1.0, -1.0, 1.0], [-1.0, 1.0, 1.0, 1.0], [-1.0, -1.0, -1.0, 1.0]])
-
-
-def _left_matrix(q: Array) -> Array:
-    """Matrices (..., 4, 4) with ``L(q) @ g == quat.mul(q, g)``."""
-    return q[..., _INDEX] * _SIGN
-
-
 def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None, pivot: int = 0) -> _Posed:
     """Rotate every S2 part by the world rotation vectors ``omega`` (F, 3).
 
@@ -176,7 +165,7 @@ def _apply(posed: _Posed, sets: LinkSets, omega: Array, root_delta: Array | None
     # the shared rotation as matrices acting on row vectors: quaternions
     # g -> q g and vectors v -> q v, one batched matrix product each for
     # all joints of all parts (much cheaper than the component formulas)
-    lq = _left_matrix(q).transpose(0, 2, 1)  # (F, 4, 4): g @ lq = q g
+    lq = quat.left_matrix(q).transpose(0, 2, 1)  # (F, 4, 4): g @ lq = q g
     rq = quat.to_matrix(q).transpose(0, 2, 1)  # (F, 3, 3): v @ rq = q v
     rot = np.array(motion.rotations, copy=True)
     root = motion.root_positions

@@ -119,6 +119,11 @@ class Limit:
     slack : float
         Allowed absolute excess, in the measure's unit (so an input with
         almost none of an artefact may gain a little).
+
+    Examples
+    --------
+    >>> Limit(1.5, 2.0).exceeded(10.0, 16.0), Limit(1.5, 2.0).exceeded(10.0, 18.0)
+    (False, True)
     """
 
     factor: float
@@ -179,6 +184,22 @@ def skate(motion: Motion, contacts: Contacts) -> Array:
     over the joints of ``contacts`` planted on both frames ``i`` and
     ``i + 1``; NaN where none is.  The ground plane is (x, z) (Y up).
 
+    Parameters
+    ----------
+    motion : Motion
+    contacts : Contacts
+        The planted joints, over the motion's frames.
+
+    Returns
+    -------
+    ndarray, shape (F - 1,)
+        Millimetres per frame; NaN on steps with no joint planted on both frames.
+
+    Raises
+    ------
+    ValueError
+        If ``contacts`` covers another number of frames.
+
     Examples
     --------
     >>> import numpy as np
@@ -206,6 +227,28 @@ def penetration(motion: Motion, floor: Floor) -> Array:
     ``floor`` gives each foot joint's height above the floor plane when
     planted (:func:`mocaplab.contacts.estimate_floor`); a joint lower than
     that is below the floor by the difference.
+
+    Parameters
+    ----------
+    motion : Motion
+    floor : Floor
+        The floor and the planted heights of its joints.
+
+    Returns
+    -------
+    ndarray, shape (F,)
+        Millimetres below the floor, 0 where every foot joint is at or above it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab import Motion, Skeleton
+    >>> from mocaplab.contacts import Contacts, estimate_floor
+    >>> sk = Skeleton(["foot"], [-1], [[0, 0, 0]])
+    >>> m = Motion(sk, np.tile([0, 0, 0, 1.0], (3, 1, 1)), [[0, 0, 0], [0, 0, 0], [0, -0.02, 0]], 30)
+    >>> floor = estimate_floor(m, Contacts(("foot",), np.array([[1], [1], [0]], bool), 30))
+    >>> penetration(m, floor).round(3).tolist()
+    [0.0, 0.0, 20.0]
     """
     motion = _check_motion(motion)
     depth = floor.depth(motion)
@@ -213,7 +256,26 @@ def penetration(motion: Motion, floor: Floor) -> Array:
 
 
 def displacement(motion: Motion) -> Array:
-    """Largest one-frame displacement of each joint, mm per frame, shape (J,) (zeros for one frame)."""
+    """Largest one-frame displacement of each joint, mm per frame, shape (J,) (zeros for one frame).
+
+    Parameters
+    ----------
+    motion : Motion
+
+    Returns
+    -------
+    ndarray, shape (J,)
+        Millimetres per frame, in skeleton order.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab import Motion, Skeleton
+    >>> sk = Skeleton(["root", "tip"], [-1, 0], [[0, 0, 0], [0, 1, 0]])
+    >>> m = Motion(sk, np.tile([0, 0, 0, 1.0], (4, 2, 1)), [[0, 0, 0], [0, 0, 0], [0.05, 0, 0], [0.05, 0, 0]], 30)
+    >>> displacement(m).round(3).tolist()
+    [50.0, 50.0]
+    """
     motion = _check_motion(motion)
     if motion.n_frames < 2:
         return np.zeros(motion.n_joints)
@@ -228,6 +290,29 @@ def angular_acceleration(motion: Motion) -> Array:
     vector of ``q_i^-1 q_{i+1}`` times the frame rate (in the joint's own
     frame); its change between consecutive steps times the frame rate is the
     acceleration.  Zeros for clips shorter than 3 frames.
+
+    Parameters
+    ----------
+    motion : Motion
+
+    Returns
+    -------
+    ndarray, shape (J,)
+        Radians per second squared, in skeleton order.
+
+    Examples
+    --------
+    A joint turning by 0, 0.1 then 0.2 rad per frame at 30 fps speeds up by
+    3 rad/s each frame, 90 rad/s^2:
+
+    >>> import numpy as np
+    >>> from mocaplab import Motion, Skeleton
+    >>> sk = Skeleton(["root", "tip"], [-1, 0], [[0, 0, 0], [0, 1, 0]])
+    >>> half = np.array([0.0, 0.0, 0.1, 0.3]) / 2
+    >>> rot = np.tile([0, 0, 0, 1.0], (4, 2, 1))
+    >>> rot[:, 1, 2], rot[:, 1, 3] = np.sin(half), np.cos(half)
+    >>> angular_acceleration(Motion(sk, rot, np.zeros((4, 3)), 30)).round(3).tolist()
+    [0.0, 90.0]
     """
     motion = _check_motion(motion)
     if motion.n_frames < 3:
@@ -239,7 +324,25 @@ def angular_acceleration(motion: Motion) -> Array:
 
 
 def bone_lengths(motion: Motion) -> Array:
-    """Length of every bone (joint to its parent) on every frame, metres, shape (F, J); column 0 is 0."""
+    """Length of every bone (joint to its parent) on every frame, metres, shape (F, J); column 0 is 0.
+
+    Parameters
+    ----------
+    motion : Motion
+
+    Returns
+    -------
+    ndarray, shape (F, J)
+        Metres; column ``j`` is the distance from joint ``j`` to its parent.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab import Motion, Skeleton
+    >>> sk = Skeleton(["root", "tip"], [-1, 0], [[0, 0, 0], [0, 1, 0]])
+    >>> bone_lengths(Motion(sk, np.tile([0, 0, 0, 1.0], (4, 2, 1)), np.zeros((4, 3)), 30))[0].tolist()
+    [0.0, 1.0]
+    """
     motion = _check_motion(motion)
     gpos = motion.global_positions()
     parents = motion.skeleton.parents
@@ -287,6 +390,25 @@ def hinge_axes(motion: Motion, *, roles: Mapping[str, Any] | None = None) -> dic
     ``(middle - upper) x (lower - middle)``, normalised: a unit vector per
     hinge, shape (3,).  A hinge that never bends beyond
     :data:`FLIP_MIN_BEND` is left out.
+
+    Parameters
+    ----------
+    motion : Motion
+    roles : mapping, optional
+        Role overrides (:func:`mocaplab.roles.resolve_roles`); default the
+        roles inferred from the joint names and topology.
+
+    Returns
+    -------
+    dict of str to ndarray, shape (3,)
+        ``{"left_knee": axis, ...}``; empty when the roles give no limbs.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> axes = hinge_axes(ml.cmu("16_15"))
+    >>> sorted(axes), axes["left_knee"].round(2).tolist()
+    (['left_elbow', 'left_knee', 'right_elbow', 'right_knee'], [0.94, 0.34, -0.0])
     """
     motion = _check_motion(motion)
     out = {}
@@ -312,6 +434,25 @@ def hinge_flips(
         input's); default the motion's own.
     roles : mapping, optional
         Role overrides (:func:`mocaplab.roles.resolve_roles`).
+
+    Returns
+    -------
+    dict of str to int
+        Per hinge with an axis, the frames bent by at least
+        :data:`FLIP_MIN_BEND` degrees about the opposite direction.
+
+    Examples
+    --------
+    A walk never bends a knee backwards; against reversed axes every bent
+    frame counts:
+
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15")
+    >>> hinge_flips(walk)["left_knee"]
+    0
+    >>> axes = hinge_axes(walk)
+    >>> hinge_flips(walk, {k: -v for k, v in axes.items()})["right_knee"], walk.n_frames
+    (415, 471)
     """
     motion = _check_motion(motion)
     axes = hinge_axes(motion, roles=roles) if axes is None else axes
@@ -349,17 +490,23 @@ def _root_change(before: Motion, after: Motion) -> float:
 class Measure:
     """One measure of one motion.
 
-    Attributes
+    Parameters
     ----------
     name : str
         The measure (see the module docstring).
     unit : str
+        Its unit, e.g. ``"mm/frame"``.
     value : float
         ``nan`` when it cannot be taken (see ``note``).
-    where : str
+    where : str, default ""
         The joint, hinge or frame the value comes from ("" when global).
-    note : str
+    note : str, default ""
         Why a value is missing, or what it was measured against.
+
+    Examples
+    --------
+    >>> Measure("penetration", "mm", 3.5, "frame 12").value
+    3.5
     """
 
     name: str
@@ -407,12 +554,21 @@ def _fmt(value: float) -> str:
 class Quality:
     """The measures of one motion (:func:`measure`): ``report["skate"].value``.
 
-    Attributes
+    Parameters
     ----------
     name : str
         The motion's name.
     measures : tuple of Measure
         In the order of the module docstring.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab import Motion, Skeleton
+    >>> sk = Skeleton(["root", "tip"], [-1, 0], [[0, 0, 0], [0, 1, 0]])
+    >>> report = measure(Motion(sk, np.tile([0, 0, 0, 1.0], (4, 2, 1)), np.zeros((4, 3)), 30), contacts=None)
+    >>> [m.name for m in report][:4], report["bone_drift"].value
+    (['skate', 'skate_max', 'penetration', 'displacement'], 0.0)
     """
 
     name: str
@@ -589,9 +745,10 @@ def measure(
 class Row:
     """One measure of an edit: the input's value, the output's, their ratio and the verdict.
 
-    Attributes
+    Parameters
     ----------
     name, unit : str
+        The measure and its unit.
     before, after : float
         The measure on the input and on the output, both against the
         input's contacts, floor, hinge axes and bone lengths.
@@ -603,7 +760,14 @@ class Row:
     regressed : bool
         ``after > limit.factor * before + limit.slack`` (for per-joint
         measures: on any joint).
-    where, note : str
+    where, note : str, default ""
+        The joint, hinge or frame of the value; why a value is missing.
+
+    Examples
+    --------
+    >>> row = Row("skate", "mm/frame", 1.0, 3.0, 3.0, LIMITS["skate"], True)
+    >>> row.regressed, row.limit.exceeded(row.before, row.after)
+    (True, True)
     """
 
     name: str
@@ -632,6 +796,23 @@ class Comparison:
     ``report["skate"].ratio``; :attr:`regressions` lists the rows beyond
     their limits; ``repr`` prints a table (``_repr_html_`` in notebooks,
     regressions marked).
+
+    Parameters
+    ----------
+    before_name, after_name : str
+        The names of the input and the output motions.
+    rows : tuple of Row
+        One per measure, in the order of the module docstring.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab import Motion, Skeleton
+    >>> sk = Skeleton(["root", "tip"], [-1, 0], [[0, 0, 0], [0, 1, 0]])
+    >>> m = Motion(sk, np.tile([0, 0, 0, 1.0], (4, 2, 1)), np.zeros((4, 3)), 30)
+    >>> report = compare(m, m, contacts=None)
+    >>> report.ok, report["displacement"].ratio, report.regressions
+    (True, 1.0, ())
     """
 
     before_name: str

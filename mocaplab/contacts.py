@@ -152,6 +152,16 @@ def intervals_from_mask(mask: ArrayLike) -> list[tuple[int, int]]:
     -------
     list of (int, int)
         Sorted, disjoint, non-adjacent intervals.
+
+    Raises
+    ------
+    ValueError
+        If ``mask`` is not one-dimensional.
+
+    Examples
+    --------
+    >>> intervals_from_mask([0, 1, 1, 0, 1, 1, 1])
+    [(1, 3), (4, 7)]
     """
     m = np.asarray(mask, dtype=bool)
     if m.ndim != 1:
@@ -175,6 +185,16 @@ def mask_from_intervals(intervals: Iterable[tuple[int, int]], n: int) -> NDArray
     Returns
     -------
     ndarray of bool, shape (n,)
+
+    Raises
+    ------
+    ValueError
+        If ``n`` is negative or an interval leaves ``[0, n]``.
+
+    Examples
+    --------
+    >>> mask_from_intervals([(1, 3), (4, 5)], 6).astype(int).tolist()
+    [0, 1, 1, 0, 1, 0]
     """
     n = int(n)
     if n < 0:
@@ -204,6 +224,13 @@ def clean_mask(mask: ArrayLike, *, min_length: int = 1, max_gap: int = 0) -> NDA
     Returns
     -------
     ndarray of bool, same shape as ``mask``
+
+    Examples
+    --------
+    The one-frame gap is filled; the lone last frame is too short:
+
+    >>> clean_mask([1, 1, 0, 1, 1, 0, 0, 0, 1], min_length=2, max_gap=1).astype(int).tolist()
+    [1, 1, 1, 1, 1, 0, 0, 0, 0]
     """
     m = np.asarray(mask, dtype=bool)
     if m.ndim not in (1, 2):
@@ -233,10 +260,30 @@ def default_foot_joints(skeleton_or_motion: object, *, roles: Mapping[str, Any] 
 
     CMU skeletons give ``("LeftFoot", "LeftToeBase", "RightFoot",
     "RightToeBase")``; the Daz skeleton of the CMU salsa clips, which has no
-    toe joints, gives ``("lFoot", "rFoot")``.  ``roles`` overrides roles as
-    in :func:`mocaplab.roles.resolve_roles`.  Raises
-    :class:`~mocaplab.roles.RolesError` (a ValueError) naming the missing
-    roles and the call that supplies them when a side has no ankle.
+    toe joints, gives ``("lFoot", "rFoot")``.
+
+    Parameters
+    ----------
+    skeleton_or_motion : Skeleton or Motion
+    roles : mapping, optional
+        Role overrides, as in :func:`mocaplab.roles.resolve_roles`.
+
+    Returns
+    -------
+    tuple of str
+        Joint names, left foot first.
+
+    Raises
+    ------
+    RolesError
+        (a ValueError) naming the missing roles and the call that supplies
+        them, when a side has no ankle.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> default_foot_joints(ml.cmu("16_15"))
+    ('LeftFoot', 'LeftToeBase', 'RightFoot', 'RightToeBase')
     """
     return resolve_roles(skeleton_or_motion, roles).foot_joints()
 
@@ -332,9 +379,10 @@ def foot_contacts(
 
     Examples
     --------
-    >>> from mocaplab.data import cmu            # doctest: +SKIP
-    >>> c = foot_contacts(cmu("16_15"))          # doctest: +SKIP
-    >>> c.intervals("LeftFoot")[:2]              # doctest: +SKIP
+    >>> from mocaplab.data import cmu
+    >>> c = foot_contacts(cmu("16_15"))
+    >>> c.intervals("LeftFoot")[:2]
+    [(0, 68), (135, 208)]
     """
     names, idx = _resolve(motion, joints, roles)
     for value, what in ((height, "height"), (speed, "speed")):
@@ -521,6 +569,20 @@ def stillness_contacts(
     Returns
     -------
     Contacts
+        Mask of shape (F, len(joints)).
+
+    Raises
+    ------
+    ValueError
+        If ``tolerance`` is not a positive number of metres or
+        ``min_duration`` is neither seconds nor ``"gait"``.
+
+    Examples
+    --------
+    >>> from mocaplab.data import cmu
+    >>> c = stillness_contacts(cmu("16_15"), joints=["LeftFoot"])
+    >>> c.intervals("LeftFoot")[:2]
+    [(0, 57), (138, 198)]
     """
     names, idx = _resolve(motion, joints, roles)
     if not np.isfinite(tolerance) or tolerance <= 0:
@@ -614,10 +676,12 @@ class Floor:
     level: joint ``joints[k]`` rests at ``slope . (x, z) + levels[k]`` when
     planted (an ankle some centimetres above a toe joint), so
     :meth:`depth` is how far a joint is below where it would stand.
+    :func:`estimate_floor` fits one to a motion's planted frames.
 
-    Attributes
+    Parameters
     ----------
     joints : tuple of str
+        The foot joints.
     slope : ndarray, shape (2,)
         Rise of the floor per metre along x and along z (0 for a level floor).
     levels : ndarray, shape (n,)
@@ -626,6 +690,12 @@ class Floor:
         Height of the ground surface above ``slope . (x, z)``, metres: where
         the soles are (the ZMP's plane in :func:`mocaplab.physics.balance`,
         which fills it in from the feet's support points); 0 by default.
+
+    Examples
+    --------
+    >>> floor = Floor(("LeftFoot",), [0.0, 0.1], [0.08])
+    >>> round(floor.angle, 2), floor.describe()
+    (5.71, 'floor inclined 5.7 deg; planted heights LeftFoot 80 mm')
     """
 
     joints: tuple[str, ...]

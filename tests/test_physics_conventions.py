@@ -395,7 +395,7 @@ def test_an_edited_walk_is_touched_up_alike_under_a_static_root(converted, cmu):
     The footplant step lowers the body where a leg cannot reach its plant; below a static root the motion
     lowers the pelvis while the forward kinematics handed back with it (``solve_goals(return_fk=True)``) had
     lowered ``joint_Root`` too.  The next adjustment set the pelvis's channels from that stale root position,
-    so the studio file's touch-up sank below the CMU clip's from the second pass on (2.7 mm in lesson 14, 5.8 mm
+    so the studio file's touch-up sank below the CMU clip's from the second pass on (2.7 mm in lesson 14, 8.3 mm
     here).
     """
     m, name_map = converted("16_15", "game_studio")

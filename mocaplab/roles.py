@@ -190,7 +190,20 @@ _BIPED_RE = re.compile(r"^bip0*1\b", re.IGNORECASE)
 
 
 class RolesError(ValueError):
-    """Joint roles could not be inferred (or an override does not fit)."""
+    """Joint roles could not be inferred (or an override does not fit).
+
+    A ``ValueError``; its message names the missing roles and the call that
+    supplies them.
+
+    Examples
+    --------
+    >>> from mocaplab import Skeleton
+    >>> sk = Skeleton(["hips", "knee"], [-1, 0], [[0, 0, 0], [0, -0.5, 0]])
+    >>> sk.roles["left_knee"]
+    Traceback (most recent call last):
+    ...
+    mocaplab.roles.RolesError: Could not infer the joint role(s) ['left_knee']. ...
+    """
 
 
 class RolesWarning(UserWarning):
@@ -211,6 +224,21 @@ def _words(name: str) -> list[tuple[str, int, int]]:
 def parse_name(name: str) -> tuple[Literal["left", "right"] | None, str]:
     """The side and the base word of a joint name.
 
+    Parameters
+    ----------
+    name : str
+        A joint name in any of the common spellings (a namespace prefix such
+        as ``mixamorig:`` and a ``Bip01`` prefix are ignored).
+
+    Returns
+    -------
+    side : {"left", "right"} or None
+        None when the name carries no side.
+    base : str
+        The rest of the name, lower case, without separators.
+
+    Examples
+    --------
     >>> parse_name("mixamorig:LeftUpLeg"), parse_name("UpperLeg_L"), parse_name("lfemur")
     (('left', 'upleg'), ('left', 'upperleg'), ('left', 'femur'))
     >>> parse_name("Bip01 R Calf"), parse_name("lowerback"), parse_name("Spine1")
@@ -264,6 +292,19 @@ def _kinds(base: str) -> dict[str, int]:
 def mirror_name(name: str) -> str:
     """The name of the joint on the other side (the same name if it has no side).
 
+    The side word keeps its spelling and case (``L`` becomes ``R``,
+    ``Left`` becomes ``Right``).
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
     >>> mirror_name("LeftArm"), mirror_name("Toes_L"), mirror_name("lfemur"), mirror_name("Bip01 L Thigh")
     ('RightArm', 'Toes_R', 'rfemur', 'Bip01 R Thigh')
     >>> mirror_name("lowerback"), mirror_name("mixamorig:RightHand")
@@ -295,6 +336,21 @@ class Roles(Mapping[str, Any]):
     joint_names : tuple of str
         The skeleton's joint names (for :meth:`index`).
     mapping : mapping of str to str or tuple of str
+        Role name (one of ``ROLE_NAMES``) to joint name; ``spine`` to a
+        tuple of joint names, pelvis side first.  None values are dropped.
+    notes : tuple of str, default ()
+        What inference corrected or guessed, for the user to read.
+
+    Raises
+    ------
+    RolesError
+        For an unknown role name or a joint the skeleton does not have.
+
+    Examples
+    --------
+    >>> roles = Roles(("hips", "LKnee"), {"pelvis": "hips", "left_knee": "LKnee"})
+    >>> roles["left_knee"], roles.index("left_knee"), "right_knee" in roles
+    ('LKnee', 1, False)
     """
 
     __slots__ = ("_names", "_map", "notes")
@@ -490,6 +546,13 @@ def infer_roles(
         For a skeleton that is plainly not a biped human (a quadruped, a
         hand: see :func:`not_a_biped`) when no role is given in
         ``overrides``; naming the roles yourself is the way out.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> roles = infer_roles(ml.cmu("16_15").skeleton)
+    >>> roles["left_knee"], roles["spine"]
+    ('LeftLeg', ('LowerBack', 'Spine', 'Spine1'))
     """
     result = _infer(skeleton, overrides=overrides, pose=pose)
     for note in result.notes:
@@ -902,6 +965,30 @@ def resolve_roles(skeleton_or_motion: Any, roles: Mapping[str, Any] | None = Non
     ``None`` gives ``skeleton.roles``; a mapping of role names to joint names
     overrides those roles (the rest is inferred around them); a
     :class:`Roles` is used as it is.
+
+    Parameters
+    ----------
+    skeleton_or_motion : Skeleton or Motion
+    roles : mapping of role name to joint name, or Roles, optional
+        The overrides; default none.
+
+    Returns
+    -------
+    Roles
+
+    Raises
+    ------
+    TypeError
+        If ``roles`` is not a mapping.
+    RolesError
+        If an override names an unknown role or joint.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15")
+    >>> resolve_roles(walk)["left_toe"], resolve_roles(walk, {"left_toe": "LeftFoot"})["left_toe"]
+    ('LeftToeBase', 'LeftFoot')
     """
     sk = getattr(skeleton_or_motion, "skeleton", skeleton_or_motion)
     if isinstance(roles, Roles):
@@ -921,6 +1008,27 @@ def mirror_map(skeleton: Skeleton, roles: Roles | None = None) -> NDArray[np.int
     ``right_knee``), from the two sides' limb subtrees matched joint by joint
     when they have the same shape (fingers and helper joints whose names
     carry no side), and from the names (:func:`mirror_name`).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    roles : Roles, optional
+        Default the skeleton's own (none when they cannot be inferred: then
+        the names alone pair the joints).
+
+    Returns
+    -------
+    ndarray of int64, shape (J,)
+        ``out[j]`` is the index of joint ``j``'s counterpart; applying it
+        twice gives every joint back.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> sk = ml.cmu("16_15").skeleton
+    >>> pairs = mirror_map(sk)
+    >>> sk.names[pairs[sk.index("LeftUpLeg")]], int(pairs[0])
+    ('RightUpLeg', 0)
     """
     names = tuple(skeleton.names)
     tree = _Tree(names, skeleton.parents, skeleton.offsets)

@@ -154,17 +154,70 @@ TRANSLATION_SUFFIX = ".position"
 
 class StaggeredTimingWarning(UserWarning):
     """A refined knot time came closer to a neighbouring pose than to its own
-    pose (section 5.2): large nonlinear time warps may add sudden accelerations."""
+    pose (section 5.2): large nonlinear time warps may add sudden accelerations.
+
+    Raised through :func:`mocaplab._warnings.warn` by :func:`set_refinements`, so every timing edit
+    (:func:`~mocaplab.staggered.succession`, :func:`~mocaplab.staggered.retime`, ...) may emit it;
+    silence it with :func:`warnings.simplefilter` or turn it into an error while testing.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> from mocaplab.staggered import StaggeredTimingWarning
+    >>> issubclass(StaggeredTimingWarning, UserWarning)
+    True
+    >>> with warnings.catch_warnings():
+    ...     warnings.simplefilter("error", StaggeredTimingWarning)  # a close knot now raises
+    """
 
 
 # --------------------------------------------------------------------- kernels
 def compose_rotation(a: ArrayLike, b: ArrayLike) -> Array:
-    """``a (+) b`` for rotations: ``quat.mul(a, b)`` (``b`` applied after ``a``, in ``a``'s frame)."""
+    """``a (+) b`` for rotations: ``quat.mul(a, b)`` (``b`` applied after ``a``, in ``a``'s frame).
+
+    Parameters
+    ----------
+    a, b : array_like, shape (..., 4)
+        Unit quaternions ``(x, y, z, w)``, broadcasting.
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from scipy.spatial.transform import Rotation
+    >>> from mocaplab.staggered import compose_rotation, factor_rotation
+    >>> a, b = Rotation.from_euler("zx", [[30, 0], [0, 45]], degrees=True).as_quat()
+    >>> bool(np.allclose(factor_rotation(compose_rotation(a, b), a), b))
+    True
+    """
     return quat.mul(a, b)
 
 
 def factor_rotation(c: ArrayLike, a: ArrayLike) -> Array:
-    """``c (-) a`` for rotations: the ``b`` with ``a (+) b == c``, i.e. ``inv(a) * c``."""
+    """``c (-) a`` for rotations: the ``b`` with ``a (+) b == c``, i.e. ``inv(a) * c``.
+
+    Parameters
+    ----------
+    c, a : array_like, shape (..., 4)
+        Unit quaternions ``(x, y, z, w)``, broadcasting.
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+        The rotation ``b`` that :func:`compose_rotation` adds to ``a`` to give ``c``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from scipy.spatial.transform import Rotation
+    >>> from mocaplab.staggered import factor_rotation
+    >>> a, c = Rotation.from_euler("z", [[30], [75]], degrees=True).as_quat()
+    >>> round(float(np.degrees(Rotation.from_quat(factor_rotation(c, a)).magnitude())), 6)
+    45.0
+    """
     return quat.mul(quat.inv(a), c)
 
 
@@ -210,7 +263,29 @@ def slerp_unit(a: Array, b: Array, t: Array, *, unit: bool = False) -> Array:
 def bezier(p0: Array, p1: Array, p2: Array, p3: Array, t: Array) -> Array:
     """Cubic Bezier curve ``sum_j B_j(t) P_j`` (Bernstein basis), broadcasting.
 
-    ``p*`` have shape (..., D) and ``t`` shape (...,).
+    Parameters
+    ----------
+    p0, p1, p2, p3 : array_like, shape (..., D)
+        Control points: the curve starts at ``p0`` (``t = 0``), ends at ``p3``
+        (``t = 1``) and leaves/arrives along ``p1 - p0`` and ``p3 - p2``.
+    t : array_like, shape (...,)
+        Curve parameters, usually in [0, 1].
+
+    Returns
+    -------
+    ndarray, shape (..., D)
+        The curve points.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab.staggered import bezier
+    >>> p = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [2.0, 1.0]])
+    >>> bezier(*p, 0.5)
+    array([1. , 0.5])
+    >>> bezier(*p, np.array([0.0, 1.0]))
+    array([[0., 0.],
+           [2., 1.]])
     """
     t = np.asarray(t, dtype=float)[..., None]
     s = 1.0 - t
@@ -223,9 +298,35 @@ def quat_bezier(q1: Array, q2: Array, q3: Array, q4: Array, t: Array, *, unit: b
     ``s(q1, q2, q3, q4, t)``: de Casteljau's construction with every linear
     interpolation replaced by :func:`slerp_unit`.  Interpolates ``q1`` at
     ``t = 0`` and ``q4`` at ``t = 1``; ``q2`` and ``q3`` are the tangent
-    orientations.  Shapes (..., 4) with ``t`` (...,).  With unit inputs
-    (``unit=True``, the default) the result is unit; ``unit=False`` accepts
-    control quaternions of any length.
+    orientations.
+
+    Parameters
+    ----------
+    q1, q2, q3, q4 : array_like, shape (..., 4)
+        Control quaternions ``(x, y, z, w)``: the end orientations ``q1`` and
+        ``q4``, the tangent orientations ``q2`` and ``q3``.
+    t : array_like, shape (...,)
+        Curve parameters in [0, 1].
+    unit : bool, default True
+        The inputs are unit quaternions and so is the result; ``False``
+        accepts control quaternions of any length.
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+
+    Examples
+    --------
+    A curve whose control orientations turn 0, 30, 60 and 90 degrees about y is
+    halfway (45 degrees) at ``t = 0.5``:
+
+    >>> import numpy as np
+    >>> from scipy.spatial.transform import Rotation
+    >>> from mocaplab.staggered import quat_bezier
+    >>> q = Rotation.from_euler("y", [[0], [30], [60], [90]], degrees=True).as_quat()
+    >>> half = quat_bezier(*q, 0.5)
+    >>> round(float(np.degrees(Rotation.from_quat(half).magnitude())), 6)
+    45.0
     """
     t = np.asarray(t, dtype=float)
     a = slerp_unit(q1, q2, t, unit=unit)
@@ -240,6 +341,25 @@ def variable_names(skeleton: Skeleton, translation_joints: Sequence[int] = ()) -
     """Names of the ``J + 1 + T`` control variables.
 
     ``("root_position", *joint names, *("<joint>.position" for each translation joint))``.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    translation_joints : sequence of int, default ()
+        Joints whose local translation is a variable (:func:`translation_joints`).
+
+    Returns
+    -------
+    tuple of str, length ``J + 1 + T``
+        Column names of ``StaggeredMotion.refinements`` and ``.active``.
+
+    Examples
+    --------
+    >>> from mocaplab.motion import Skeleton
+    >>> from mocaplab.staggered import variable_names
+    >>> sk = Skeleton(["hips", "knee"], [-1, 0], [[0, 1, 0], [0, -0.5, 0]])
+    >>> variable_names(sk, (1,))
+    ('root_position', 'hips', 'knee', 'knee.position')
     """
     names = skeleton.names
     return (ROOT_POSITION,) + tuple(names) + tuple(names[int(j)] + TRANSLATION_SUFFIX for j in translation_joints)
@@ -254,6 +374,18 @@ def translation_joints(motion: Motion) -> tuple[int, ...]:
     root translation (its row of ``translations`` is ignored by forward
     kinematics).  Empty when the clip has no translation channels.
 
+    Parameters
+    ----------
+    motion : Motion
+        The clip; only its ``translations`` (shape (F, J, 3), metres, or ``None``) are read.
+
+    Returns
+    -------
+    tuple of int
+        Joint indices in increasing order.
+
+    Examples
+    --------
     >>> import numpy as np
     >>> from mocaplab.motion import Motion, Skeleton
     >>> sk = Skeleton(["ref", "hips", "knee"], [-1, 0, 1], [[0, 0, 0], [0, 1, 0], [0, -0.5, 0]])
@@ -341,6 +473,17 @@ class StaggeredMotion:
     rotation_noise : ndarray, shape (M, J, 3), optional
         The noise layer (module notes): rotation vectors applied last,
         ``mul(v, exp(n))``.  ``None`` (with ``noise_u``): no noise layer.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mocaplab as ml
+    >>> clip = ml.cmu("16_15").resample(30)[:60]
+    >>> sm = ml.staggered.extract(clip)
+    >>> sm.n_poses, sm.refinements.shape                # K poses, V = J + 1 variables
+    (6, (6, 32))
+    >>> bool(np.allclose(sm.evaluate().global_positions(), clip.global_positions()))
+    True
     """
 
     skeleton: Skeleton
@@ -926,9 +1069,42 @@ def set_refinements(sm: StaggeredMotion, refinements: ArrayLike) -> StaggeredMot
     The one place refinements change (every timing edit of
     :mod:`~mocaplab.staggered.edit` ends here): the knot values, tangents and
     displacement maps are unchanged by retiming, so their caches are kept.
-    Raises ``ValueError`` if a variable's refined knots would cross; warns
-    (:class:`StaggeredTimingWarning`) when a knot is closer to a neighbouring
-    pose than to its own.
+
+    Parameters
+    ----------
+    sm : StaggeredMotion
+    refinements : array_like, shape (K, V)
+        Timing refinements ``r_{k,i}`` in seconds; entries of variables a pose
+        does not control (``sm.active`` False) are set to 0.
+
+    Returns
+    -------
+    StaggeredMotion
+        ``sm`` itself when nothing changes, else a new object.
+
+    Raises
+    ------
+    ValueError
+        If ``refinements`` has another shape, or a variable's refined knots would cross.
+
+    Warns
+    -----
+    StaggeredTimingWarning
+        When a knot is closer to a neighbouring pose than to its own.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> sm = ml.staggered.extract(ml.cmu("16_15").resample(30)[:60])
+    >>> r = sm.refinements.copy()
+    >>> r[2, 0] = 0.05                      # pose 2's root translation 50 ms late
+    >>> float(ml.staggered.set_refinements(sm, r).refinements[2, 0])
+    0.05
+    >>> r[2, 0] = 5.0                       # past the next pose
+    >>> ml.staggered.set_refinements(sm, r)
+    Traceback (most recent call last):
+    ...
+    ValueError: Refined knot times of variable 'root_position' are out of order ...
     """
     r = np.asarray(refinements, dtype=float)
     if r.shape != sm.refinements.shape:

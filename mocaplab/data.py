@@ -134,26 +134,78 @@ ACKNOWLEDGMENT = (
 
 
 class DataError(RuntimeError):
-    """A clip could not be found, fetched or verified."""
+    """A clip could not be found, fetched or verified.
+
+    Examples
+    --------
+    >>> import os
+    >>> from unittest import mock
+    >>> with mock.patch.dict(os.environ, {"MOCAPLAB_DATA_DIR": "/no/such/folder"}):
+    ...     cmu("16_15")
+    Traceback (most recent call last):
+    ...
+    mocaplab.data.DataError: MOCAPLAB_DATA_DIR=/no/such/folder is set but that folder does not exist. ...
+    """
 
 
 class UnverifiedDataWarning(UserWarning):
-    """A clip was read from files that no registry hash vouches for (they were only parsed)."""
+    """A clip was read from files that no registry hash vouches for (they were only parsed).
+
+    Examples
+    --------
+    A registry clip is checked against its hash, so it loads without this
+    warning even when the warning is an error:
+
+    >>> import warnings
+    >>> with warnings.catch_warnings():
+    ...     warnings.simplefilter("error", UnverifiedDataWarning)
+    ...     walk = cmu("16_15")
+    >>> walk.name
+    '16_15'
+    """
 
 
 def clips() -> list[str]:
-    """Trial ids in the registry, e.g. ``['16_15', '02_01', ...]``."""
+    """Trial ids in the registry, e.g. ``['16_15', '02_01', ...]``.
+
+    Returns
+    -------
+    list of str
+        A new list, in registry order.
+
+    Examples
+    --------
+    >>> clips()[:2], "16_15" in clips()
+    (['16_15', '02_01'], True)
+    """
     return list(CLIPS)
 
 
 def describe(trial: str) -> dict[str, object]:
     """Registry entry of a clip (description, frames, fps, scale, files).
 
+    Parameters
+    ----------
+    trial : str
+        A registry trial id (:func:`clips`).
+
+    Returns
+    -------
+    dict
+        A copy of the entry: ``description``, ``frames``, ``fps``,
+        ``scale`` (metres per file unit), the file names and their sha256.
+
     Raises
     ------
     KeyError
         For a trial that is not in the registry (:func:`cmu` still loads any
         CMU trial).
+
+    Examples
+    --------
+    >>> entry = describe("16_15")
+    >>> entry["fps"], entry["frames"]
+    (120.0, 471)
     """
     try:
         return dict(CLIPS[trial])
@@ -212,7 +264,22 @@ def parse_trial(trial: str) -> tuple[str, str]:
 
 
 def mirror_dir() -> Path | None:
-    """The local mirror folder from ``MOCAPLAB_DATA_DIR``, or None if unset."""
+    """The local mirror folder from ``MOCAPLAB_DATA_DIR``, or None if unset.
+
+    Returns
+    -------
+    Path or None
+        The folder, ``~`` expanded (not checked to exist).
+
+    Examples
+    --------
+    >>> import os
+    >>> from pathlib import Path
+    >>> from unittest import mock
+    >>> with mock.patch.dict(os.environ, {"MOCAPLAB_DATA_DIR": "~/mocap"}):
+    ...     mirror_dir() == Path.home() / "mocap"
+    True
+    """
     value = os.environ.get(ENV_VAR)
     return Path(value).expanduser() if value else None
 
@@ -240,10 +307,22 @@ def _existing_mirror() -> Path | None:
 def download_base() -> str:
     """Where trials are downloaded from: ``MOCAPLAB_CMU_URL``, default :data:`DEFAULT_CMU_URL` (no trailing ``/``).
 
+    Returns
+    -------
+    str
+
     Raises
     ------
     DataError
         When the variable is set to something that is not a URL.
+
+    Examples
+    --------
+    >>> import os
+    >>> from unittest import mock
+    >>> with mock.patch.dict(os.environ, {"MOCAPLAB_CMU_URL": "https://example.org/cmu/subjects/"}):
+    ...     download_base()
+    'https://example.org/cmu/subjects'
     """
     value = os.environ.get(URL_ENV_VAR, "").strip() or DEFAULT_CMU_URL
     if "://" not in value:
@@ -342,6 +421,12 @@ def cmu(trial: str, *, source: Literal["auto", "bvh", "asfamc"] = "auto") -> Mot
     BVH in the mirror (a third-party conversion with another skeleton, in
     centimetres); its header says 120 fps but the clips are 60 fps, which is
     what is used, and its artificial T-pose frame 0 is dropped.
+
+    Examples
+    --------
+    >>> walk = cmu("16_15")
+    >>> walk.name, walk.n_frames, walk.fps, walk.n_joints
+    ('16_15', 471, 120.0, 31)
     """
     subject, trial = parse_trial(trial)
     if source not in ("auto", "bvh", "asfamc"):
@@ -573,6 +658,15 @@ def lesson_clips() -> list[str]:
 
     ``tests/test_data.py`` scans the lesson notebooks for trial ids and
     checks that every one is in the registry.
+
+    Returns
+    -------
+    list of str
+
+    Examples
+    --------
+    >>> lesson_clips() == clips()
+    True
     """
     return clips()
 
@@ -648,6 +742,13 @@ def check_mirror(dest: str | os.PathLike[str], trials: list[str] | None = None) 
     dict of str to str
         Each missing or bad file (relative to ``dest``) and what is wrong;
         empty for a good mirror.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as empty:
+    ...     sorted(check_mirror(empty, ["02_01"]))
+    ['asfamc/02/02.asf', 'asfamc/02/02_01.amc', 'bvh/02_01.bvh']
     """
     root = Path(dest)
     problems = {}
@@ -659,7 +760,20 @@ def check_mirror(dest: str | os.PathLike[str], trials: list[str] | None = None) 
 
 
 def mirror_url() -> str | None:
-    """A web folder holding a whole mirror (``MOCAPLAB_MIRROR_URL``), or None (no trailing ``/``)."""
+    """A web folder holding a whole mirror (``MOCAPLAB_MIRROR_URL``), or None (no trailing ``/``).
+
+    Returns
+    -------
+    str or None
+
+    Examples
+    --------
+    >>> import os
+    >>> from unittest import mock
+    >>> with mock.patch.dict(os.environ, {"MOCAPLAB_MIRROR_URL": "https://example.org/mocap/"}):
+    ...     mirror_url()
+    'https://example.org/mocap'
+    """
     value = os.environ.get(MIRROR_URL_ENV_VAR, "").strip()
     return value.rstrip("/") or None
 
@@ -760,10 +874,16 @@ def fetch_mirror(
     DataError
         When ``url`` names a local folder that does not exist.
 
-    Example
-    -------
-    >>> fetch_mirror("classroom", url="/media/usb/mocap")  # doctest: +SKIP
-    {}
+    Examples
+    --------
+    Copy one clip from a local mirror (here the one ``MOCAPLAB_DATA_DIR``
+    names) into a new folder:
+
+    >>> import os, tempfile
+    >>> with tempfile.TemporaryDirectory() as dest:
+    ...     problems = fetch_mirror(dest, ["16_15"], url=str(mirror_dir()), progress=False)
+    ...     problems, sorted(os.listdir(dest)), check_mirror(dest, ["16_15"])
+    ({}, ['asfamc', 'bvh'], {})
     """
     from tqdm.auto import tqdm
 

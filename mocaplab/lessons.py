@@ -56,7 +56,15 @@ MANIFEST = ".mocaplab-lessons.json"
 
 
 class CheckError(AssertionError):
-    """An exercise answer that does not match (an AssertionError, so nbgrader counts it as failed)."""
+    """An exercise answer that does not match (an AssertionError, so nbgrader counts it as failed).
+
+    Examples
+    --------
+    >>> check([1, 2], [1, 3], name="contacts")
+    Traceback (most recent call last):
+    ...
+    mocaplab.lessons.CheckError: contacts: not yet, 1 of 2 entries are off
+    """
 
 
 def check(
@@ -91,12 +99,23 @@ def check(
 
     Returns
     -------
-    True when the answer matches.
+    bool
+        True when the answer matches.
 
     Raises
     ------
     CheckError
         When it does not, saying how (never showing ``expected``).
+    ValueError
+        For a negative or infinite tolerance.
+
+    Examples
+    --------
+    >>> check(0.52, 0.5, name="stride (m)", rtol=0.1)
+    ok: stride (m)
+    True
+    >>> check(0.52, 0.5, rtol=0.1, quiet=True)
+    True
     """
     if not (0 <= rtol < math.inf and 0 <= atol < math.inf):
         raise ValueError(f"Expected finite non-negative `rtol` and `atol`, got {rtol!r} and {atol!r}")
@@ -199,7 +218,7 @@ def _array_problem(answer: Any, expected: Any, *, rtol: float, atol: float) -> s
 class LessonsCopy:
     """What :func:`copy_lessons` did, file names sorted in each list.
 
-    Attributes
+    Parameters
     ----------
     added : list of str
         Lessons the working copy did not have.
@@ -211,6 +230,11 @@ class LessonsCopy:
         Lessons the student changed, replaced by the course version (``force``).
     unchanged : list of str
         Lessons already the same as the course's.
+
+    Examples
+    --------
+    >>> LessonsCopy(added=["01_intro.ipynb"])
+    LessonsCopy(added=['01_intro.ipynb'], updated=[], kept=[], replaced=[], unchanged=[])
     """
 
     added: list[str] = field(default_factory=list)
@@ -223,10 +247,21 @@ class LessonsCopy:
 def course_lessons() -> Path:
     """The course's ``lessons/`` folder: the one beside the installed (editable) package.
 
+    Returns
+    -------
+    Path
+        An absolute path; the folder holds ``00_glossary.md``.
+
     Raises
     ------
     FileNotFoundError
         When there is none (a package installed without the repository): pass the folder explicitly.
+
+    Examples
+    --------
+    >>> folder = course_lessons()
+    >>> folder.name, (folder / "00_glossary.md").is_file()
+    ('lessons', True)
     """
     folder = Path(__file__).resolve().parents[1] / "lessons"
     if not (folder / GLOSSARY).is_file():
@@ -299,11 +334,24 @@ def copy_lessons(
     ValueError
         When ``dest`` is the course's folder, or holds an unreadable record.
 
-    Example
-    -------
-    >>> done = copy_lessons("~/my-lessons")  # doctest: +SKIP
-    >>> done.kept  # doctest: +SKIP
-    ['03_laplacian_path_editing.ipynb']
+    Examples
+    --------
+    A course of two lessons; the student edits one, the course updates the
+    other, and the second copy keeps the student's work:
+
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     course, mine = Path(tmp, "course"), Path(tmp, "mine")
+    ...     course.mkdir()
+    ...     _ = (course / "01_intro.ipynb").write_text("{}")
+    ...     _ = (course / "02_paths.ipynb").write_text("{}")
+    ...     first = copy_lessons(mine, source=course)
+    ...     _ = (mine / "01_intro.ipynb").write_text('{"answer": 1}')
+    ...     _ = (course / "02_paths.ipynb").write_text('{"fixed": 1}')
+    ...     again = copy_lessons(mine, source=course)
+    >>> first.added, again.kept, again.updated
+    (['01_intro.ipynb', '02_paths.ipynb'], ['01_intro.ipynb'], ['02_paths.ipynb'])
     """
     src = course_lessons() if source is None else Path(source).expanduser()
     out = Path(dest).expanduser()

@@ -766,7 +766,35 @@ class Motion:
 
 
 def concatenate(motions: Sequence[Motion]) -> Motion:
-    """Join clips end to end (same skeleton and fps); no alignment or blending."""
+    """Join clips end to end (same skeleton and fps); no alignment or blending.
+
+    Parameters
+    ----------
+    motions : sequence of Motion
+        At least one; all with the joint names, offsets and frame rate of the
+        first.  Per-frame translations, where only some clips have them, are
+        filled with the skeleton's offsets for the others.
+
+    Returns
+    -------
+    Motion
+        The first motion's skeleton, name and fps, with ``sum(n_frames)``
+        frames.
+
+    Raises
+    ------
+    ValueError
+        For no motion, another skeleton or another frame rate (naming the clip).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> sk = Skeleton(["hips", "knee"], [-1, 0], [[0, 0, 0], [0, -0.5, 0]])
+    >>> a = Motion(sk, np.tile([0, 0, 0, 1.0], (3, 2, 1)), np.zeros((3, 3)), 30)
+    >>> joined = concatenate([a, a.replace(root_positions=np.ones((3, 3)))])
+    >>> joined.n_frames, joined.root_positions[:, 0].tolist()
+    (6, [0.0, 0.0, 0.0, 1.0, 1.0, 1.0])
+    """
     if not motions:
         raise ValueError("Expected at least one motion to concatenate, got none")
     first = motions[0]

@@ -163,9 +163,31 @@ def keep_knot_order(sm: StaggeredMotion, refinements: ArrayLike, *, gap: float |
     last knots do not move.  Used by the procedural timing tools so a slider
     can never produce crossing knots.
 
+    Parameters
+    ----------
+    sm : StaggeredMotion
+        Gives the pose times and which variables each pose controls.
+    refinements : array_like, shape (K, V)
+        Proposed refinements, seconds.
+    gap : float, optional
+        Smallest time between two knots of a variable, seconds; default ``1 / sm.fps``.
+
     Returns
     -------
     ndarray, shape (K, V)
+
+    Examples
+    --------
+    Pushing pose 2's root knot past pose 3 pushes pose 3's knot one frame further:
+
+    >>> import mocaplab as ml
+    >>> sm = ml.staggered.extract(ml.cmu("16_15").resample(30)[:60])
+    >>> r = sm.refinements.copy()
+    >>> r[2, 0] = 0.5
+    >>> kept = ml.staggered.keep_knot_order(sm, r)
+    >>> knots = sm.times + kept[:, 0]
+    >>> round(float(knots[3] - knots[2]) * sm.fps, 6)
+    1.0
     """
     r = np.array(refinements, dtype=float, copy=True)
     g = 1.0 / sm.fps if gap is None else float(gap)
@@ -191,6 +213,32 @@ def retime(sm: StaggeredMotion, k: int, time: float) -> StaggeredMotion:
 
     Moving the last pose changes the duration.  Pose times must stay
     strictly increasing.
+
+    Parameters
+    ----------
+    sm : StaggeredMotion
+    k : int
+        Pose index, 1 to ``K - 1``.
+    time : float
+        New pose time ``t_k``, seconds, between the times of poses ``k - 1`` and ``k + 1``.
+
+    Returns
+    -------
+    StaggeredMotion
+
+    Raises
+    ------
+    ValueError
+        For the first pose, or a time that leaves the pose times out of order.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> sm = ml.staggered.extract(ml.cmu("16_15").resample(30)[:60])
+    >>> sm.times.round(3).tolist()
+    [0.0, 0.533, 0.9, 1.1, 1.667, 1.967]
+    >>> ml.staggered.retime(sm, 2, 1.0).times.round(3).tolist()
+    [0.0, 0.533, 1.0, 1.1, 1.667, 1.967]
     """
     k = sm._pose_index(k)
     if k == 0:
@@ -212,6 +260,23 @@ def default_joint(skeleton: Skeleton, roles: Mapping[str, Any] | None = None) ->
     The ``pelvis`` role (:func:`mocaplab.roles.resolve_roles`, ``roles``
     overriding), which is joint 0 on most skeletons but not below a static
     reference joint; joint 0 when the skeleton has no pelvis role.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    roles : mapping, optional
+        Joint-role overrides (``{"pelvis": "Hips"}``).
+
+    Returns
+    -------
+    str
+        The joint's name.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> ml.staggered.default_joint(ml.cmu("16_15").skeleton)
+    'Hips'
     """
     try:
         pelvis = resolve_roles(skeleton, roles).get("pelvis")
@@ -235,7 +300,30 @@ def succession_depths(
     translation (the root translation for joint 0, the translation
     variables for ``translation_joints``) has the depth of its rotation.
     Variables outside every chosen subtree get NaN (they are not retimed).
-    Default joint: the pelvis (:func:`default_joint`, ``roles`` overriding).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    joint : str or sequence of str, optional
+        The chosen joint(s); default the pelvis (:func:`default_joint`, ``roles`` overriding).
+    translation_joints : sequence of int, default ()
+        Joints with a translation variable (``StaggeredMotion.translation_joints``).
+    roles : mapping, optional
+        Joint-role overrides (:func:`mocaplab.roles.resolve_roles`).
+
+    Returns
+    -------
+    ndarray, shape (V,)
+        Depths in the order of :func:`~mocaplab.staggered.variable_names`, NaN outside the subtrees.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> sk = ml.cmu("16_15").skeleton
+    >>> d = ml.staggered.succession_depths(sk, "LeftShoulder")
+    >>> names = ml.staggered.variable_names(sk)
+    >>> [(names[i], int(d[i])) for i in range(len(d)) if d[i] == d[i]][:4]
+    [('LeftShoulder', 0), ('LeftArm', 1), ('LeftForeArm', 2), ('LeftHand', 3)]
     """
     if joint is None:
         joint = default_joint(skeleton, roles)
@@ -289,6 +377,18 @@ def succession(
         ``s = 0`` returns an identical motion.  Knots that would cross a
         neighbour of the same variable are stopped one frame short of it
         (:func:`keep_knot_order`).
+
+    Examples
+    --------
+    The left hand is three levels below the left shoulder, so with ``s = 0.03``
+    and ``l = 2`` its knots come ``0.03 * 3**2 = 0.27`` s later:
+
+    >>> import mocaplab as ml
+    >>> sm = ml.staggered.extract(ml.cmu("16_15").resample(30)[:60])
+    >>> hand = ml.staggered.variable_names(sm.skeleton).index("LeftHand")
+    >>> late = ml.staggered.succession(sm, 0.03, 2.0, joint="LeftShoulder")
+    >>> (late.refinements - sm.refinements)[1:-1, hand].round(3).tolist()
+    [0.27, 0.27, 0.27, 0.27]
     """
     if not np.isfinite(s):
         raise ValueError(f"Expected a finite `s` in seconds, got {s!r}")
@@ -316,6 +416,30 @@ def limb_groups(
     (:func:`mocaplab.roles.resolve_roles`, ``roles`` overriding); everything
     else (the root translation, the pelvis, the spine, the head) is the
     trunk.  A translation variable belongs to its joint's limb.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    translation_joints : sequence of int, default ()
+        Joints with a translation variable (``StaggeredMotion.translation_joints``).
+    roles : mapping, optional
+        Joint-role overrides.
+
+    Returns
+    -------
+    ndarray of int, shape (V,)
+        Indices into ``LIMBS = ("trunk", "left_leg", "right_leg", "left_arm", "right_arm")``,
+        in the order of :func:`~mocaplab.staggered.variable_names`.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> from mocaplab.staggered.edit import LIMBS
+    >>> sk = ml.cmu("16_15").skeleton
+    >>> limb = ml.staggered.limb_groups(sk)
+    >>> names = ml.staggered.variable_names(sk)
+    >>> LIMBS[limb[names.index("LeftLeg")]], LIMBS[limb[names.index("RightHand")]], LIMBS[limb[0]]
+    ('left_leg', 'right_arm', 'trunk')
     """
     r = resolve_roles(skeleton, roles)
     J = skeleton.n_joints
@@ -345,6 +469,7 @@ def randomize(
 
     Parameters
     ----------
+    sm : StaggeredMotion
     tau : float >= 0
         Bound of the offsets, seconds.
     joints : sequence of str, optional
@@ -363,6 +488,23 @@ def randomize(
         as a whole.
     roles : mapping, optional
         Joint-role overrides for the limbs (``by="limb"``).
+
+    Returns
+    -------
+    StaggeredMotion
+        Knots that would cross a neighbour are stopped one frame short of it
+        (:func:`keep_knot_order`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mocaplab as ml
+    >>> sm = ml.staggered.extract(ml.cmu("16_15").resample(30)[:60])
+    >>> a = ml.staggered.randomize(sm, 0.05, seed=1)
+    >>> bool(np.abs(a.refinements - sm.refinements).max() <= 0.05)
+    True
+    >>> bool(np.array_equal(a.refinements, ml.staggered.randomize(sm, 0.05, seed=1).refinements))
+    True
     """
     if not (np.isfinite(tau) and tau >= 0):
         raise ValueError(f"Expected `tau` >= 0 seconds, got {tau!r}")
@@ -424,6 +566,7 @@ def apply_knot_deltas(
 
     Parameters
     ----------
+    sm : StaggeredMotion
     root_delta : array_like, shape (K, 3)
         Translation changes of the root-position knots (added).
     rotation_delta : array_like, shape (K, J, 4)
@@ -438,6 +581,20 @@ def apply_knot_deltas(
         ``spline (+) offset (+) displacement`` on every displacement sample,
         where the offset is ``Delta_k`` between pose ``k``'s editing knot and
         extreme knot, smoothly blended between poses.
+
+    Examples
+    --------
+    Raise pose 3's root knot by 10 cm and leave every rotation alone:
+
+    >>> import numpy as np
+    >>> import mocaplab as ml
+    >>> sm = ml.staggered.extract(ml.cmu("16_15").resample(30)[:60])
+    >>> K, J = sm.rotation_values.shape[:2]
+    >>> lift = np.zeros((K, 3))
+    >>> lift[3, 1] = 0.1
+    >>> up = ml.staggered.apply_knot_deltas(sm, lift, np.tile([0.0, 0.0, 0.0, 1.0], (K, J, 1)))
+    >>> (up.root_values[3] - sm.root_values[3]).round(6).tolist()
+    [0.0, 0.1, 0.0]
     """
     K, J, T = sm.n_poses, sm.n_joints, sm.n_translations
     V = sm.n_variables
@@ -586,7 +743,9 @@ def edit_pose(
 
     Parameters
     ----------
+    sm : StaggeredMotion
     k : int
+        Pose index.
     root_position : array_like, shape (3,), optional
         New root translation (metres).
     rotations : array_like, shape (J, 4), or dict of joint name -> (4,), optional
@@ -598,12 +757,23 @@ def edit_pose(
         ``"non-staggered"``: the values are the new extreme values
         ``v_hat_{k,i}``; editing knots are offset by the same change.
         ``"true"``: the values are the new pose at ``t_k`` (editing knots);
-        afterwards ``true_pose(k)`` returns exactly them and the extreme knots
-        received the same change.
+        afterwards ``true_pose(k)`` returns them (to rounding, a few ulps) and
+        the extreme knots received the same change.
 
     Returns
     -------
     StaggeredMotion
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> sm = ml.staggered.extract(ml.cmu("16_15").resample(30)[:60])
+    >>> up = ml.staggered.edit_pose(sm, 2, root_position=sm.root_values[2] + [0, 0.1, 0])
+    >>> (up.root_values[2] - sm.root_values[2]).round(6).tolist()
+    [0.0, 0.1, 0.0]
+    >>> true = ml.staggered.edit_pose(sm, 2, root_position=[0.0, 1.0, 0.0], which="true")
+    >>> true.true_pose(2)[0].round(12).tolist()
+    [0.0, 1.0, 0.0]
     """
     if which not in ("true", "non-staggered"):
         raise ValueError(f"Expected `which` in ('true', 'non-staggered'), got {which!r}")
@@ -633,6 +803,30 @@ def average_pose(sm: StaggeredMotion, *, which: Literal["true", "non-staggered"]
 
     Rotations are averaged as the dominant eigenvector of ``sum q q^T``
     (sign independent).  (Translation variables average like the root.)
+
+    Parameters
+    ----------
+    sm : StaggeredMotion
+    which : {"non-staggered", "true"}
+        Average the extreme values (default) or the true poses at ``t_k``.
+
+    Returns
+    -------
+    root : ndarray, shape (3,)
+        Mean root translation, metres.
+    rotations : ndarray, shape (J, 4)
+        Unit mean rotation of each joint.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mocaplab as ml
+    >>> sm = ml.staggered.extract(ml.cmu("16_15").resample(30)[:60])
+    >>> root, rotations = ml.staggered.average_pose(sm)
+    >>> root.shape, rotations.shape
+    ((3,), (31, 4))
+    >>> bool(np.allclose(np.linalg.norm(rotations, axis=-1), 1.0))
+    True
     """
     pos, rot = _average_pose(sm, which)
     return pos[0], rot
@@ -670,6 +864,7 @@ def exaggerate(
 
     Parameters
     ----------
+    sm : StaggeredMotion
     w_r : float
         Degree of offset (0: no change; positive exaggerates away from the
         reference, negative moves toward it, -1 reaches it).
@@ -691,6 +886,17 @@ def exaggerate(
     Returns
     -------
     StaggeredMotion
+
+    Examples
+    --------
+    ``w_r = -1`` moves pose 3 all the way to its reference, pose 0:
+
+    >>> import numpy as np
+    >>> import mocaplab as ml
+    >>> sm = ml.staggered.extract(ml.cmu("16_15").resample(30)[:60])
+    >>> same = ml.staggered.exaggerate(sm, -1.0, reference=0, poses=[3])
+    >>> bool(np.allclose(same.rotation_values[3], sm.rotation_values[0]))
+    True
     """
     if not np.isfinite(w_r):
         raise ValueError(f"Expected a finite `w_r`, got {w_r!r}")
@@ -847,6 +1053,7 @@ def insert_pose(sm: StaggeredMotion, time: float, *, joints: Sequence[str] | Non
 
     Parameters
     ----------
+    sm : StaggeredMotion
     time : float
         Seconds, strictly between two poses and between the refined knots
         of every variable it controls.
@@ -860,6 +1067,17 @@ def insert_pose(sm: StaggeredMotion, time: float, *, joints: Sequence[str] | Non
         The new knots take the current values at ``time``; the splines of the
         split segments are refitted and the displacement maps re-measured,
         so the motion is unchanged.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mocaplab as ml
+    >>> sm = ml.staggered.extract(ml.cmu("16_15").resample(30)[:60])
+    >>> more = ml.staggered.insert_pose(sm, 0.7)
+    >>> more.n_poses - sm.n_poses
+    1
+    >>> bool(np.allclose(more.evaluate().global_positions(), sm.evaluate().global_positions()))
+    True
     """
     t = float(time)
     K, V = sm.n_poses, sm.n_variables
@@ -903,6 +1121,28 @@ def delete_pose(sm: StaggeredMotion, k: int) -> StaggeredMotion:
 
     The two segments around the pose merge; their spline is refitted and
     the displacement maps re-measured.
+
+    Parameters
+    ----------
+    sm : StaggeredMotion
+    k : int
+        Pose index, 1 to ``K - 2``.
+
+    Returns
+    -------
+    StaggeredMotion
+        With ``K - 1`` poses.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mocaplab as ml
+    >>> sm = ml.staggered.extract(ml.cmu("16_15").resample(30)[:60])
+    >>> fewer = ml.staggered.delete_pose(sm, 2)
+    >>> fewer.n_poses, sm.n_poses
+    (5, 6)
+    >>> bool(np.allclose(fewer.evaluate().global_positions(), sm.evaluate().global_positions()))
+    True
     """
     k = sm._pose_index(k)
     K, V = sm.n_poses, sm.n_variables

@@ -130,6 +130,30 @@ def interval_weights(
     after ``stop - 1`` get weights strictly between 0 and 1, the frames
     beyond are 0.
 
+    Parameters
+    ----------
+    n_frames : int
+        Number of frames F.
+    intervals : sequence of (int, int)
+        Half-open ``(start, stop)`` frame intervals, ``0 <= start < stop <= F``.
+    window_frames : int
+        Ramp length on each side, frames (>= 0); required.
+    **removed
+        Old keywords (``window=``), answered with a ``TypeError`` that says
+        what to write instead.
+
+    Returns
+    -------
+    ndarray, shape (K, F)
+        One row per interval; ``(0, F)`` for none.
+
+    Raises
+    ------
+    TypeError
+        Without ``window_frames``, or with an old keyword.
+    ValueError
+        For a negative or fractional window, or an interval outside the clip.
+
     Examples
     --------
     >>> interval_weights(6, [(2, 3)], window_frames=1).round(2).tolist()
@@ -160,6 +184,28 @@ def blend_weights(
     ``window_frames`` frames on each side (see :func:`interval_weights`);
     overlapping ramps add up, clipped at 1.  (A window in frames, as its
     name says: every other window of mocaplab is in seconds.)
+
+    Parameters
+    ----------
+    n_frames : int
+        Number of frames F (>= 1).
+    intervals : sequence of (int, int)
+        Half-open ``(start, stop)`` frame intervals.
+    window_frames : int
+        Ramp length on each side, frames (>= 0); required.
+    **removed
+        Old keywords (``window=``), answered with a ``TypeError``.
+
+    Returns
+    -------
+    ndarray, shape (F,)
+
+    Raises
+    ------
+    TypeError
+        Without ``window_frames``, or with an old keyword.
+    ValueError
+        For ``n_frames < 1``, a bad window or an interval outside the clip.
 
     Examples
     --------
@@ -198,6 +244,22 @@ class Goal:
         Relative priority of an ankle and its toe where both are planted and
         cannot both be met exactly (default 1): the foot rolls about the
         stiffer one.
+
+    Raises
+    ------
+    ValueError
+        For targets, weights or stiffness of the wrong shape or out of range,
+        an unknown ``kind``, or a ``chain`` on a goal that is not a limb.
+
+    Examples
+    --------
+    A goal that fades in over two frames and then holds the ankle at the
+    origin (:func:`solve_goals` and :func:`enforce_goals` meet it):
+
+    >>> import numpy as np
+    >>> goal = Goal("ankle", np.zeros((4, 3)), [0.0, 0.5, 1.0, 1.0])
+    >>> goal.n_frames, goal.kind, goal.stiffness.tolist()
+    (4, 'limb', [1.0, 1.0, 1.0, 1.0])
     """
 
     joint: JointRef
@@ -376,6 +438,30 @@ def plant_positions(
     ``1 / (speed + 0.1 m/s)`` (speed in ``reference``, else ``motion``): the
     detected intervals include the slow ends of the foot's landing and
     take-off, and the plant belongs where the foot rests.
+
+    Parameters
+    ----------
+    motion : Motion
+        The (edited) motion.
+    contacts : Contacts
+        Contact intervals, over the motion's frames.
+    joint : str
+        A joint of ``contacts``.
+    reference : Motion, optional
+        The motion before editing, same frames (heights and speeds).
+
+    Returns
+    -------
+    ndarray, shape (K, 3)
+        World positions, metres, one per contact interval of ``joint``.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15")
+    >>> plants = plant_positions(walk, ml.contacts.foot_contacts(walk), "LeftFoot")
+    >>> plants.shape, plants[0].round(2).tolist()
+    ((4, 3), [0.09, 0.09, -1.21])
     """
     j = motion.skeleton.index(joint)
     ref = reference if reference is not None else motion
@@ -460,6 +546,21 @@ def foot_goals(
     toe plant is moved along the ankle-to-toe direction so that its ground
     distance from the ankle plant fits the foot's length at the two joints'
     mean heights, and both can hold at once.
+
+    Raises
+    ------
+    TypeError
+        If ``contacts`` is not a :class:`~mocaplab.contacts.Contacts`.
+    ValueError
+        If ``contacts`` or ``reference`` covers other frames than ``motion``.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15")
+    >>> goals = foot_goals(walk, ml.contacts.foot_contacts(walk))
+    >>> [(g.joint, g.kind) for g in goals]
+    [('LeftFoot', 'foot'), ('LeftToeBase', 'toe'), ('RightFoot', 'foot'), ('RightToeBase', 'toe')]
     """
     if not isinstance(contacts, Contacts):
         raise TypeError(f"Expected `contacts` to be a Contacts, got {type(contacts).__name__}")
@@ -1000,6 +1101,25 @@ def enforce_goals(
     Returns
     -------
     Motion
+        A new motion (``motion`` itself when there is no goal).
+
+    Raises
+    ------
+    TypeError, ValueError
+        For a ``spacing`` or ``levels`` of the wrong kind or out of range.
+
+    Examples
+    --------
+    A leg reaches a point over frames 10-19, with three-frame ramps:
+
+    >>> import numpy as np
+    >>> from mocaplab.motion import Motion, Skeleton
+    >>> sk = Skeleton(["hip", "knee", "ankle"], [-1, 0, 1], [[0, 1, 0], [0, -0.45, 0], [0, -0.45, 0]])
+    >>> leg = Motion(sk, np.tile([0.0, 0, 0, 1], (30, 3, 1)), np.zeros((30, 3)), fps=30)
+    >>> reach = Goal("ankle", np.tile([0.2, 0.3, 0.0], (30, 1)), blend_weights(30, [(10, 20)], window_frames=3))
+    >>> ankle = enforce_goals(leg, [reach], adjust_root=False).global_positions()[:, 2]
+    >>> ankle[15].round(3).tolist(), ankle[0].round(2).tolist()
+    ([0.2, 0.3, 0.0], [0.0, -0.9, 0.0])
     """
     spacing, levels = map_options(spacing, levels)
     if not goals:
@@ -1043,6 +1163,16 @@ class RelativeTo:
     and B's hand relative to A's, as in a high five) meet halfway: both
     targets are the midpoint of the two hands (shifted by half the agreed
     offset), so each character reaches half the gap.
+
+    Raises
+    ------
+    ValueError
+        For an ``offset`` that is not 3 numbers.
+
+    Examples
+    --------
+    >>> RelativeTo("RightHand", offset=[0, 0.1, 0], character=1)
+    RelativeTo(joint='RightHand', offset=(0.0, 0.1, 0.0), character=1)
     """
 
     joint: str
@@ -1068,6 +1198,16 @@ class ObjectFrame:
         Object orientation (quaternion), per frame or constant.
     offset : array_like, shape (3,)
         Target point in the object's frame.
+
+    Examples
+    --------
+    A box at x = 1 m turned a quarter turn about Y: a point half a metre
+    along its x axis is at z = -0.5 m in the world:
+
+    >>> import numpy as np
+    >>> box = ObjectFrame([1.0, 0, 0], rotations=[0, np.sin(np.pi / 4), 0, np.cos(np.pi / 4)], offset=[0.5, 0, 0])
+    >>> box.world(2).round(3).tolist()
+    [[1.0, 0.0, -0.5], [1.0, 0.0, -0.5]]
     """
 
     positions: Array
@@ -1109,6 +1249,18 @@ class EndEffector:
         and the arm) instead of the two-bone limb ending at ``joint``.
     blend : float, optional
         Blending window in seconds (default: that of the refine call).
+
+    Raises
+    ------
+    ValueError
+        For a world target that is not of shape (3,) or (F, 3).
+
+    Examples
+    --------
+    >>> EndEffector("RightHand", (10, 20), [0.2, 1.3, 0.0]).intervals(30)
+    [(10, 20)]
+    >>> EndEffector("RightHand", [3, 4, 5, 9], [0.2, 1.3, 0.0]).intervals(30)
+    [(3, 6), (9, 10)]
     """
 
     joint: str
@@ -1192,6 +1344,21 @@ def world_targets(ee: EndEffector, motions: Sequence[Motion]) -> Array:
     -------
     ndarray, shape (F, 3)
         A new array.
+
+    Raises
+    ------
+    ValueError
+        For characters of different frame counts or a target of the wrong shape.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab.motion import Motion, Skeleton
+    >>> sk = Skeleton(["hip", "knee", "ankle"], [-1, 0, 1], [[0, 1, 0], [0, -0.45, 0], [0, -0.45, 0]])
+    >>> leg = Motion(sk, np.tile([0.0, 0, 0, 1], (30, 3, 1)), np.zeros((30, 3)), fps=30)
+    >>> above_knee = EndEffector("ankle", 5, RelativeTo("knee", offset=(0, 0.1, 0)))
+    >>> world_targets(above_knee, [leg])[5].round(3).tolist()
+    [0.0, -0.35, 0.0]
     """
     me = motions[ee.character]
     n = me.n_frames
@@ -1222,6 +1389,33 @@ def effector_goals(
 
     In the blending windows the joint follows its own motion plus a fading
     correction (see ``_window_targets`` in the source for the formula).
+
+    Parameters
+    ----------
+    motion : Motion
+        The constrained character.
+    end_effectors : sequence of EndEffector
+    targets : sequence of ndarray, shape (F, 3)
+        Each end effector's world targets (:func:`world_targets`), in order.
+    blend : float
+        Blending window on each side, seconds, for end effectors without
+        their own ``blend`` (default 0.1 s).
+
+    Returns
+    -------
+    list of Goal
+        One ``"limb"`` goal per end effector.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab.motion import Motion, Skeleton
+    >>> sk = Skeleton(["hip", "knee", "ankle"], [-1, 0, 1], [[0, 1, 0], [0, -0.45, 0], [0, -0.45, 0]])
+    >>> leg = Motion(sk, np.tile([0.0, 0, 0, 1], (30, 3, 1)), np.zeros((30, 3)), fps=30)
+    >>> ee = EndEffector("ankle", (10, 20), [0.2, 0.3, 0.0])
+    >>> goal, = effector_goals(leg, [ee], [world_targets(ee, [leg])], blend=0.1)
+    >>> goal.weights[6:11].round(2).tolist(), goal.targets[15].tolist()
+    ([0.0, 0.1, 0.5, 0.9, 1.0], [0.2, 0.3, 0.0])
     """
     out = []
     n = motion.n_frames

@@ -732,7 +732,7 @@ def test_lesson_03_undo_and_export_in_the_path_editor(open_lesson: Any, tmp_path
     assert back["paths"] == first["paths"], "Undo did not restore the first path exactly"
     assert back["n"] == first["n"]
     status = text_of(editor.locator(".mocaplab-path-status").first)
-    assert "restored" in status, f"status after Undo: {status!r}"
+    assert status.startswith("undid: ") and " at frame " in status, f"status after Undo: {status!r}"
     page.wait_for_function("(el) => el.disabled", arg=undo.element_handle(), timeout=30000)
 
     redo.click()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import html
 import os
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -20,7 +21,10 @@ import ipywidgets as W
 from mocaplab.io import save_bvh
 from mocaplab.motion import Motion
 
-__all__ = ["HistoryButtons", "ExportControl", "export_paths", "error_html", "row", "keep_width"]
+__all__ = [
+    "HistoryButtons", "ExportControl", "export_paths", "error_html", "row", "keep_width",
+    "export_name", "free_paths", "history_status",
+]
 
 #: Widgets kept at their own width in a :func:`row`: controls (a squeezed one reads "..."), pictures and boxes.
 _FIXED = (
@@ -141,6 +145,10 @@ class HistoryButtons:
         Called with no argument after each action (the widget redraws).
     guard : callable, optional
         Wraps each action (the widget's error display); default runs it.
+    snapshot : callable, optional
+        Returns what the widget describes of the editor's state (its
+        constraints, its parameters); taken before and after each action and
+        kept in :attr:`last`, so the status can say what changed.
     """
 
     def __init__(
@@ -149,10 +157,14 @@ class HistoryButtons:
         after: Callable[[], None],
         *,
         guard: Callable[[Callable[[], object]], None] | None = None,
+        snapshot: Callable[[], Any] | None = None,
     ) -> None:
         self.editor = editor
         self._after = after
         self._guard = guard or (lambda action: action())
+        self._snapshot = snapshot or (lambda: None)
+        #: ``(action, state before, state after)`` of the last Undo / Redo / Reset (see :func:`history_status`).
+        self.last: tuple[str, Any, Any] | None = None
         layout = W.Layout(width="auto")
         self.undo = W.Button(description="Undo", icon="undo", tooltip="Undo the last edit", layout=layout)
         self.redo = W.Button(description="Redo", icon="repeat", tooltip="Redo the edit undone", layout=layout)
@@ -167,10 +179,12 @@ class HistoryButtons:
 
     def _run(self, name: str) -> None:
         def action() -> None:
+            before = self._snapshot()
             try:
                 getattr(self.editor, name)()
             finally:
                 self.sync()
+            self.last = (name, before, self._snapshot())
             self._after()
 
         self._guard(action)
@@ -179,6 +193,63 @@ class HistoryButtons:
         """Enable each button exactly when its action is possible."""
         self.undo.disabled = not self.editor.can_undo
         self.redo.disabled = not self.editor.can_redo
+
+
+_DONE = {"undo": "undid", "redo": "redid", "reset": "reset"}
+
+
+def history_status(action: str, before: Any, after: Any, describe: Callable[[Any, Any], str]) -> str:
+    """What an Undo, Redo or Reset changed, in words: ``"undid: moved pin at frame 40 of character 0"``.
+
+    Parameters
+    ----------
+    action : {"undo", "redo", "reset"}
+    before, after : object
+        The editor's state (a widget's snapshot) before and after the action.
+    describe : callable
+        ``describe(old, new)`` says what an edit from ``old`` to ``new`` did.
+        Undo names the edit it took back (from ``after`` to ``before``),
+        redo and reset the change they made.
+
+    Examples
+    --------
+    >>> history_status("undo", 2, 1, lambda old, new: f"{old} -> {new}")
+    'undid: 1 -> 2'
+    """
+    if action not in _DONE:
+        raise ValueError(f"Expected `action` to be 'undo', 'redo' or 'reset', got {action!r}")
+    what = describe(after, before) if action == "undo" else describe(before, after)
+    return f"{_DONE[action]}: {what}"
+
+
+def export_name(clip: str | None, method: str) -> str:
+    """The default export file of a widget: ``<clip>_<method>.bvh`` in letters, digits and ``._-``.
+
+    >>> export_name("16_15", "touched_up"), export_name("my walk (take 2)", "edited"), export_name("", "staggered")
+    ('16_15_touched_up.bvh', 'my_walk_take_2_edited.bvh', 'motion_staggered.bvh')
+    """
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", str(clip or "")).strip("._") or "motion"
+    return f"{stem}_{method}.bvh"
+
+
+def free_paths(path: str | os.PathLike[str], n: int) -> list[Path]:
+    """:func:`export_paths` of ``path``, or, when one of them exists, of the first free ``stem_2``, ``stem_3`` ...
+
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp()); (d / "a.bvh").write_text("")
+    0
+    >>> [f.name for f in free_paths(d / "a.bvh", 1)], [f.name for f in free_paths(d / "a.bvh", 2)]
+    (['a_2.bvh'], ['a_1.bvh', 'a_2.bvh'])
+    >>> (d / "a_2.bvh").write_text(""); [f.name for f in free_paths(d / "a.bvh", 2)]
+    0
+    ['a_2_1.bvh', 'a_2_2.bvh']
+    """
+    files = export_paths(path, n)
+    base, k = files[0] if n == 1 else export_paths(path, 1)[0], 1
+    while any(f.exists() for f in files):
+        k += 1
+        files = export_paths(base.with_name(f"{base.stem}_{k}{base.suffix}"), n)
+    return files
 
 
 def export_paths(path: str | os.PathLike[str], n: int) -> list[Path]:
@@ -199,9 +270,16 @@ class ExportControl:
     motions : callable
         Returns the Motion (or sequence of Motions) to write.
     default : str
-        Initial file name.
+        Initial file name (see :func:`export_name`).
     guard : callable, optional
         Wraps the write (the widget's error display).
+
+    Notes
+    -----
+    An existing file is never overwritten without saying so: the export
+    writes the first free numbered name (``16_15_edited_2.bvh``,
+    :func:`free_paths`) unless ``export(path, overwrite=True)``, and the
+    label shows the full path of every file written.
     """
 
     def __init__(
@@ -223,18 +301,23 @@ class ExportControl:
         self.button.on_click(lambda _b: self._guard(self.export))
         self.box = row([self.path, self.button, self.label])
 
-    def export(self, path: str | os.PathLike[str] | None = None) -> list[Path]:
-        """Write the current motions (to ``path`` or the box's name); returns the files written.
+    def export(self, path: str | os.PathLike[str] | None = None, *, overwrite: bool = False) -> list[Path]:
+        """Write the current motions (to ``path`` or the box's name); returns the files written (absolute).
 
-        :attr:`written` lists the files written by this call; when a write
-        fails it holds those written before the failure, the label says so,
-        and the error is raised (the widget shows it).
+        An existing file is kept and the next free numbered name written
+        instead (the label says so), unless ``overwrite``.  :attr:`written`
+        lists the files written by this call; when a write fails it holds
+        those written before the failure, the label says so, and the error
+        is raised (the widget shows it).
         """
         self.written = []
         self.label.value = ""
         motions = self._motions()
         ms = [motions] if isinstance(motions, Motion) else list(motions)
-        files = export_paths(self.path.value if path is None else path, len(ms))
+        target = Path(os.fspath(self.path.value if path is None else path)).expanduser().absolute()
+        asked = export_paths(target, len(ms))
+        files = asked if overwrite else free_paths(target, len(ms))
+        existing = ", ".join(html.escape(f.name) for f in asked if f.exists()) if files != asked else ""
         for m, f in zip(ms, files, strict=True):
             try:
                 save_bvh(m, f)
@@ -247,5 +330,6 @@ class ExportControl:
                 raise
             self.written.append(f)
         names = ", ".join(html.escape(str(f)) for f in files)
-        self.label.value = f"<span class='mocaplab-ok' style='overflow-wrap:anywhere'>wrote {names}</span>"
+        kept = f" ({existing} already there: kept, not overwritten)" if existing else ""
+        self.label.value = f"<span class='mocaplab-ok' style='overflow-wrap:anywhere'>wrote {names}{kept}</span>"
         return list(files)

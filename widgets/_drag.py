@@ -54,13 +54,14 @@ drawn (the paths); unticked, the view shows and writes the plain edit.
 
 from __future__ import annotations
 
+import dataclasses
+import difflib
 import functools
 import html
 import io
 import json
-import re
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -73,7 +74,7 @@ from numpy.typing import NDArray
 
 from mocaplab import editing
 
-from ._controls import ExportControl, HistoryButtons, row
+from ._controls import ExportControl, HistoryButtons, export_name, history_status, row
 
 Backend = Literal["auto", "ipympl", "agg"]
 
@@ -252,8 +253,12 @@ class DragView:
         )
         self.refine.add_class("mocaplab-refine")
         self.refine.observe(self._on_refine_toggle, names="value")
-        self.history_buttons = HistoryButtons(self.editor, self._after_history, guard=self._guard)
-        self.export_control = ExportControl(self._export_motions, default=_export_name(self.editor), guard=self._guard)
+        self.history_buttons = HistoryButtons(
+            self.editor, self._after_history, guard=self._guard, snapshot=lambda: tuple(self.editor.constraints)
+        )
+        self.export_control = ExportControl(
+            self._export_motions, default=export_name(_first_clip_name(self.editor), "edited"), guard=self._guard
+        )
         # a row that wraps: the "wrote ..." note goes under the button when it does not fit beside it
         self.controls = row([self.history_buttons.box, self.refine, self.export_control.box])
         self.controls.add_class("mocaplab-edit-controls")
@@ -438,8 +443,13 @@ class DragView:
         self._drag = None
         self._apply(current_result(self.editor))
         self._settle(grow_only=self._refresh_grows_view)
-        n = len(self.editor.constraints)
-        self._set_status(f"restored: {n} constraint{'s' if n != 1 else ''}" + self._history_note() + self._refine_note)
+        last = self.history_buttons.last
+        text = history_status(*last, self._constraint_change) if last is not None else "history"
+        self._set_status(text + self._history_note() + self._refine_note)
+
+    def _constraint_change(self, old: Sequence[Any], new: Sequence[Any]) -> str:
+        """What an edit from constraints ``old`` to ``new`` did, in words (:func:`constraint_change`)."""
+        return constraint_change(old, new, who=self._character)
 
     def _history_note(self) -> str:
         """Extra status text after an undo, redo or reset (subclasses add to it)."""
@@ -653,12 +663,84 @@ def as_scene_editor(
     return editing.make_editor(characters, list(constraints or ()), **(options or {}))
 
 
-def _export_name(editor: Any) -> str:
-    """Default export file: ``<first clip's name>_edited.bvh`` (letters, digits, ``._-`` only)."""
+def _first_clip_name(editor: Any) -> str:
+    """The first character's clip name (the default export is named after it), or ``""``."""
     characters: Sequence[Any] = getattr(editor, "characters", None) or ()
-    name = str(getattr(characters[0], "name", "") or "") if len(characters) else ""
-    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "motion"
-    return f"{stem}_edited.bvh"
+    return str(getattr(characters[0], "name", "") or "") if len(characters) else ""
+
+
+#: What a status line calls each constraint (the class name for any other).
+_NOUNS = {
+    "PinPosition": "pin",
+    "PinDirection": "direction pin",
+    "Relative": "relative offset",
+    "AbsoluteTime": "time handle",
+    "Duration": "duration",
+    "Sync": "sync",
+}
+
+
+def _constraint_key(c: Any) -> Hashable:
+    """A value key of a constraint (equal keys: the same constraint), arrays compared by their bytes."""
+    if not dataclasses.is_dataclass(c):
+        return (type(c).__name__, repr(c))
+    out: list[Hashable] = [type(c).__name__]
+    for f in dataclasses.fields(c):
+        value = getattr(c, f.name)
+        arr = np.asarray(value) if not isinstance(value, str) else None
+        if arr is None or arr.dtype == object:
+            out.append((f.name, repr(value)))
+        else:
+            out.append((f.name, arr.shape, str(arr.dtype), arr.tobytes()))
+    return tuple(out)
+
+
+def constraint_change(old: Sequence[Any], new: Sequence[Any], *, who: Callable[[int], str] | None = None) -> str:
+    """What an edit from constraint list ``old`` to ``new`` did, in words.
+
+    ``"moved pin at frame 40 of character 0"``, ``"added time handle at
+    frame 12 of character 1"``, ``"removed direction pin ..."``; several
+    changes are joined with ``"; "`` (the first three, then how many more).
+
+    Parameters
+    ----------
+    old, new : sequence of constraints
+    who : callable, optional
+        ``who(k)`` names character ``k`` (default ``"character k"``).
+
+    Examples
+    --------
+    >>> from mocaplab.editing import PinPosition
+    >>> a, b = PinPosition(0, 40, (0.0, 1.0)), PinPosition(0, 40, (0.5, 1.0))
+    >>> constraint_change([a], [b]), constraint_change([a], []), constraint_change([], [a, b])
+    ('moved pin at frame 40 of character 0', 'removed pin at frame 40 of character 0', 'added 2 pins')
+    """
+    name = who or (lambda k: f"character {k}")
+
+    def phrase(c: Any) -> str:
+        noun = _NOUNS.get(kind_of(c), kind_of(c))
+        hard = "hard " if getattr(c, "hard", False) and noun == "pin" else ""
+        return f"{hard}{noun} at frame {frame_of(c)} of {name(int(c.character))}"
+
+    def many(verb: str, items: Sequence[Any]) -> list[str]:
+        if len(items) > 1 and len({kind_of(c) for c in items}) == 1:
+            return [f"{verb} {len(items)} {_NOUNS.get(kind_of(items[0]), kind_of(items[0]))}s"]
+        return [f"{verb} {phrase(c)}" for c in items]
+
+    done: list[str] = []
+    matcher = difflib.SequenceMatcher(None, [_constraint_key(c) for c in old], [_constraint_key(c) for c in new])
+    for op, i1, i2, j1, j2 in matcher.get_opcodes():
+        if op == "equal":
+            continue
+        pairs = list(zip(old[i1:i2], new[j1:j2], strict=False)) if op == "replace" else []
+        for a, b in pairs:
+            same = kind_of(a) == kind_of(b) and int(a.character) == int(b.character) and frame_of(a) == frame_of(b)
+            done.append(f"moved {phrase(b)}" if same else f"replaced {phrase(a)} by {phrase(b)}")
+        done += many("removed", old[i1 + len(pairs) : i2]) + many("added", new[j1 + len(pairs) : j2])
+    if not done:
+        return "no constraint changed"
+    more = f"; and {len(done) - 3} more" if len(done) > 3 else ""
+    return "; ".join(done[:3]) + more
 
 
 def own_spans(result: Any, motions: Sequence[Any] | None = None) -> list[Any]:

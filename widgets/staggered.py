@@ -47,6 +47,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import html
 import io
 import json
@@ -62,10 +63,49 @@ from mocaplab.motion import Motion
 from mocaplab.plot import literal
 from mocaplab.staggered import StaggeredEditor
 
-from ._controls import ExportControl, HistoryButtons, error_html, row
+from ._controls import ExportControl, HistoryButtons, error_html, export_name, history_status, row
 from ._drag import TOOLBAR_PX, make_canvas
 
-__all__ = ["StaggeredExplorer"]
+__all__ = ["StaggeredExplorer", "params_change"]
+
+#: What the explorer's controls call each edit parameter (``EditorParams`` field -> words).
+_PARAM_NAMES = {
+    "max_poses": "poses",
+    "s": "succession s",
+    "l": "exponent l",
+    "joint": "depth from",
+    "tau": "random tau",
+    "seed": "random seed",
+    "random_by": "random by",
+    "w_r": "exaggerate w_r",
+    "exaggerate_joints": "exaggerated joints",
+    "staggered": "staggered",
+    "constraints": "feet planted",
+    "selected": "selected pose",
+}
+
+
+def params_change(old: Any, new: Any) -> str:
+    """What an edit from explorer parameters ``old`` to ``new`` (``EditorParams``) did, in words.
+
+    >>> from mocaplab.staggered.editor import EditorParams
+    >>> params_change(EditorParams(12), EditorParams(12, s=0.02, staggered=False))
+    'succession s 0 -> 0.02, staggered on -> off'
+    """
+
+    def shown(value: Any) -> str:
+        if isinstance(value, bool):
+            return "on" if value else "off"
+        if isinstance(value, float):
+            return f"{value:.4g}"
+        return "all" if value is None else str(value)
+
+    changed = [
+        f"{_PARAM_NAMES.get(f.name, f.name)} {shown(getattr(old, f.name))} -> {shown(getattr(new, f.name))}"
+        for f in dataclasses.fields(new)
+        if getattr(old, f.name) != getattr(new, f.name)
+    ]
+    return ", ".join(changed) if changed else "no parameter changed"
 
 _COMPONENT_COLORS = ("#d62728", "#2ca02c", "#1f77b4")
 NON_STAGGERED_COLOR = "#ff7f0e"  # orange, as in Figure 6
@@ -207,8 +247,12 @@ class StaggeredExplorer:
         self.joint_dropdown.observe(edit(lambda v: self.editor.set_curve_joint(v), viewers=False), names="value")
         # selections merge into one undo step (no checkpoint); they move the 3D clock to t_k
         self.pose_list.observe(edit(self._select, checkpoint=False, move_clock=True), names="value")
-        self.history = HistoryButtons(self.editor, self._after_history, guard=self._run)
-        self.export = ExportControl(self.editor.evaluate, default="staggered_edit.bvh", guard=self._run)
+        self.history = HistoryButtons(
+            self.editor, self._after_history, guard=self._run, snapshot=lambda: self.editor.params
+        )
+        self.export = ExportControl(
+            self.editor.evaluate, default=export_name(self.editor.motion.name, "staggered"), guard=self._run
+        )
 
     def _run(self, action: Callable[[], object]) -> None:
         """Run a widget action; an error goes to the status line, and the controls show the editor's values."""
@@ -252,8 +296,12 @@ class StaggeredExplorer:
             self.editor.select(int(value))
 
     def _after_history(self) -> None:
-        """After undo, redo or reset: redraw; the clock moves only when the selected pose changed."""
+        """After undo, redo or reset: redraw and say what changed; the clock moves only when the selected pose did."""
         self._refresh_all(move_clock=self.editor.selected != self._shown_pose)
+        if self.history.last is not None:
+            text = history_status(*self.history.last, params_change)
+            note = f" · {self.editor.message}" if self.editor.message else ""
+            self.status.value = html.escape(text + note)
 
     @staticmethod
     def _put(control: W.Widget, value: Any) -> None:

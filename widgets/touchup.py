@@ -56,7 +56,7 @@ from mocaplab.motion import Motion
 from mocaplab.physics import Adjustment, TouchUpSession
 from mocaplab.plot import literal
 
-from ._controls import ExportControl, error_html, row
+from ._controls import ExportControl, error_html, export_name, row
 from ._drag import TOOLBAR_PX
 
 __all__ = ["TouchUpStepper", "plot_zmp_distance", "plot_mean_distance", "plot_balance_top"]
@@ -326,7 +326,11 @@ class TouchUpStepper:
         self.step_button.on_click(lambda _: self._guard(self.forward))
         self.iteration_button.on_click(lambda _: self._guard(self.forward_iteration))
         self.reset_button.on_click(lambda _: self._guard(self.reset))
-        self.export = ExportControl(lambda: self.session.current.motion, default="touched_up.bvh", guard=self._guard)
+        self.export = ExportControl(
+            lambda: self.session.current.motion,
+            default=export_name(self.session.input.motion.name, "touched_up"),
+            guard=self._guard,
+        )
 
         self.rows = [_Row(k, adj) for k, adj in enumerate(self.session.schedule)]
         for line in self.rows:

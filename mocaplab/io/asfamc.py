@@ -673,9 +673,11 @@ def load_asf_amc(
 
     Examples
     --------
-    >>> walk = load_asf_amc("16.asf", "16_15.amc")  # doctest: +SKIP
-    >>> walk.skeleton.names[:3]                      # doctest: +SKIP
-    ('root', 'lhipjoint', 'lfemur')
+    >>> from mocaplab.data import mirror_dir
+    >>> folder = mirror_dir() / "asfamc" / "16"
+    >>> walk = load_asf_amc(folder / "16.asf", folder / "16_15.amc")
+    >>> walk.skeleton.names[:3], walk.n_frames, walk.fps
+    (('root', 'lhipjoint', 'lfemur'), 471, 120.0)
     """
     asf_file = as_path(asf_path, "asf_path")
     amc_file = as_path(amc_path, "amc_path")

@@ -700,6 +700,16 @@ def estimate_scale(skeleton_in_file_units: Skeleton) -> tuple[float, str]:
     with a single child and no end site is a reference joint (often placed
     at the origin while its child, the pelvis, sits at the first frame's
     world position): it is left out of the extent.
+
+    Examples
+    --------
+    A figure 1.7 units tall is in metres, one 170 units tall in centimetres:
+
+    >>> from mocaplab.motion import Skeleton
+    >>> offsets = [[0, 95, 0], [0, 40, 0], [0, 35, 0], [10, -88, 0]]
+    >>> sk = Skeleton(["hips", "spine", "head", "foot"], [-1, 0, 1, 0], offsets)
+    >>> estimate_scale(sk)
+    (0.01, 'centimetres')
     """
     sk = skeleton_in_file_units
     rest = Motion(sk, np.tile([0.0, 0.0, 0.0, 1.0], (1, sk.n_joints, 1)), sk.offsets[None, 0], 1.0)
@@ -758,7 +768,12 @@ def load_bvh(path: str | bytes | PathLike[str], *, scale: float | None = None, n
 
     Examples
     --------
-    >>> walk = load_bvh("16_15.bvh", scale=0.0254 / 0.45)  # doctest: +SKIP
+    A CMU clip from the mirror (``MOCAPLAB_DATA_DIR``), in CMU units of 1/0.45 inch:
+
+    >>> from mocaplab.data import mirror_dir
+    >>> walk = load_bvh(mirror_dir() / "bvh" / "16_15.bvh", scale=0.0254 / 0.45)
+    >>> walk.name, walk.n_frames, round(walk.fps, 3), round(float(walk.root_positions[0, 1]), 3)
+    ('16_15', 471, 120.0, 0.974)
     """
     path = as_path(path)
     _check_scale(scale)
@@ -1013,7 +1028,18 @@ def save_bvh(
 
     Examples
     --------
-    >>> save_bvh(walk, "walk.bvh", scale=0.01)  # doctest: +SKIP
+    Write a clip in centimetres and read it back:
+
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> from mocaplab.data import cmu
+    >>> walk = cmu("16_15")
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     save_bvh(walk, Path(folder) / "walk.bvh", scale=0.01)
+    ...     back = load_bvh(Path(folder) / "walk.bvh", scale=0.01)
+    >>> back.n_frames, bool(np.abs(back.global_positions() - walk.global_positions()).max() < 1e-6)
+    (471, True)
     """
     if not isinstance(motion, Motion):
         hint = " (pass one of its `motions`, e.g. result.motions[0])" if hasattr(motion, "motions") else ""

@@ -23,12 +23,16 @@ class MocapFormatError(ValueError):
     concerns the whole file or its path) and what was expected versus what
     was found.  An empty path is shown as ``''``.
 
-    Attributes
+    Parameters
     ----------
-    path : str
+    path : str, bytes or os.PathLike
+        The file (kept as :attr:`path`, a str).
     line : int
+        1-based line number; 0 for the whole file or its path.
     expected : str
-    got : str or None
+        What the reader expected there.
+    got : str, optional
+        What it found (left out of the message when None).
 
     Examples
     --------

@@ -162,10 +162,12 @@ def load_fbx(
 
     Examples
     --------
-    >>> from mocaplab.io import load_fbx
-    >>> dance = load_fbx("dance.fbx")                  # doctest: +SKIP
-    >>> dance.skeleton.roles["pelvis"]                 # doctest: +SKIP
-    'mixamorig:Hips'
+    A CMU walk exported to FBX by Blender, from the mirror's ``fbx/`` folder:
+
+    >>> from mocaplab.data import mirror_dir
+    >>> walk = load_fbx(mirror_dir() / "fbx" / "16_15.fbx")
+    >>> walk.n_frames, walk.fps, walk.skeleton.roles["pelvis"]
+    (471, 120.0, 'Hips')
     """
     file = as_path(path)
     if fps is not None and not (

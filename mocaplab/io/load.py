@@ -160,13 +160,19 @@ def load(
 
     Examples
     --------
+    The same CMU walk from its BVH file and from its ASF/AMC pair (found
+    beside the ``.amc``), in the mirror (``MOCAPLAB_DATA_DIR``):
+
     >>> from mocaplab import load
-    >>> walk = load("16_15.bvh")                        # doctest: +SKIP
-    >>> same = load("subjects/16/16_15.amc")            # doctest: +SKIP
-    >>> other = load("takes/walk.amc", asf="takes/actor2.asf")  # doctest: +SKIP
-    >>> rig = load("char.bvh", up="z", scale=0.01)      # doctest: +SKIP
-    >>> rig.fps                                         # doctest: +SKIP
-    30.0
+    >>> from mocaplab.data import mirror_dir
+    >>> walk = load(mirror_dir() / "bvh" / "16_15.bvh", scale=0.0254 / 0.45)
+    >>> same = load(mirror_dir() / "asfamc" / "16" / "16_15.amc")
+    >>> walk.fps, walk.n_frames, same.n_frames
+    (120.0, 471, 471)
+
+    Other files name their Acclaim skeleton or their axes and unit:
+    ``load("takes/walk.amc", asf="takes/actor2.asf")``,
+    ``load("char.bvh", up="z", scale=0.01)``.
     """
     file = os.fspath(path)
     if up not in ("y", "z", None):

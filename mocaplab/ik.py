@@ -105,7 +105,14 @@ def _ramp(x: Array, edges: tuple[float, float]) -> Array:
 
 
 class UnreachableTargetWarning(UserWarning):
-    """An IK target lay beyond its limb's reach on some frames: the limb went straight and missed it."""
+    """An IK target lay beyond its limb's reach on some frames: the limb went straight and missed it.
+
+    Examples
+    --------
+    >>> from mocaplab.ik import UnreachableTargetWarning
+    >>> issubclass(UnreachableTargetWarning, UserWarning)
+    True
+    """
 
 
 def _frame_runs(frames: ArrayLike) -> str:

@@ -61,8 +61,28 @@ def constraint_joints(
     is a ``"foot"`` goal (the leg's two-bone IK), a toe whose parent is an
     ankle a ``"toe"`` goal (the foot turns about the ankle), a wrist a
     ``"limb"`` goal (the arm's two-bone IK); other joints are left out.
-    Returns the kept joint names (in the order of ``candidates``) and their
-    kinds of :class:`~mocaplab.goals.Goal`.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    candidates : sequence of str
+        Joint names to consider (usually the contact joints).
+    roles : mapping, optional
+        Joint-role overrides (:func:`mocaplab.roles.resolve_roles`).
+
+    Returns
+    -------
+    joints : tuple of str
+        The kept joint names, in the order of ``candidates``.
+    kinds : tuple of str
+        Their kinds of :class:`~mocaplab.goals.Goal` (``"foot"``, ``"toe"`` or ``"limb"``).
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> sk = ml.cmu("16_15").skeleton
+    >>> ml.staggered.constraint_joints(sk, ["LeftFoot", "LeftToeBase", "RightHand", "Head"])
+    (('LeftFoot', 'LeftToeBase', 'RightHand'), ('foot', 'toe', 'limb'))
     """
     r = resolve_roles(skeleton, roles)
     ankles = {r[f"{s}_ankle"] for s in ("left", "right") if f"{s}_ankle" in r}
@@ -152,7 +172,7 @@ class ConstraintLayer:
       ``reach_tolerance``, or a two-bone goal beyond the limb's reach), an
       :class:`~mocaplab.ik.UnreachableTargetWarning` names the frames.
 
-    Attributes
+    Parameters
     ----------
     joints : tuple of str
         Constrained joints (see :func:`constraint_joints`).
@@ -193,6 +213,15 @@ class ConstraintLayer:
         middle joint's local frame; default estimated on the motion solved.
     reach_tolerance : float
         Metres; see "Reach" above.
+
+    Examples
+    --------
+    :func:`~mocaplab.staggered.extract` builds the layer from the clip's foot contacts:
+
+    >>> import mocaplab as ml
+    >>> sm = ml.staggered.extract(ml.cmu("16_15").resample(30)[:60], constraints=True)
+    >>> sm.constraints.joints, sm.constraints.masks.shape, sm.constraints.window
+    (('LeftFoot', 'LeftToeBase', 'RightFoot', 'RightToeBase'), (60, 4), 0.1)
     """
 
     joints: tuple[str, ...]

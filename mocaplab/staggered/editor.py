@@ -54,6 +54,40 @@ class EditorParams:
     ``staggered`` chooses the playback, ``constraints`` whether the contact
     constraint layer holds the feet where they were planted, and
     ``selected`` the pose overlaid.
+
+    Parameters
+    ----------
+    max_poses : int or None
+        Pose count of the culled base representation (None: every candidate).
+    s, l : float
+        Succession offset per depth level (seconds) and nonlinearity
+        (:func:`~mocaplab.staggered.succession`).
+    joint : str
+        Joint the succession depth is measured from.
+    tau : float
+        Random timing bound, seconds (:func:`~mocaplab.staggered.randomize`).
+    seed : int
+        Seed of the random timing.
+    random_by : {"variable", "limb"}
+        One random offset per variable or per limb.
+    w_r : float
+        Exaggeration degree (:func:`~mocaplab.staggered.exaggerate`).
+    exaggerate_joints : tuple of str, optional
+        Variables exaggerated (None: every joint rotation).
+    staggered : bool
+        Play the staggered motion (True) or the non-staggered one.
+    constraints : bool
+        Apply the contact constraint layer.
+    selected : int
+        Index of the overlaid pose.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> from mocaplab.staggered import EditorParams
+    >>> p = EditorParams(max_poses=8)
+    >>> dataclasses.replace(p, s=0.02).s, p.s
+    (0.02, 0.0)
     """
 
     max_poses: int | None
@@ -125,9 +159,14 @@ class StaggeredEditor(Undoable):
 
     Examples
     --------
-    >>> ed = StaggeredEditor(walk, max_poses=8)          # doctest: +SKIP
-    >>> ed.set_succession(s=0.02); ed.set_succession(s=0.04); ed.checkpoint()  # doctest: +SKIP
-    >>> ed.undo(); ed.s                                  # doctest: +SKIP
+    >>> import mocaplab as ml
+    >>> ed = ml.staggered.StaggeredEditor(ml.cmu("16_15").resample(30)[:60], max_poses=4)
+    >>> ed.set_succession(s=0.02); ed.set_succession(s=0.04); ed.checkpoint()
+    >>> ed.s
+    0.04
+    >>> ed.undo()                                   # both slider moves were one edit
+    EditorParams(max_poses=4, s=0.0, ...)
+    >>> ed.s
     0.0
     """
 

@@ -179,7 +179,14 @@ filters (whose widths are in seconds), got 10000.0: resample the clip first, e.g
             )
 
 class NoContactsWarning(UserWarning):
-    """Contact detection found no contact in a clip: no global evidence, an empty constraint layer."""
+    """Contact detection found no contact in a clip: no global evidence, an empty constraint layer.
+
+    Examples
+    --------
+    >>> from mocaplab.staggered import NoContactsWarning
+    >>> issubclass(NoContactsWarning, UserWarning)
+    True
+    """
 
 
 MAX_REFINEMENT = 0.25
@@ -675,7 +682,7 @@ def timing_refinements(
 class PoseAnalysis:
     """Everything :func:`analyze` computes for a clip (the signals of Figure 5).
 
-    Attributes
+    Parameters
     ----------
     fps : float
     variables : tuple of str, length V
@@ -696,6 +703,13 @@ class PoseAnalysis:
         ``w_k`` of the candidates (``inf`` at the ends).
     contacts : Contacts or None
         The contacts used as global evidence.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> analysis = ml.staggered.analyze(ml.cmu("16_15").resample(30)[:60])
+    >>> analysis.signals.shape, analysis.event_joints
+    ((60, 32), ('LeftFoot', 'LeftToeBase', 'RightFoot', 'RightToeBase'))
     """
 
     fps: float
@@ -802,6 +816,15 @@ def analyze(
     Returns
     -------
     PoseAnalysis
+
+    Examples
+    --------
+    The candidate poses of two seconds of a walk (frames at 30 fps; the first
+    and last frames are always candidates):
+
+    >>> import mocaplab as ml
+    >>> ml.staggered.analyze(ml.cmu("16_15").resample(30)[:60]).candidates.tolist()
+    [0, 16, 27, 33, 50, 59]
     """
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")

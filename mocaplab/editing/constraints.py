@@ -87,14 +87,25 @@ __all__ = [
 class ConstraintError(ValueError):
     """Constraints that cannot be met: conflicting, redundant or ill-posed.
 
-    Attributes
+    A ``ValueError``, raised by the editors (:func:`~mocaplab.editing.edit`,
+    :class:`~mocaplab.editing.SceneEditor`).
+
+    Parameters
     ----------
-    constraints : tuple
+    message : str
+        What is wrong and what to change.
+    constraints : sequence
         The offending constraints (user constraints, or descriptions such as
         ``"rigid stationary segment of character 0, frames 300-346"``).
-    indices : tuple of int
+    indices : sequence of int
         Their indices in the scene's constraint list (automatic constraints
         have no index and are left out).
+
+    Examples
+    --------
+    >>> err = ConstraintError("two hard pins disagree", [PinPosition(0, 10, (0.0, 0.0), hard=True)], [2])
+    >>> err.indices, err.constraints[0].frame, isinstance(err, ValueError)
+    ((2,), 10, True)
     """
 
     def __init__(self, message: str, constraints: Sequence[Any] = (), indices: Sequence[int] = ()) -> None:
@@ -211,7 +222,19 @@ def _sample(start: int, stop: int, step: int) -> list[int]:
 
 @dataclasses.dataclass(frozen=True)
 class Constraint:
-    """Common base: ``character``, ``frame`` / ``frames``, ``hard``, ``weight``."""
+    """Common base: ``character``, ``frame`` / ``frames``, ``hard``, ``weight``.
+
+    Not built directly: the subclasses (:class:`PinPosition`,
+    :class:`PinDirection`, :class:`Relative`, :class:`AbsoluteTime`,
+    :class:`Duration`, :class:`Sync`) declare the fields; the base gives
+    them the common checks and the interface the solvers read.
+
+    Examples
+    --------
+    >>> pin = PinPosition(0, 10, (1.0, 2.0))
+    >>> isinstance(pin, Constraint), pin.kind, pin.target, pin.with_target((3, 4)).position
+    (True, 'space', (1.0, 2.0), (3.0, 4.0))
+    """
 
     kind: ClassVar[str] = ""  # "space" or "time"
     target_name: ClassVar[str] = ""
@@ -301,6 +324,31 @@ class Constraint:
 class PinPosition(Constraint):
     """Pin the root of ``character`` at ``frame`` to ground point ``position`` (x, z), metres.
 
+    Parameters
+    ----------
+    character : int
+        Index of the character in the scene.
+    frame : int, optional
+        The frame (instant form).
+    position : (float, float)
+        Ground point ``(x, z)``, metres; required.  The drag target.
+    hard : bool, default False
+        Met exactly (Lagrange multipliers) instead of in the least-squares sense.
+    weight : float, default 1.0
+        Weight of a soft constraint's squared residual (> 0).
+    frames : (start, stop), optional
+        Variational form instead of ``frame``: a half-open interval of frames,
+        sampled every 10 frames (its last frame always included).
+    frames_inclusive : (first, last), optional
+        The same interval with both ends included (stored as ``frames``).
+
+    Raises
+    ------
+    TypeError
+        Without ``position``, or with a ``hard`` that is not a bool.
+    ValueError
+        For both or neither of ``frame`` and ``frames``, or a weight <= 0.
+
     Examples
     --------
     >>> PinPosition(0, 10, (1.0, 2.0), hard=True).position
@@ -337,6 +385,33 @@ class PinDirection(Constraint):
     ``atan2(x, z)``); stored as a unit vector.  The tangent keeps its
     undeformed length.  Variational form: ``PinDirection(k, direction=d,
     frames=(a, b))``.
+
+    Parameters
+    ----------
+    character : int
+        Index of the character in the scene.
+    frame : int, optional
+        The frame (instant form).
+    direction : (float, float) or float
+        Ground vector ``(x, z)`` or yaw angle in radians; required.  The drag
+        target.
+    hard : bool, default False
+        Met exactly (Lagrange multipliers) instead of in the least-squares sense.
+    weight : float, default 1.0
+        Weight of a soft constraint's squared residual (> 0).
+    frames : (start, stop), optional
+        Variational form instead of ``frame``: a half-open interval of frames,
+        sampled every 10 frames (its last frame always included).
+    frames_inclusive : (first, last), optional
+        The same interval with both ends included (stored as ``frames``).
+
+    Examples
+    --------
+    >>> PinDirection(0, 10, (3.0, 4.0)).direction
+    (0.6, 0.8)
+    >>> x, z = PinDirection(0, 10, np.pi / 2).direction
+    >>> round(x, 6), round(z, 6)
+    (1.0, 0.0)
     """
 
     character: int
@@ -380,6 +455,14 @@ class Relative(Constraint):
 
     Parameters
     ----------
+    character : int
+        The character placed.
+    frame : int, optional
+        Its frame (instant form).
+    other : int
+        The character it is placed relative to; required.
+    other_frame : int, optional
+        The other's frame (instant form; required with ``frame``).
     offset : (forward, left), metres
         Position of ``character`` in the moving tangent frame of ``other``,
         in metres on the edited path (see the module docstring).
@@ -394,6 +477,10 @@ class Relative(Constraint):
         frames=(40, 91))``.
     frames_inclusive, other_frames_inclusive : (first, last), optional
         The same intervals with both ends included.
+    hard : bool, default False
+        Met exactly (Lagrange multipliers) instead of in the least-squares sense.
+    weight : float, default 1.0
+        Weight of a soft constraint's squared residual (> 0).
 
     Drag target: ``offset``.  The offset enters the matrix, so moving it
     refactorises (still fast; positions pins are the cheap drag).
@@ -461,6 +548,31 @@ class AbsoluteTime(Constraint):
     Variational form ``AbsoluteTime(k, time=t, frames=(start, stop))``: frame
     ``start`` at ``time`` and the interval played at its original speed
     (``t_i = time + (i - start) h``).
+
+    Parameters
+    ----------
+    character : int
+        Index of the character in the scene.
+    frame : int, optional
+        The frame (instant form).
+    time : float
+        Reference time, seconds; required.  The drag target.
+    hard : bool, default False
+        Met exactly (Lagrange multipliers) instead of in the least-squares sense.
+    weight : float, default 1.0
+        Weight of a soft constraint's squared residual (> 0).
+    frames : (start, stop), optional
+        Variational form instead of ``frame``: a half-open interval of frames,
+        sampled every 10 frames (its last frame always included).
+    frames_inclusive : (first, last), optional
+        The same interval with both ends included (stored as ``frames``).
+
+    Examples
+    --------
+    >>> AbsoluteTime(0, 10, 1.5).time
+    1.5
+    >>> AbsoluteTime(0, time=2.0, frames=(0, 25)).samples()
+    [(0,), (10,), (20,), (24,)]
     """
 
     character: int
@@ -483,7 +595,33 @@ class AbsoluteTime(Constraint):
 
 @dataclasses.dataclass(frozen=True)
 class Duration(Constraint):
-    """Frames ``frame`` to ``end_frame`` of ``character`` last ``duration`` s: ``t_end - t_frame = duration``."""
+    """Frames ``frame`` to ``end_frame`` of ``character`` last ``duration`` s: ``t_end - t_frame = duration``.
+
+    Parameters
+    ----------
+    character : int
+        Index of the character in the scene.
+    frame, end_frame : int
+        First and last frame of the span, ``frame < end_frame`` (no
+        variational form).
+    duration : float
+        Seconds (> 0).  The drag target.
+    hard : bool, default False
+        Met exactly (Lagrange multipliers) instead of in the least-squares sense.
+    weight : float, default 1.0
+        Weight of a soft constraint's squared residual (> 0).
+
+    Raises
+    ------
+    ValueError
+        For ``end_frame <= frame`` or a duration <= 0.
+
+    Examples
+    --------
+    >>> slow = Duration(0, 10, 40, 1.2)
+    >>> slow.samples(), slow.with_target(2.0).duration
+    ([(10, 40)], 2.0)
+    """
 
     character: int
     frame: int
@@ -528,6 +666,34 @@ class Sync(Constraint):
     Variational form (half-open intervals): ``Sync(k, other=j, frames=(a, b),
     other_frames=(c, d))``, ``frames`` of ``character`` matched linearly to
     ``other_frames`` of ``other`` (default: the same frame numbers).
+
+    Parameters
+    ----------
+    character : int
+        Index of the character in the scene.
+    frame : int, optional
+        Its frame (instant form).
+    other : int
+        The character it is synchronised with; required.
+    other_frame : int, optional
+        The other's frame (instant form; required with ``frame``).
+    offset : float, default 0.0
+        ``t[frame] - t_other[other_frame]``, seconds.  The drag target.
+    hard : bool, default False
+        Met exactly (Lagrange multipliers) instead of in the least-squares sense.
+    weight : float, default 1.0
+        Weight of a soft constraint's squared residual (> 0).
+    frames, other_frames : (start, stop), optional
+        Variational form: half-open intervals matched linearly.
+    frames_inclusive, other_frames_inclusive : (first, last), optional
+        The same intervals with both ends included.
+
+    Examples
+    --------
+    >>> Sync(1, 50, 0, 70, offset=0.5).samples()
+    [(50, 70)]
+    >>> Sync(1, other=0, frames=(40, 61), other_frames=(0, 41)).samples()
+    [(40, 0), (50, 20), (60, 40)]
     """
 
     character: int
@@ -596,6 +762,34 @@ class EndEffectorConstraint:
       :class:`~mocaplab.goals.EndEffector` as it is.
 
     ``constraint`` is the :class:`~mocaplab.goals.EndEffector` either way.
+
+    Parameters
+    ----------
+    character : int
+        Index of the character in the scene.
+    constraint : EndEffector, optional
+        The second form; then none of the keywords below.
+    joint : str, optional
+        The end effector joint (first form; required there).
+    frame : int, optional
+        One frame (first form).
+    frames : (start, stop), optional
+        A half-open interval of frames (first form).
+    target : array_like, shape (3,) or (F, 3), RelativeTo or ObjectFrame, optional
+        Where the joint goes, metres (first form; required there).
+    chain : sequence of str, optional
+        Joints solved by damped least squares instead of the two-bone limb.
+    blend : float, optional
+        Blending window, seconds (default: that of the refine call).
+    frames_inclusive : (first, last), optional
+        ``frames`` with both ends included.
+
+    Raises
+    ------
+    TypeError
+        For both forms at once, or a first form without ``joint`` or ``target``.
+    ValueError
+        For both or neither of ``frame`` and ``frames``.
 
     Examples
     --------

@@ -161,6 +161,13 @@ class LinkSpec:
         Two skeleton points whose midpoint in the reference pose is the link centre; each
         point is the mean of the named joints, ``"Joint:end"`` naming the end
         site of ``Joint``.
+
+    Examples
+    --------
+    >>> from mocaplab.physics import LinkSpec
+    >>> thigh = LinkSpec("left_thigh", "thigh", 1.0, "LeftUpLeg", ("LeftUpLeg",), ("LeftLeg",))
+    >>> thigh.owner, thigh.share
+    ('LeftUpLeg', 1.0)
     """
 
     name: str
@@ -247,6 +254,9 @@ def _limb_links(skeleton: Skeleton, roles: Roles, pose: _Pose, frame: _Frame) ->
 class Body:
     """Point masses attached to the joints of a skeleton.
 
+    Use :meth:`from_skeleton` to build one from any humanoid skeleton (by its joint roles).
+    Its arrays are copies, read-only for good (views of read-only owners).
+
     Parameters
     ----------
     joint_names : tuple of str
@@ -272,15 +282,12 @@ class Body:
         polygon leaves out a lifted heel or toe of such a foot
         (:func:`mocaplab.physics.balance`).
 
-    Use :meth:`from_skeleton` to build one from any humanoid skeleton (by its joint roles).
-    Its arrays are copies, read-only for good (views of read-only owners).
-
     Examples
     --------
-    >>> from mocaplab.data import cmu          # doctest: +SKIP
-    >>> body = Body.from_skeleton(cmu("16_15").skeleton)   # doctest: +SKIP
-    >>> round(body.total_mass, 1)               # doctest: +SKIP
-    70.0
+    >>> import mocaplab as ml
+    >>> body = ml.physics.Body.from_skeleton(ml.cmu("16_15").skeleton)
+    >>> round(body.total_mass, 1), body.masses.shape
+    (70.0, (17,))
     """
 
     joint_names: tuple[str, ...]
@@ -597,7 +604,25 @@ class Body:
 def link_positions(motion: Motion, body: Body, *, fk: tuple[Array, Array] | None = None) -> Array:
     """World positions of the link centres, shape (F, L, 3).
 
-    ``fk`` optionally gives the motion's (global rotations, global positions).
+    Parameters
+    ----------
+    motion : Motion
+    body : Body
+    fk : (ndarray (F, J, 4), ndarray (F, J, 3)), optional
+        The motion's global rotations and global positions when already at hand.
+
+    Returns
+    -------
+    ndarray, shape (F, L, 3)
+        Metres.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15").resample(30)[:60]
+    >>> body = ml.physics.Body.from_skeleton(walk.skeleton)
+    >>> ml.physics.link_positions(walk, body).shape
+    (60, 17, 3)
     """
     body.check(motion)
     grot, gpos = (motion.global_rotations(), motion.global_positions()) if fk is None else fk
@@ -634,6 +659,17 @@ def smoothed_derivatives(
     -------
     smoothed, velocity, acceleration : ndarray, shape (F, ...)
         Units per second and per second squared.
+
+    Examples
+    --------
+    A ballistic height ``1 - 4.9 t^2`` comes out with its exact acceleration, ends included:
+
+    >>> import numpy as np
+    >>> from mocaplab.physics import smoothed_derivatives
+    >>> t = np.arange(30) / 30.0
+    >>> _, _, acc = smoothed_derivatives(1 - 4.9 * t**2, 30.0, width=5)
+    >>> acc[[0, 15, 29]].round(6).tolist()
+    [-9.8, -9.8, -9.8]
     """
     x = np.asarray(positions, dtype=float)
     n = x.shape[0]
@@ -716,7 +752,27 @@ def _extrapolator(q: int, at: tuple[int, ...]) -> Array:
 
 
 def center_of_mass(motion: Motion, body: Body) -> Array:
-    """Centre of mass on every frame (equation 1), shape (F, 3)."""
+    """Centre of mass on every frame (equation 1), shape (F, 3).
+
+    Parameters
+    ----------
+    motion : Motion
+    body : Body
+        Its joint names must match the motion's skeleton.
+
+    Returns
+    -------
+    ndarray, shape (F, 3)
+        Metres.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15").resample(30)[:60]
+    >>> body = ml.physics.Body.from_skeleton(walk.skeleton)
+    >>> ml.physics.center_of_mass(walk, body)[0].round(3).tolist()
+    [0.082, 0.937, -1.491]
+    """
     r = link_positions(motion, body)
     return np.einsum("l,flc->fc", body.masses, r) / body.total_mass
 
@@ -731,6 +787,28 @@ def linear_momentum(motion: Motion, body: Body, *, width: float | None = None) -
     Velocities are central differences of positions smoothed with a
     Gaussian of ``width`` frames (default 5 frames at 30 fps, scaled to the
     clip's rate; see :func:`smoothed_derivatives`).
+
+    Parameters
+    ----------
+    motion : Motion
+    body : Body
+    width : float, optional
+        Smoothing width in frames of this clip.
+
+    Returns
+    -------
+    ndarray, shape (F, 3)
+        kg m/s.
+
+    Examples
+    --------
+    Divided by the mass, the walker's speed: about 1 m/s along z.
+
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15").resample(30)[:60]
+    >>> body = ml.physics.Body.from_skeleton(walk.skeleton)
+    >>> (ml.physics.linear_momentum(walk, body)[30] / body.total_mass).round(2).tolist()
+    [-0.01, -0.1, 1.04]
     """
     _, v, _ = smoothed_derivatives(link_positions(motion, body), motion.fps, width=_smoothing(motion, width))
     return np.einsum("l,flc->fc", body.masses, v)
@@ -750,6 +828,19 @@ def angular_momentum(
         or fixed/per-frame points.
     width : float, optional
         Smoothing width in frames (default 5 frames at 30 fps).
+
+    Returns
+    -------
+    ndarray, shape (F, 3)
+        kg m^2/s.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15").resample(30)[:60]
+    >>> body = ml.physics.Body.from_skeleton(walk.skeleton)
+    >>> ml.physics.angular_momentum(walk, body).shape
+    (60, 3)
     """
     s, v, _ = smoothed_derivatives(link_positions(motion, body), motion.fps, width=_smoothing(motion, width))
     m = body.masses

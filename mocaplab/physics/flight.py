@@ -81,7 +81,26 @@ MIN_FIT_FRAMES = 3
 
 
 class FlightMeasure(NamedTuple):
-    """How well one flight ``[start, stop)`` obeys the two laws of section 3.4 (:func:`flight_measures`)."""
+    """How well one flight ``[start, stop)`` obeys the two laws of section 3.4 (:func:`flight_measures`).
+
+    Parameters
+    ----------
+    start : int
+        First frame of the flight.
+    stop : int
+        One past its last frame.
+    gravity : float
+        Gravity fitted to the centre of mass's height, m/s^2 (NaN when too short to fit).
+    momentum_spread : float
+        Mean distance of the angular momentum from its mean over the flight, kg m^2/s.
+
+    Examples
+    --------
+    >>> from mocaplab.physics import FlightMeasure
+    >>> hop = FlightMeasure(start=10, stop=20, gravity=9.7, momentum_spread=0.5)
+    >>> hop.frames, hop.fitted
+    (10, True)
+    """
 
     #: First frame of the flight.
     start: int
@@ -137,6 +156,16 @@ def flight_measures(
     -------
     tuple of FlightMeasure
         Empty when the clip has no flight.
+
+    Examples
+    --------
+    A walk always has a foot down:
+
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15").resample(30)[:60]
+    >>> body = ml.physics.Body.from_skeleton(walk.skeleton)
+    >>> ml.physics.flight_measures(walk, body, ml.contacts.foot_contacts(walk))
+    ()
     """
     stages = flight_stages(contacts)
     if not stages:

@@ -54,7 +54,7 @@ Array = NDArray[np.float64]
 class MassFit:
     """Result of :func:`fit_masses`.
 
-    Attributes
+    Parameters
     ----------
     body : Body
         The body with fitted masses (same total mass as the initial one).
@@ -65,6 +65,13 @@ class MassFit:
         of the reference clips, metres, with the initial and fitted masses.
     result : scipy.optimize.OptimizeResult
         The optimiser's report.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> fit = ml.physics.fit_masses(ml.cmu("16_15").resample(30)[:60])
+    >>> round(fit.body.total_mass, 1) == round(fit.initial.total_mass, 1)
+    True
     """
 
     body: Body
@@ -178,10 +185,12 @@ def fit_masses(
 
     Examples
     --------
-    >>> from mocaplab.data import cmu                                  # doctest: +SKIP
-    >>> fit = fit_masses([cmu("16_15").resample(30), cmu("16_11").resample(30)])  # doctest: +SKIP
-    >>> fit.after < fit.before                                          # doctest: +SKIP
-    True
+    The mean ZMP distance (mm) of two seconds of a walk, before and after:
+
+    >>> import mocaplab as ml
+    >>> fit = ml.physics.fit_masses(ml.cmu("16_15").resample(30)[:60])
+    >>> round(1000 * fit.before, 1), round(1000 * fit.after, 1)
+    (12.5, 6.0)
     """
     clips = [motions] if isinstance(motions, Motion) else list(motions)
     if not clips:

@@ -84,6 +84,16 @@ def zmp_from_links(
     ndarray, shape (F, 3)
         NaN on frames whose denominator ``sum m_i (a_iy - g_y)`` is at most
         0.1 % of the weight (free fall or worse: no ground force to balance).
+
+    Examples
+    --------
+    Two resting masses (no acceleration): the ZMP is below their centre of mass.
+
+    >>> import numpy as np
+    >>> from mocaplab.physics import zmp_from_links
+    >>> positions = np.array([[[0.1, 1.0, 0.0], [0.3, 1.0, 0.0]]])     # one frame, two links
+    >>> zmp_from_links(positions, np.zeros_like(positions), [1.0, 3.0]).round(6).tolist()
+    [[0.25, 0.0, 0.0]]
     """
     r = np.asarray(positions, dtype=float)
     a = np.asarray(accelerations, dtype=float) - np.asarray(gravity, dtype=float)
@@ -131,6 +141,16 @@ def support_polygon(points: ArrayLike) -> Array:
         Hull vertices.  Degenerate cases: no points gives (0, 2); points that
         coincide give their single point; collinear points give the two
         extreme points (a segment).
+
+    Examples
+    --------
+    An inner point is not a vertex:
+
+    >>> import numpy as np
+    >>> from mocaplab import physics
+    >>> square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    >>> physics.support_polygon(np.r_[square, [[0.5, 0.5]]]).tolist()
+    [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]
     """
     p = np.asarray(points, dtype=float).reshape(-1, 2)
     if p.shape[0] == 0:
@@ -180,6 +200,17 @@ def polygon_distance(
         of one point or of collinear points has no inside.
     projection : ndarray, shape (F, 2)
         Nearest point of the hull (the query itself when inside).
+
+    Examples
+    --------
+    One point a metre outside a unit square, one at its centre (half a metre deep):
+
+    >>> import numpy as np
+    >>> from mocaplab import physics
+    >>> square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    >>> signed, nearest = physics.polygon_distance([[2.0, 0.5], [0.5, 0.5]], np.array([square, square]))
+    >>> signed.tolist(), nearest.tolist()
+    ([1.0, -0.5], [[1.0, 0.5], [0.5, 0.5]])
     """
     z = np.asarray(points, dtype=float)
     v = np.asarray(vertices, dtype=float)
@@ -313,6 +344,26 @@ def signed_distance(point: ArrayLike, polygon: ArrayLike) -> float:
 
     Positive outside, negative inside; a polygon of fewer than three
     vertices (a point or a segment) has no inside.
+
+    Parameters
+    ----------
+    point : array_like, shape (2,)
+        Ground coordinates ``(x, z)``, metres.
+    polygon : array_like, shape (V, 2)
+        Convex polygon vertices (:func:`support_polygon`).
+
+    Returns
+    -------
+    float
+        Metres.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab import physics
+    >>> square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    >>> physics.signed_distance([2.0, 0.5], square), physics.signed_distance([0.5, 0.5], square)
+    (1.0, -0.5)
     """
     p = np.asarray(point, dtype=float).reshape(1, 2)
     poly = np.asarray(polygon, dtype=float).reshape(1, -1, 2)
@@ -350,7 +401,7 @@ def _check_contacts(contacts: Contacts, motion: Motion) -> None:
 class Balance:
     """ZMP, support polygon and their distance on every frame of a clip.
 
-    Attributes
+    Parameters
     ----------
     zmp : ndarray, shape (F, 3)
         Equation 4 (``y = 0``); NaN on flight frames and on ground frames
@@ -375,6 +426,13 @@ class Balance:
     Every array, :attr:`signed_distance` included, is read-only for good (a
     view of a read-only owner: ``flags.writeable = True`` raises); arrays
     given to the constructor are copied.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> b = ml.physics.balance(ml.cmu("16_15").resample(30)[:60])
+    >>> b.zmp.shape, b.support.shape[0], int(b.ground.sum())
+    ((60, 3), 60, 60)
     """
 
     zmp: Array
@@ -481,8 +539,10 @@ def balance(
 
     Examples
     --------
-    >>> from mocaplab.data import cmu                      # doctest: +SKIP
-    >>> round(1000 * balance(cmu("16_15")).mean_distance)  # doctest: +SKIP
+    The walk's mean ZMP distance outside the support polygon, in millimetres:
+
+    >>> import mocaplab as ml
+    >>> round(1000 * ml.physics.balance(ml.cmu("16_15")).mean_distance)
     13
     """
     known = resolve_roles(motion, roles) if body is None or isinstance(contacts, str) else None
@@ -700,6 +760,28 @@ def zmp_distance(
     """Distance of the ZMP outside the support polygon, shape (F,); 0 inside, NaN in flight.
 
     Options as for :func:`balance`.
+
+    Parameters
+    ----------
+    motion : Motion
+    body : Body, optional
+        Default :meth:`Body.from_skeleton` of the motion.
+    contacts : "auto" or Contacts
+        Planted joints (see :func:`balance`).
+    roles : mapping, optional
+        Joint-role overrides for the default body and contacts.
+
+    Returns
+    -------
+    ndarray, shape (F,)
+        Metres: ``balance(motion, ...).distance``.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> d = ml.physics.zmp_distance(ml.cmu("16_15").resample(30)[:60])
+    >>> d.shape, round(1000 * float(d.mean()), 1)
+    ((60,), 12.5)
     """
     return balance(motion, body, contacts=contacts, roles=roles).distance
 

@@ -455,9 +455,20 @@ class SceneEditor(Undoable):
 
     Examples
     --------
-    >>> ed = SceneEditor([walk], [PinPosition(0, 0, start, hard=True), PinPosition(0, 100, goal)])  # doctest: +SKIP
-    >>> res = ed.drag(1, (2.0, 1.0))  # doctest: +SKIP
-    >>> ed.checkpoint(); ed.undo() is not res  # doctest: +SKIP
+    Pin a walk's first frame, drag a soft pin on its last frame half a
+    metre along x, then undo the drag:
+
+    >>> import numpy as np
+    >>> from mocaplab.data import cmu
+    >>> from mocaplab.editing import PinPosition
+    >>> walk = cmu("16_15")
+    >>> ends = walk.root_positions[[0, -1]][:, [0, 2]]
+    >>> ed = SceneEditor([walk], [PinPosition(0, 0, ends[0], hard=True), PinPosition(0, 470, ends[1])])
+    >>> before = ed.result
+    >>> res = ed.drag(1, ends[1] + (0.5, 0.0))
+    >>> (np.round(res.paths[0][-1] - ends[1], 3) + 0.0).tolist()
+    [0.5, 0.0]
+    >>> ed.checkpoint(); ed.undo() is before
     True
     """
 
@@ -844,6 +855,25 @@ class PathJumpWarning(UserWarning):
     dragged away from a hard pin a few frames before it (or two rigid
     segments pulled apart across a short gap).  The message names the
     frames, the jump and what holds them.
+
+    Examples
+    --------
+    A character stands still for a second, then walks 1 m; its standing
+    segment is dragged 1 m back while frame 31 is held hard:
+
+    >>> import warnings
+    >>> import numpy as np
+    >>> from mocaplab import Motion, Skeleton
+    >>> from mocaplab.editing import PinPosition
+    >>> x = np.concatenate([np.zeros(30), np.linspace(0, 1, 31)[1:]])
+    >>> root = np.column_stack([x, np.ones(60), np.zeros(60)])
+    >>> m = Motion(Skeleton(["hips"], [-1], [[0, 0, 0]]), np.tile([0, 0, 0, 1.0], (60, 1, 1)), root, 30)
+    >>> pins = [PinPosition(0, 31, (x[31], 0.0), hard=True), PinPosition(0, 0, (-1.0, 0.0), hard=True)]
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     res = edit([m], pins, stationary="speed")
+    >>> [w.category.__name__ for w in caught], res.stationary
+    (['PathJumpWarning'], (((0, 28),),))
     """
 
 
@@ -860,6 +890,22 @@ class RelativeConflictWarning(UserWarning):
     of 0.8 m; the relative is then missed by about 2.2 m.  A hard relative
     in that place raises :class:`~mocaplab.editing.constraints.ConstraintError`
     naming it and the pins.
+
+    Examples
+    --------
+    That case, on two copies of a walk:
+
+    >>> import warnings
+    >>> from mocaplab.data import cmu
+    >>> from mocaplab.editing import PinPosition, Relative
+    >>> walk = cmu("16_15")
+    >>> p = walk.root_positions[100, [0, 2]]
+    >>> pins = [PinPosition(0, 100, p, hard=True), PinPosition(1, 100, p + (3.0, 0.0), hard=True)]
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     res = edit([walk, walk], [*pins, Relative(1, 100, 0, 100, (0.0, 0.8))])
+    >>> print(caught[0].message)
+    soft relative constraint #2 is missed by 2.21 m: hard constraints #0, #1 fix what it asks for, ...
     """
 
 
@@ -905,10 +951,16 @@ def edit(motions: Any, constraints: Sequence[Any] = (), **options: Any) -> EditR
 
     Examples
     --------
-    >>> from mocaplab.editing import edit, PinPosition  # doctest: +SKIP
-    >>> res = edit([walk], [PinPosition(0, 0, (0, 0), hard=True), PinPosition(0, 200, (1.0, 3.0))])  # doctest: +SKIP
-    >>> res.paths[0].shape  # doctest: +SKIP
-    (471, 2)
+    Pin a walk's first frame and move its last frame 1 m along x:
+
+    >>> import numpy as np
+    >>> from mocaplab.data import cmu
+    >>> from mocaplab.editing import PinPosition
+    >>> walk = cmu("16_15")
+    >>> ends = walk.root_positions[[0, -1]][:, [0, 2]]
+    >>> res = edit([walk], [PinPosition(0, 0, ends[0], hard=True), PinPosition(0, 470, ends[1] + (1.0, 0.0))])
+    >>> res.paths[0].shape, (np.round(res.paths[0][-1] - ends[1], 3) + 0.0).tolist(), res.motions[0].n_frames
+    ((471, 2), [1.0, 0.0], 471)
 
     Warns
     -----
@@ -1013,6 +1065,28 @@ class EditResult:
         Solves made for the relative constraints' metric targets (1 without any).
 
     Attributes cannot be reassigned; :meth:`with_transformations` returns a copy.
+
+    Parameters
+    ----------
+    editor : SceneEditor
+        The editor whose current solution this is: results are made by the
+        editors (:attr:`SceneEditor.result`, :func:`edit`), not by hand.
+    constraints : tuple
+        The constraints solved for.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from mocaplab.data import cmu
+    >>> from mocaplab.editing import PinPosition
+    >>> walk = cmu("16_15")
+    >>> res = edit([walk], [PinPosition(0, 0, walk.root_positions[0, [0, 2]], hard=True)])
+    >>> len(res.paths), res.times[0].shape, res.stationary, res.transformations
+    (1, (471,), ((),), ())
+    >>> res.paths = None
+    Traceback (most recent call last):
+    ...
+    AttributeError: EditResult is immutable: cannot set 'paths'
     """
 
     _frozen = False

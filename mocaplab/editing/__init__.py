@@ -231,6 +231,18 @@ def make_editor(motions: Any, constraints: Sequence[Any] = (), *, discrete: Any 
         :class:`~mocaplab.editing.discrete.DiscreteOptions`: section 5 too.
     **options
         Options of :class:`SceneEditor` (:mod:`mocaplab.editing.scene`).
+
+    Returns
+    -------
+    SceneEditor or DiscreteEditor
+
+    Examples
+    --------
+    >>> from mocaplab.data import cmu
+    >>> walk = cmu("16_15")
+    >>> pin = PinPosition(0, 0, walk.root_positions[0, [0, 2]], hard=True)
+    >>> type(make_editor([walk], [pin])).__name__, type(make_editor([walk], [pin], discrete=True)).__name__
+    ('SceneEditor', 'DiscreteEditor')
     """
     if discrete is False or discrete is None:
         return SceneEditor(motions, constraints, **options)
@@ -247,9 +259,34 @@ def edit(motions: Any, constraints: Sequence[Any] = (), *, discrete: Any = False
     with ``discrete`` on, Algorithm 1 run to convergence (up to
     ``DiscreteOptions.max_initial`` transformations).
 
+    Parameters
+    ----------
+    motions : Motion or sequence of Motion
+        The characters (never modified).
+    constraints : sequence of constraints
+        :mod:`~mocaplab.editing.constraints` objects; ``[]`` edits with none.
+    discrete : bool or DiscreteOptions
+        False (default): continuous editing only; True or a
+        :class:`~mocaplab.editing.discrete.DiscreteOptions`: section 5 too.
+    **options
+        Options of :class:`SceneEditor` (:mod:`mocaplab.editing.scene`),
+        each checked before any work.
+
+    Returns
+    -------
+    EditResult
+
     Examples
     --------
-    >>> res = edit([walk], [PinPosition(0, 0, (0, 0), hard=True), PinPosition(0, 200, (1.0, 3.0))])  # doctest: +SKIP
+    Pin a walk's first frame and move its last frame 1 m along x:
+
+    >>> import numpy as np
+    >>> from mocaplab.data import cmu
+    >>> walk = cmu("16_15")
+    >>> ends = walk.root_positions[[0, -1]][:, [0, 2]]
+    >>> res = edit([walk], [PinPosition(0, 0, ends[0], hard=True), PinPosition(0, 470, ends[1] + (1.0, 0.0))])
+    >>> (np.round(res.paths[0][-1] - ends[1], 3) + 0.0).tolist(), res.transformations
+    ([1.0, 0.0], ())
     """
     if discrete is False or discrete is None:
         return _continuous_edit(motions, constraints, **options)

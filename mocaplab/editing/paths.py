@@ -484,10 +484,46 @@ def stationary_segments(
     ``min_duration`` seconds (or 3 frames) are dropped: walking has short
     double-support phases that must stay deformable.
 
+    Parameters
+    ----------
+    motion : Motion
+    speed : float
+        Ground speed threshold of the path joint, m/s (default 0.15).
+    min_duration : float
+        Shortest segment kept, seconds (default 0.3).
+    contacts : Contacts, "auto" or None
+        Foot contacts for the "both feet planted" test; None (default)
+        uses the speed alone.
+    smoothing : float
+        Standard deviation of the Gaussian smoothing the speed, seconds (0: none).
+    joints : sequence of str, optional
+        Contact joints for ``contacts="auto"``.
+    roles : mapping, optional
+        Role overrides (:func:`mocaplab.roles.resolve_roles`).
+
     Returns
     -------
     list of (start, stop)
         Half-open frame intervals.
+
+    Raises
+    ------
+    TypeError
+        If ``motion`` is not a Motion.
+    ValueError
+        For a ``contacts`` string other than ``"auto"``.
+
+    Examples
+    --------
+    A character stands for a second, then walks 1 m in a second:
+
+    >>> import numpy as np
+    >>> from mocaplab import Motion, Skeleton
+    >>> x = np.concatenate([np.zeros(30), np.linspace(0, 1, 31)[1:]])
+    >>> root = np.column_stack([x, np.ones(60), np.zeros(60)])
+    >>> m = Motion(Skeleton(["hips"], [-1], [[0, 0, 0]]), np.tile([0, 0, 0, 1.0], (60, 1, 1)), root, 30)
+    >>> stationary_segments(m)
+    [(0, 28)]
     """
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected a Motion, got {type(motion).__name__}")

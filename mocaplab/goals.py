@@ -34,8 +34,11 @@ imports only the kinematic core (:mod:`~mocaplab.motion`,
    map (:class:`~mocaplab.displacement.DisplacementMap`, Lee and Shin 1999)
    to the per-frame IK corrections, constrained frames weighted more,
    applies it, and runs the IK layer once more toward the per-frame
-   solution so constraints hold exactly; that last correction is small and
-   smooth.
+   solution so constraints hold exactly; that last correction is small.
+   Where a plant starts or ends it changes velocity in one frame, so the
+   legs' corrections are finally smoothed over a tenth of a second except
+   on the frames a goal holds fully (``_smooth_kinks``): no knee pop at
+   heel strike.
 
 Conventions: frame intervals are half-open ``(start, stop)`` (as
 :attr:`mocaplab.contacts.Contacts.intervals`); ``window`` arguments of
@@ -63,13 +66,14 @@ from typing import Any, Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg import solveh_banded
 from scipy.ndimage import minimum_filter1d
 
 from . import kinematics, quat
 from ._api import reject_keywords
 from ._checks import integer, real
 from .contacts import Contacts, intervals_from_mask
-from .displacement import DisplacementMap, blend_ramp, displacement_between
+from .displacement import DisplacementMap, blend_ramp, displace, displacement_between, rotation_displacement
 from .ik import (
     aim_deltas,
     dls_ik,
@@ -1093,8 +1097,9 @@ def enforce_goals(
     exact : bool
         Run the IK layer once more on the smoothed motion, aiming each goal
         joint at its position in the per-frame solution with the same
-        weights: constraints hold exactly and the remaining correction is
-        small and smooth.
+        weights (constraints hold exactly), then smooth the legs'
+        corrections where no foot goal holds fully, so a plant's start or
+        end puts no kink in a knee (end-effector arms stay exact).
     adjust_root, dls_options
         See :func:`solve_goals`.
 
@@ -1140,7 +1145,73 @@ def enforce_goals(
     reached = solved.global_positions()
     sk = motion.skeleton
     final = [dataclasses.replace(g, targets=reached[:, sk.index(g.joint, arg="Goal.joint")]) for g in goals]
-    return solve_goals(smooth, final, adjust_root=False, dls_options=dls_options)
+    return _smooth_kinks(motion, solve_goals(smooth, final, adjust_root=False, dls_options=dls_options), goals)
+
+
+# Kink smoothing after the exact pass (see _smooth_kinks): the smoother's time scale, seconds, the (much
+# shorter) one on frames where a goal holds its joint fully, and how sharply a goal's weight counts as holding.
+_KINK_SECONDS = 0.1
+_HELD_SECONDS = 0.01
+_HELD_POWER = 50
+
+
+def _smooth_kinks(motion: Motion, out: Motion, goals: Sequence[Goal]) -> Motion:
+    """The correction ``out - motion`` of each joint above a goal, smoothed where no goal holds fully.
+
+    The exact pass meets every goal on every frame, and where a goal starts
+    or ends (a heel strike, a toe-off) the correction it needs changes its
+    velocity in one frame: a landing foot moving at ``v`` is held still, so
+    its correction starts growing at ``-v`` from one frame to the next, and
+    a near-straight knee turns that into an angular-acceleration spike.
+    Each joint's rotation displacement ``d = log(q^-1 q')`` is therefore
+    refitted by a weighted second-difference smoother (a Whittaker
+    smoother, one banded solve per joint): minimise
+    ``sum_i W_i |x_i - d_i|^2 + lam sum_i |x_{i-1} - 2 x_i + x_{i+1}|^2``
+    with ``lam = (fps * 0.1 s)^4 / 16`` and ``W = 1 + ((0.1 / 0.01)^4 - 1)
+    w^50``, ``w`` the largest weight of the goals below the joint: the
+    correction is smoothed over about a tenth of a second where no goal
+    holds (free frames and the outer blending windows) and over about a
+    hundredth where one holds fully, the same at any frame rate.  The
+    velocity change moves out of the held frames into the blending windows
+    (a plant moves by a millimetre or so where its foot rolls from heel to
+    toe, where the exact pass's correction is least smooth).  Only the legs are smoothed: joints above an end
+    effector (a ``"limb"`` goal: a hand on its target, met exactly), joints
+    above no goal and uncorrected joints are left as they are, and so is
+    the root's translation (its lowering is smooth already).
+    """
+    n = motion.n_frames
+    if n < 4 or not goals:
+        return out
+    d = rotation_displacement(motion.rotations, out.rotations)
+    moved = np.abs(d).max(axis=(0, 2)) > 1e-12
+    sk = motion.skeleton
+    held = np.zeros((sk.n_joints, n))
+    exact = np.zeros(sk.n_joints, dtype=bool)  # above an end effector: its target is the user's, met exactly
+    for g in goals:
+        j = sk.index(g.joint, arg="Goal.joint")
+        while j >= 0:
+            if g.kind == "limb":
+                exact[j] = True
+            else:
+                held[j] = np.maximum(held[j], g.weights)
+            j = int(sk.parents[j])
+    lam = (_KINK_SECONDS * motion.fps) ** 4 / 16.0
+    # lam D2^T D2 in banded upper form (second differences over frames)
+    band = np.zeros((3, n))
+    band[0, 2:] = lam
+    band[1, 1:] = -4.0 * lam
+    band[1, 1] = band[1, -1] = -2.0 * lam
+    band[2] = 6.0 * lam
+    band[2, [0, -1]] = lam
+    band[2, [1, -2]] = 5.0 * lam
+    rot = np.array(out.rotations, copy=True)
+    for j in np.flatnonzero(moved & ~exact & (held.max(axis=1) > 0.0)):
+        w = 1.0 + ((_KINK_SECONDS / _HELD_SECONDS) ** 4 - 1.0) * held[j] ** _HELD_POWER
+        ab = band.copy()
+        ab[2] += w
+        x = solveh_banded(ab, w[:, None] * d[:, j], check_finite=False)
+        rot[:, j] = displace(motion.rotations[:, j], x)
+    return out.replace(rotations=_owned(rot))
 
 
 # ------------------------------------------------------------ end effectors

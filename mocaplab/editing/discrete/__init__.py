@@ -30,12 +30,13 @@ continuous modules of :mod:`mocaplab.editing`, none back):
 
 Examples
 --------
->>> from mocaplab import data                                          # doctest: +SKIP
->>> from mocaplab.editing import DiscreteEditor, PinPosition             # doctest: +SKIP
->>> walk = data.cmu("16_15").resample(30); p = walk.root_positions[:, [0, 2]]  # doctest: +SKIP
->>> ed = DiscreteEditor([walk], [PinPosition(0, 0, p[0], hard=True), PinPosition(0, len(p) - 1, p[-1], hard=True)])  # doctest: +SKIP
->>> res = ed.drag(1, p[0] + 1.5 * (p[-1] - p[0]))                        # doctest: +SKIP
->>> [str(t) for t in res.transformations]                                 # doctest: +SKIP
+>>> from mocaplab import data
+>>> from mocaplab.editing import DiscreteEditor, PinPosition
+>>> walk = data.cmu("16_15").resample(30); p = walk.root_positions[:, [0, 2]]
+>>> ed = DiscreteEditor([walk], [PinPosition(0, 0, p[0], hard=True), PinPosition(0, len(p) - 1, p[-1], hard=True)])
+>>> res = ed.drag(1, p[0] + 1.5 * (p[-1] - p[0]))
+>>> [str(t) for t in res.transformations]
+['character 0: duplicate frames 65..100 (1.20 s)']
 """
 
 from __future__ import annotations

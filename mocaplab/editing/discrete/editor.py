@@ -110,6 +110,24 @@ class DiscreteOptions:
         update.
     verify_subsample : int
         Subsampling ratio of that second scoring (1 in 5 frames).
+    threshold, window, min_gap : float
+        Parameters of the default graphs (:func:`~mocaplab.editing.graph.build_graph`):
+        frame distance, and seconds.
+    weights : SimilarityWeights, optional
+        Weights of the default graphs' frame distance.
+
+    Raises
+    ------
+    ValueError
+        For durations out of order, negative weights or gains, or counts below their minimum.
+    TypeError
+        For a ``locality`` that is neither a Locality nor a mapping of them.
+
+    Examples
+    --------
+    >>> opts = DiscreteOptions(subsample=10, max_initial=2)
+    >>> opts.subsample, opts.max_duration, opts.locality_of(0) == opts.locality
+    (10, 2.0, True)
     """
 
     graphs: Mapping[int, MotionGraph] | None = None
@@ -273,8 +291,17 @@ class DiscreteEditor(Undoable):
 
     Examples
     --------
-    >>> ed = DiscreteEditor([walk], [PinPosition(0, 0, p0, hard=True), PinPosition(0, F - 1, p1, hard=True)])  # doctest: +SKIP
-    >>> ed.drag(1, p1 + (0.0, 2.0)).transformations  # doctest: +SKIP
+    Pull the end of a 30 fps walk half as far again: the editor adds a
+    gait cycle instead of stretching the steps.
+
+    >>> from mocaplab.data import cmu
+    >>> from mocaplab.editing import PinPosition
+    >>> walk = cmu("16_15").resample(30)
+    >>> p = walk.root_positions[:, [0, 2]]
+    >>> ed = DiscreteEditor([walk], [PinPosition(0, 0, p[0], hard=True), PinPosition(0, len(p) - 1, p[-1], hard=True)])
+    >>> res = ed.drag(1, p[0] + 1.5 * (p[-1] - p[0]))
+    >>> [str(t) for t in res.transformations]
+    ['character 0: duplicate frames 65..100 (1.20 s)']
     """
 
     def __init__(

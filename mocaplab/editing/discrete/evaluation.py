@@ -55,7 +55,7 @@ coupled rows touching ``k`` (``J``, a handful) see it.  So per update:
    X dr)_J`` (Woodbury again, a ``|J| x |J|`` solve);
 3. the candidate's own part is solved from them, and every other part
    ``k'`` moves by ``Z_k' dw``: this is computed (and its energies
-   re-evaluated) only where it can exceed ``FAR`` (1e-6 m or s: a bound
+   re-evaluated) only where it can exceed ``FAR`` (1e-3 m or s: a bound
    ``|Z_k'| |dw|`` decides); elsewhere the base scene's values stand.  A
    change propagates through each link of constraints with a factor of
    about 0.1 in the relay scenes (each character has its own pins), so only

@@ -39,7 +39,23 @@ Array = NDArray[np.float64]
 
 @dataclasses.dataclass(frozen=True)
 class Box:
-    """Axis-aligned ground rectangle ``lo <= (x, z) <= hi`` (metres)."""
+    """Axis-aligned ground rectangle ``lo <= (x, z) <= hi`` (metres).
+
+    Parameters
+    ----------
+    lo, hi : (float, float)
+        Opposite corners ``(x, z)``, metres, ``lo <= hi`` on both axes.
+
+    Raises
+    ------
+    ValueError
+        For corners that are not ``(x, z)`` pairs or out of order.
+
+    Examples
+    --------
+    >>> Box((0, 0), (2, 1)).contains([[1.0, 0.5], [3.0, 0.5]]).tolist()
+    [True, False]
+    """
 
     lo: tuple[float, float]
     hi: tuple[float, float]
@@ -60,7 +76,25 @@ class Box:
 
 @dataclasses.dataclass(frozen=True)
 class Disk:
-    """Ground disk of ``radius`` metres around ``center`` ``(x, z)``."""
+    """Ground disk of ``radius`` metres around ``center`` ``(x, z)``.
+
+    Parameters
+    ----------
+    center : (float, float)
+        ``(x, z)``, metres.
+    radius : float
+        Metres (> 0).
+
+    Raises
+    ------
+    ValueError
+        For a center that is not an ``(x, z)`` pair or a radius <= 0.
+
+    Examples
+    --------
+    >>> Disk((0, 0), 1.5).contains([[1.0, 1.0], [1.5, 1.0]]).tolist()
+    [True, False]
+    """
 
     center: tuple[float, float]
     radius: float

@@ -91,9 +91,10 @@ TYPES: tuple[str, ...] = ("deletion", "insertion", "duplication", "replacement")
 class Transformation:
     """One discrete transformation: current frames ``[a, b)`` become graph frames ``[s, e)``.
 
-    Attributes
+    Parameters
     ----------
     character : int
+        Index of the character in the scene.
     kind : {"deletion", "insertion", "duplication", "replacement"}
     removed : (a, b)
         Half-open interval of the character's *current* frames removed
@@ -115,6 +116,12 @@ class Transformation:
     full_energy, full_baseline : float
         The same two energies from the full-resolution solve that verified
         it (NaN if not verified; see ``DiscreteOptions.verify``).
+
+    Examples
+    --------
+    >>> cut = Transformation(0, "deletion", (40, 70), (0, 0), 30.0)
+    >>> str(cut), cut.length_change, cut.removed_duration
+    ('character 0: delete frames 40..69 (1.00 s)', -30, 1.0)
     """
 
     character: int

@@ -78,8 +78,8 @@ def literal(text: object) -> str:
 
     Examples
     --------
-    >>> literal("cost in $")
-    'cost in \\$'
+    >>> print(literal("cost in $"))
+    cost in \\$
     """
     return str(text).replace("$", "\\$")
 

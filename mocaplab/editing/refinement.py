@@ -111,6 +111,9 @@ def refine(
         Joint-role overrides for the default foot contacts
         (:func:`mocaplab.roles.resolve_roles`); the feet are the skeleton's
         ankle and toe roles.
+    **removed
+        Old keywords (``feet=``), answered with a ``TypeError`` that says
+        what to write instead.
 
     Returns
     -------
@@ -119,10 +122,19 @@ def refine(
 
     Examples
     --------
-    >>> import mocaplab as ml                                  # doctest: +SKIP
-    >>> walk = ml.cmu("16_15")                                 # doctest: +SKIP
-    >>> bent = walk.transformed(yaw=0.3)                       # doctest: +SKIP
-    >>> clean = ml.refine(bent, reference=walk)                # doctest: +SKIP
+    A second of walk whose root drifts 30 cm sideways, so the planted feet
+    skate; refining against the walk plants them again:
+
+    >>> import numpy as np
+    >>> import mocaplab as ml
+    >>> from mocaplab.quality import skate
+    >>> walk = ml.cmu("16_15")[:120]
+    >>> drift = walk.replace(root_positions=walk.root_positions + np.outer(np.linspace(0, 0.3, 120), [1, 0, 0]))
+    >>> clean = ml.refine(drift, reference=walk)
+    >>> contacts = ml.contacts.foot_contacts(walk)
+    >>> before, after = (float(np.nanmean(skate(m, contacts))) for m in (drift, clean))
+    >>> round(before, 1), after < before / 3
+    (3.1, True)
     """
     reject_keywords("refine", removed, _RENAMED, _ALLOWED + ("contacts", "end_effectors", "reference"))
     blend, spacing, levels = _checked(blend, spacing, levels)

@@ -206,7 +206,19 @@ def _zero_length(skeleton: Skeleton) -> float:
 
 
 class RestPoseWarning(UserWarning):
-    """The skeleton's rest pose is not a standing pose: the body is measured in another pose (or is off)."""
+    """The skeleton's rest pose is not a standing pose: the body is measured in another pose (or is off).
+
+    Parameters
+    ----------
+    *args
+        The message, as for any warning.
+
+    Examples
+    --------
+    >>> from mocaplab.anatomy import RestPoseWarning
+    >>> issubclass(RestPoseWarning, UserWarning)
+    True
+    """
 
 
 def standing_pose(motion: Motion, *, roles: Mapping[str, Any] | None = None) -> Array:
@@ -243,10 +255,13 @@ def standing_pose(motion: Motion, *, roles: Mapping[str, Any] | None = None) -> 
 
     Examples
     --------
-    >>> from mocaplab.data import cmu                                  # doctest: +SKIP
-    >>> from mocaplab.physics import Body                               # doctest: +SKIP
-    >>> walk = cmu("16_15")                                             # doctest: +SKIP
-    >>> body = Body.from_skeleton(walk, pose=standing_pose(walk))       # doctest: +SKIP
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15")
+    >>> pose = ml.anatomy.standing_pose(walk)
+    >>> pose.shape
+    (31, 4)
+    >>> round(ml.physics.Body.from_skeleton(walk, pose=pose).total_mass, 1)
+    70.0
     """
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
@@ -627,9 +642,16 @@ def foot_balls(motion: Motion, *, roles: Mapping[str, Any] | None = None) -> dic
 
     Examples
     --------
-    >>> import mocaplab as ml                                              # doctest: +SKIP
+    Every foot of the CMU skeleton has a toe joint, so nothing is estimated:
+
+    >>> import mocaplab as ml
+    >>> ml.anatomy.foot_balls(ml.cmu("16_15"))
+    {}
+
+    A file of your own whose feet end at the ankle:
+
     >>> walk = ml.load("walk01.bvh")          # a foot without toe joints   # doctest: +SKIP
-    >>> sorted(foot_balls(walk))                                           # doctest: +SKIP
+    >>> sorted(ml.anatomy.foot_balls(walk))                                # doctest: +SKIP
     ['LeftFoot', 'RightFoot']
     """
     sk = motion.skeleton

@@ -107,6 +107,11 @@ def _ramp(x: Array, edges: tuple[float, float]) -> Array:
 class UnreachableTargetWarning(UserWarning):
     """An IK target lay beyond its limb's reach on some frames: the limb went straight and missed it.
 
+    Parameters
+    ----------
+    *args
+        The message, as for any warning.
+
     Examples
     --------
     >>> from mocaplab.ik import UnreachableTargetWarning

@@ -160,6 +160,11 @@ class StaggeredTimingWarning(UserWarning):
     (:func:`~mocaplab.staggered.succession`, :func:`~mocaplab.staggered.retime`, ...) may emit it;
     silence it with :func:`warnings.simplefilter` or turn it into an error while testing.
 
+    Parameters
+    ----------
+    *args
+        The message, as for any warning.
+
     Examples
     --------
     >>> import warnings

@@ -49,10 +49,12 @@ seconds.
 
 Examples
 --------
->>> import mocaplab as ml                                          # doctest: +SKIP
->>> walk = ml.cmu("16_15")                                         # doctest: +SKIP
->>> goals = ml.goals.foot_goals(walk, ml.contacts.foot_contacts(walk))  # doctest: +SKIP
->>> planted = ml.goals.enforce_goals(walk, goals)                 # doctest: +SKIP
+>>> import mocaplab as ml
+>>> walk = ml.cmu("16_15")[:120]
+>>> goals = ml.goals.foot_goals(walk, ml.contacts.foot_contacts(walk))
+>>> planted = ml.goals.enforce_goals(walk, goals)
+>>> planted.n_frames, [g.kind for g in goals]
+(120, ['foot', 'toe', 'foot', 'toe'])
 
 Longer than 800 lines because it is one mechanism: the goal types, the weights, the foot plants and the solver's steps (root lowering, chains, limbs, feet, smoothing) share private helpers over the same per-frame arrays, and every paper calls it as one.
 """

@@ -122,7 +122,7 @@ def real(
     if ok and high is not None:
         ok = v < high if high_open else v <= high
     if not ok:
-        raise ValueError(f"Expected `{name}` {what}, got {_shown(value)}")
+        raise ValueError(f"Expected `{name}` {'to be ' if rng == 'finite' else ''}{what}, got {_shown(value)}")
     return v
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import html
 import os
 import re
+import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -22,7 +23,7 @@ from mocaplab.io import save_bvh
 from mocaplab.motion import Motion
 
 __all__ = [
-    "HistoryButtons", "ExportControl", "export_paths", "error_html", "row", "keep_width",
+    "HistoryButtons", "ExportControl", "export_paths", "error_html", "ERROR_STYLE", "MAX_ERROR_TEXT", "row", "keep_width",
     "export_name", "free_paths", "history_status",
 ]
 
@@ -91,46 +92,88 @@ def row(children: Sequence[W.Widget], *, align: str = "center") -> W.HBox:
     return box
 
 
-def _text(get: Callable[[], str], what: str) -> str:
+#: Most characters of an error's text a status line shows; the rest is counted, not shown (a message of a
+#: megabyte would make the page slow to draw and is not read).
+MAX_ERROR_TEXT = 20_000
+
+#: How an error looks when the caller does not say: dark red, wrapped at the box's width, every line kept.
+ERROR_STYLE = "color:#b00; white-space:pre-wrap; overflow-wrap:anywhere; margin:0"
+
+
+def _text(get: Callable[[], object], what: str) -> str:
+    """``get()`` as plain text (a ``str`` subclass with its own methods is copied out); never raises."""
     try:
-        return str(get())
+        value = get()
+        return str.__str__(value) if isinstance(value, str) else str.__str__(str(value))
     except Exception:  # noqa: BLE001 - an error display must not fail
         return f"<{what} could not be shown>"
 
 
-def error_html(err: BaseException, *, trace: bool = False) -> str:
+def _where(err: BaseException) -> str:
+    """`` (function, line N)`` of the innermost frame of ``err``'s traceback, or ``""``."""
+    try:
+        frames = traceback.extract_tb(err.__traceback__) if err.__traceback__ is not None else []
+        return f" ({frames[-1].name}, line {frames[-1].lineno})" if frames else ""
+    except Exception:  # noqa: BLE001 - an error display must not fail
+        return ""
+
+
+def error_html(
+    err: BaseException, *, trace: bool = False, where: bool = False, tag: str = "pre", style: str = ERROR_STYLE
+) -> str:
     """An exception as the HTML of a widget's status line; never raises.
 
-    The message of an exception is user code (``__str__``) and may itself
-    fail, or not be text; the display shows what it can and never lets a
-    second exception out of the widget's callback.
+    The one error display of the widgets (the editors, the touch-up, the
+    staggered explorer, the 3D viewer).  The message of an exception is user
+    code (``__str__``) and may itself fail, not be text, hold markup or be
+    megabytes long: the display shows the type and what it can of the
+    message, HTML-escaped, at most :data:`MAX_ERROR_TEXT` characters (the
+    rest counted), and never lets a second exception out of the widget's
+    callback.
 
     Parameters
     ----------
     err : BaseException
     trace : bool
         Add the last frames of the traceback.
+    where : bool
+        Add `` (function, line N)`` of the frame that raised.
+    tag : {"pre", "span"}
+        The element: a ``<pre>`` block, or a ``<span>`` inside a line of text.
+    style : str
+        Its CSS (escaped as an attribute); default :data:`ERROR_STYLE`.
 
     Returns
     -------
     str
-        A ``<pre>`` block, HTML-escaped.
-    """
-    name = _text(lambda: type(err).__name__, "exception type")
-    message = _text(lambda: str(err), "message")
-    if message.startswith("<message could not"):
-        message = _text(lambda: object.__repr__(err), "message")
-    text = f"{name}: {message}"
-    if trace:
-        import traceback
+        ``<tag class='mocaplab-error' style='...'>Type: message</tag>``.
 
-        text += "\n" + _text(
-            lambda: "".join(traceback.format_exception(type(err), err, err.__traceback__, limit=3)), "traceback"
+    Examples
+    --------
+    >>> error_html(ValueError("<b>"), style="color:red")
+    "<pre class='mocaplab-error' style='color:red'>ValueError: &lt;b&gt;</pre>"
+    """
+    try:
+        name = _text(lambda: type(err).__name__, "exception type")
+        message = _text(lambda: str(err), "message")
+        if message.startswith("<message could not"):
+            message = _text(lambda: object.__repr__(err), "message")
+        text = f"{name}: {message}" + (_where(err) if where else "")
+        if trace:
+            text += "\n" + _text(
+                lambda: "".join(traceback.format_exception(type(err), err, err.__traceback__, limit=3)), "traceback"
+            )
+        if len(text) > MAX_ERROR_TEXT:
+            text = f"{text[:MAX_ERROR_TEXT]}... ({len(text) - MAX_ERROR_TEXT} more characters not shown)"
+        # lone surrogates (from bytes decoded with surrogateescape) would fail later, when the page is sent
+        text = text.encode("utf-8", "backslashreplace").decode("utf-8")
+        element = tag if tag in ("pre", "span") else "pre"
+        return (
+            f"<{element} class='mocaplab-error' style='{html.escape(style, quote=True)}'>"
+            f"{html.escape(text)}</{element}>"
         )
-    return (
-        "<pre class='mocaplab-error' style='color:#b00; white-space:pre-wrap'>"
-        f"{html.escape(text)}</pre>"
-    )
+    except Exception:  # noqa: BLE001 - the last resort: even building the text failed (out of memory)
+        return f"<pre class='mocaplab-error' style='{ERROR_STYLE}'>an error occurred and could not be shown</pre>"
 
 
 class HistoryButtons:

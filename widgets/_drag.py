@@ -60,7 +60,6 @@ import functools
 import html
 import io
 import json
-import traceback
 from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -74,7 +73,7 @@ from numpy.typing import NDArray
 
 from mocaplab import editing
 
-from ._controls import ExportControl, HistoryButtons, export_name, history_status, row
+from ._controls import ExportControl, HistoryButtons, error_html, export_name, history_status, row
 
 Backend = Literal["auto", "ipympl", "agg"]
 
@@ -496,14 +495,10 @@ class DragView:
 
     # -- status
     def _show_error(self, exc: BaseException) -> None:
+        """``Type: message (function, line N)`` in the status line (:func:`error_html`: escaped, never raises)."""
         self.last_error = exc
-        where = traceback.extract_tb(exc.__traceback__)[-1] if exc.__traceback__ else None
-        loc = f" ({where.name}, line {where.lineno})" if where else ""
-        style = _STATUS_STYLE.format(px=self._status_width())
-        self.status.value = (
-            f'<span class="mocaplab-error" style="color:#b00020; {style}">'
-            f"{html.escape(type(exc).__name__)}: {html.escape(str(exc))}{html.escape(loc)}</span>"
-        )
+        style = "color:#b00020; " + _STATUS_STYLE.format(px=self._status_width())
+        self.status.value = error_html(exc, where=True, tag="span", style=style)
 
     def _set_status(self, text: str) -> None:
         """The status text, wrapped at the figure's width (all of it shown), html-escaped."""

@@ -148,6 +148,7 @@ from numpy.typing import NDArray
 from mocaplab.motion import Motion
 
 from . import vtkjs_page
+from ._controls import error_html
 from .scene import (
     COLORS,
     Character,
@@ -214,12 +215,6 @@ DEFAULT_BACKEND = "client"
 def default_backend() -> str:
     """The backend named by ``MOCAPLAB_JUPYTER_BACKEND`` (default :data:`DEFAULT_BACKEND`, the browser draws)."""
     return os.environ.get(ENV_VAR, DEFAULT_BACKEND).strip().lower() or DEFAULT_BACKEND
-
-
-def _error_html(err: BaseException) -> str:
-    """An exception as status HTML: its text escaped, wrapped (never cut)."""
-    text = html.escape(f"{type(err).__name__}: {err}")
-    return f"<pre style='color:#b00;white-space:pre-wrap;overflow-wrap:anywhere;margin:0'>{text}</pre>"
 
 
 @dataclass
@@ -885,7 +880,7 @@ class MotionViewer:
         except Exception as err:  # noqa: BLE001 - shown in the widget; nobody awaits this task
             _log.exception("MotionViewer: playback failed")
             if self._status is not None:
-                self._status.value = _error_html(err)
+                self._status.value = error_html(err)
         if self._play_task is current_task():
             self._play_task = None
             self.stop_playback()
@@ -922,7 +917,7 @@ class MotionViewer:
         except Exception as err:  # noqa: BLE001 - shown in the widget and logged
             _log.exception("MotionViewer: a queued update failed")
             if self._status is not None:
-                self._status.value = _error_html(err)
+                self._status.value = error_html(err)
 
     def _draw_pending_frame(self) -> None:
         """Show the newest slider frame set from another thread (one draw for a burst of moves)."""
@@ -1337,7 +1332,7 @@ class MotionViewer:
             call(*args)
         except Exception as err:  # noqa: BLE001 - shown in the widget
             if self._status is not None:
-                self._status.value = _error_html(err)
+                self._status.value = error_html(err)
             return
         if self._status is not None and self._status.value and threading.current_thread() is threading.main_thread():
             self._status.value = ""
@@ -1368,7 +1363,7 @@ class MotionViewer:
             if self._status.value:
                 self._status.value = ""
         except Exception as err:  # show it in the widget instead of losing it in the log
-            self._status.value = _error_html(err)
+            self._status.value = error_html(err)
             raise
 
     def show(self) -> Any:

@@ -23,6 +23,12 @@ ticks inside it).
 
 Options (keyword-only, for both :func:`edit` and :class:`SceneEditor`)
 ----------------------------------------------------------------------
+Every option is checked when the editor is built, before any path,
+contact or solve (``_checked_options``: a TypeError for the wrong kind, a
+ValueError for NaN, infinity or a value out of range, each naming the
+option); ``constraints`` is a list or tuple, ``[]`` for none (``None`` is
+refused, not read as none).
+
 scale_compensation : bool, default True
     Run phase 2 (equation 7) after the shape-preserving phase.
 stationary : "auto", "speed", None, or per-character lists of (start, stop)
@@ -46,15 +52,15 @@ flip_rate : float or None, default 900.0 (degrees per second)
     switches the repair off.
 flip_window : float, default 1.0
     Seconds: the longest reversed stretch between two paired jumps that is
-    repaired as one fold.
+    repaired as one fold; from 0 to 10 times the scene's duration.
 relative_tolerance : float, default 1e-3
     Metres: relative constraints are re-solved until their metric
     corrections change by less than this (see
     :mod:`~mocaplab.editing.laplacian`, "Relative constraints in metres").
 relative_iterations : int, default 20
-    Most solves per update for that.
+    Most solves per update for that (>= 1).
 variational_step : int, default 10
-    Sampling step of variational constraints (frames).
+    Sampling step of variational constraints (frames, >= 1).
 start_times : sequence of float, optional
     Reference time of each character's frame 0 before editing (default 0),
     within :func:`~mocaplab.editing.timewarp.time_reach` of 0 (10 times the
@@ -104,6 +110,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._checks import integer, real
 from .._warnings import warn
 from ..contacts import foot_contacts
 from ..goals import EndEffector
@@ -118,7 +125,7 @@ from .lsq import Rows
 from .paths import MotionPath, apply_path, contact_joints, laplacian_coordinates, stationary_segments, with_roles
 from .refinement import refine_scene
 from .spatial import SpatialFactors, SpatialSolution, SpatialSolver
-from .timewarp import TimeFactors, TimeSolver, temporal_rows
+from .timewarp import TIME_REACH, TimeFactors, TimeSolver, temporal_rows, time_reach
 
 __all__ = [
     "edit",
@@ -324,6 +331,65 @@ def _is_names(value: Any) -> bool:
     )
 
 
+def _constraint_list(constraints: Any) -> tuple[Any, ...]:
+    """``constraints`` as a tuple: a list or tuple of them (each checked later, by index).
+
+    ``None`` is refused rather than read as "no constraints": no constraint
+    is written ``[]`` (the default), and a None usually stands for a list
+    that was never built.  A single constraint must be put in a list.
+    """
+    if constraints is None:
+        raise TypeError(
+            "Expected `constraints` to be a sequence of constraints, got None: for no constraint give [] "
+            "(or leave `constraints` out)"
+        )
+    if isinstance(constraints, (str, bytes, Mapping)) or not isinstance(constraints, Sequence):
+        hint = "; put a single constraint in a list: [c]" if type(constraints).__module__.startswith("mocaplab") else ""
+        raise TypeError(
+            f"Expected `constraints` to be a sequence (list or tuple) of constraints, got "
+            f"{type(constraints).__name__}{hint}"
+        )
+    return tuple(constraints)
+
+
+def _checked_options(opts: dict[str, Any], chars: Sequence[Motion]) -> dict[str, Any]:
+    """Every option of :class:`SceneEditor` checked (TypeError/ValueError naming it), numbers made plain.
+
+    The one validator of the editing entry points (:func:`edit`,
+    :class:`SceneEditor`, :func:`~mocaplab.editing.make_editor` and the
+    discrete editor, which builds a SceneEditor): run before any path,
+    contact or solve.  Time options are bounded by the scene
+    (:func:`~mocaplab.editing.timewarp.time_reach`).
+    """
+    out = dict(opts)
+    reach = time_reach([m.n_frames for m in chars], [m.dt for m in chars])
+    flip_step(out["flip_rate"], 1.0, name="flip_rate")  # a bad rate fails here, not when a heading is first asked for
+    _check_clock_fps(out["clock_fps"])
+    for name, unit in (
+        ("stationary_speed", "m/s"), ("stationary_min_duration", "seconds"), ("min_speed", "m/s"),
+        ("relative_tolerance", "metres"), ("refine_tolerance", "metres"),
+    ):
+        out[name] = real(out[name], name, low=0.0, unit=unit)
+    out["min_step"] = real(out["min_step"], "min_step", low=0.0, high=1.0, low_open=True, high_open=True,
+                           unit="of the frame time")
+    out["max_step"] = real(out["max_step"], "max_step", low=1.0, low_open=True, unit="of the frame time")
+    out["flip_window"] = real(
+        out["flip_window"], "flip_window", low=0.0, high=reach,
+        unit=f"seconds (at most {TIME_REACH:g} times the scene's duration)",
+    )
+    out["relative_iterations"] = integer(out["relative_iterations"], "relative_iterations", low=1,
+                                         why="most solves per update")
+    out["variational_step"] = integer(out["variational_step"], "variational_step", low=1, why="frames")
+    starts = out["start_times"]
+    if starts is not None:
+        if isinstance(starts, (str, bytes)) or not isinstance(starts, Sequence | np.ndarray):
+            raise TypeError(f"Expected `start_times` to be a sequence of seconds, one per motion, got {starts!r:.80}")
+        if len(starts) != len(chars):
+            raise ValueError(f"Expected {len(chars)} `start_times` (one per motion), got {len(starts)}")
+        out["start_times"] = tuple(real(t, f"start_times[{k}]", unit="seconds") for k, t in enumerate(starts))
+    return out
+
+
 def _characters(motions: Any) -> tuple[Motion, ...]:
     if isinstance(motions, Motion):
         motions = (motions,)
@@ -485,10 +551,10 @@ class SceneEditor(Undoable):
             raise TypeError(f"Unknown option(s) {unknown}; valid options are {sorted(_OPTIONS)}")
         opts = dict(_OPTIONS)
         opts.update(options)
-        flip_step(opts["flip_rate"], 1.0, name="flip_rate")  # a bad rate fails here, not when a heading is first asked for
-        _check_clock_fps(opts["clock_fps"])
-        self.options = opts
         chars = _characters(motions)
+        constraints = _constraint_list(constraints)
+        opts = _checked_options(opts, chars)  # every option, before any path, contact or solve
+        self.options = opts
         K = len(chars)
         roles = _per_character(opts["roles"], K, "roles", lambda v: isinstance(v, Mapping))
         self.characters = tuple(with_roles(m, r) for m, r in zip(chars, roles, strict=True))
@@ -503,21 +569,14 @@ class SceneEditor(Undoable):
         self._refine_cache = RefineCache(opts["refine_tolerance"])
         self.paths = tuple(MotionPath.from_motion(m, min_speed=opts["min_speed"]) for m in self.characters)
         self.segments = self._stationary(opts["stationary"])
-        step = int(opts["variational_step"])
-        if step < 1:
-            raise ValueError(f"Expected `variational_step` >= 1, got {step}")
-        starts = opts["start_times"]
-        if starts is None:
-            starts = [0.0] * K
-        starts = [float(s) for s in starts]
-        if len(starts) != K:
-            raise ValueError(f"Expected {K} `start_times`, got {len(starts)}")
+        step = opts["variational_step"]
+        starts = [0.0] * K if opts["start_times"] is None else list(opts["start_times"])
         self._space = SpatialSolver(
             self.paths,
             self.segments,
             scale_compensation=opts["scale_compensation"],
-            metric_tolerance=float(opts["relative_tolerance"]),
-            metric_iterations=int(opts["relative_iterations"]),
+            metric_tolerance=opts["relative_tolerance"],
+            metric_iterations=opts["relative_iterations"],
         )
         self._time = TimeSolver(
             [m.n_frames for m in self.characters],
@@ -754,8 +813,8 @@ class SceneEditor(Undoable):
         return self._record(self._set(tuple(new), changed=i if same else None))
 
     def set_constraints(self, constraints: Sequence[Any]) -> EditResult:
-        """Replace every constraint and re-solve (one undo step)."""
-        return self._record(self._set(tuple(constraints), changed=None))
+        """Replace every constraint and re-solve (one undo step); ``[]`` removes them all (None is refused)."""
+        return self._record(self._set(_constraint_list(constraints), changed=None))
 
     # ----------------------------------------------------------- history
     def _record(self, result: EditResult, merge: Any = None) -> EditResult:
@@ -942,8 +1001,11 @@ def edit(motions: Any, constraints: Sequence[Any] = (), **options: Any) -> EditR
     ----------
     motions : Motion or sequence of Motion
     constraints : sequence of constraints
+        A list or tuple; ``[]`` (the default) edits with none.  ``None`` is
+        a TypeError saying so (it is not read as "no constraints").
     **options
-        See :mod:`mocaplab.editing.scene`.
+        See :mod:`mocaplab.editing.scene`; each is checked before any work
+        (a TypeError or ValueError naming the option and what it takes).
 
     Returns
     -------

@@ -57,6 +57,7 @@ __all__ = [
     "link_sets",
     "preset_mask",
     "flight_stages",
+    "check_schedule",
 ]
 
 Stage = Literal["ground", "flight"]
@@ -170,19 +171,47 @@ def default_schedule(
     return FLIGHT_SCHEDULE + GROUND_SCHEDULE
 
 
-def _as_schedule(schedule: str | Adjustment | Sequence[Adjustment], contacts: Contacts) -> tuple[Adjustment, ...]:
+_SCHEDULES = ("default", "ground", "flight", "both")
+
+
+def check_schedule(schedule: Any) -> str | tuple[Adjustment, ...]:
+    """``schedule`` checked before any work: a preset name, or its adjustments as a tuple.
+
+    Parameters
+    ----------
+    schedule : "default", "ground", "flight", "both", Adjustment or sequence of Adjustment
+
+    Raises
+    ------
+    TypeError
+        Neither a name, an Adjustment nor a non-empty sequence of them (the
+        message names the first item that is not an Adjustment).
+    ValueError
+        An unknown name.
+    """
+    expected = "'default', 'ground', 'flight', 'both', an Adjustment or a non-empty sequence of Adjustment"
     if isinstance(schedule, str):
-        if schedule == "default":
-            return default_schedule("both", contacts=contacts)
-        if schedule in ("ground", "flight", "both"):
-            return default_schedule(schedule, contacts=contacts if schedule == "both" else None)  # type: ignore[arg-type]
-        raise ValueError(f"Expected `schedule` 'default', 'ground', 'flight' or a sequence of Adjustment, got {schedule!r}")
+        if schedule not in _SCHEDULES:
+            raise ValueError(f"Expected `schedule` {expected}, got {schedule!r}")
+        return schedule
     if isinstance(schedule, Adjustment):
         return (schedule,)
+    if not isinstance(schedule, Sequence) or not schedule:
+        raise TypeError(f"Expected `schedule` {expected}, got {type(schedule).__name__} {schedule!r:.80}")
     out = tuple(schedule)
-    if not out or not all(isinstance(a, Adjustment) for a in out):
-        raise TypeError(f"Expected `schedule` to be a non-empty sequence of Adjustment, got {schedule!r}")
+    for k, a in enumerate(out):
+        if not isinstance(a, Adjustment):
+            raise TypeError(f"Expected `schedule[{k}]` to be an Adjustment, got {type(a).__name__} {a!r:.80}")
     return out
+
+
+def _as_schedule(schedule: str | Adjustment | Sequence[Adjustment], contacts: Contacts) -> tuple[Adjustment, ...]:
+    checked = check_schedule(schedule)
+    if checked == "default":
+        return default_schedule("both", contacts=contacts)
+    if isinstance(checked, str):
+        return default_schedule(checked, contacts=contacts if checked == "both" else None)  # type: ignore[arg-type]
+    return checked
 
 
 # ======================================================================

@@ -37,7 +37,9 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from .._checks import real
 from .._warnings import warn
+from ..goals import MAX_WINDOW
 from ..motion import Motion, Skeleton, readonly
 from ..roles import Roles, resolve_roles
 from .adjust import _Posed, _posed
@@ -45,7 +47,7 @@ from .body import Body
 from .flight import FLIGHT_WINDOW, FlightMeasure, _ballistic, _flight_step, flight_measures
 from .footplants import Footplants, _footplant_fn
 from .ground import _edge_frames, _edge_width, _ground_step
-from .schedule import Adjustment, LinkSets, _as_schedule, flight_stages, link_sets
+from .schedule import Adjustment, LinkSets, _as_schedule, check_schedule, flight_stages, link_sets
 from .zmp import Balance, _check_contacts, _rebalance, balance, ground_contacts
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -284,6 +286,9 @@ def start(
     """
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
+    # the options first, before any role, body or contact is worked out
+    check_schedule(schedule)
+    flight_window = real(flight_window, "flight_window", low=0.0, high=MAX_WINDOW, unit="seconds")
     edge = _edge_width(motion.fps)
     if motion.n_frames < 2 * edge + 1:
         raise ValueError(
@@ -299,8 +304,6 @@ def start(
     body.check(motion)
     contacts = ground_contacts(contacts, motion, roles=known)
     _check_contacts(contacts, motion)
-    if not (np.isfinite(flight_window) and flight_window >= 0):
-        raise ValueError(f"Expected `flight_window` >= 0 seconds, got {flight_window!r}")
     _check_stages(motion, contacts)
     fix = _footplant_fn(footplants, contacts, motion)
     sched = _as_schedule(schedule, contacts)

@@ -87,6 +87,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._api import Gone
+from .._checks import integer, real
 from .._warnings import warn
 from ..contacts import intervals_from_mask
 from ..motion import Motion, readonly
@@ -269,7 +270,7 @@ def touch_up(
         (:func:`mocaplab.contacts.foot_contacts`); ``None`` (no contacts)
         raises ValueError: nothing would stand on the ground.
     iterations : int
-        Passes over the schedule, at most (default :data:`ITERATIONS`).
+        Passes over the schedule, at most (default :data:`ITERATIONS`), >= 0.
         Each pass is a line search: a pass that would raise
         :attr:`TouchUpState.error`, or leave the ground frames' mean ZMP
         distance more than :data:`ZMP_SLACK` above the input's, is done again with every ``rho`` halved,
@@ -286,7 +287,8 @@ def touch_up(
         stopping when no step lowers the error).
     flight_window : float
         Seconds of ground frames on each side of a flight adjusted as flight
-        and blended to zero (0.5 s in the paper).
+        and blended to zero (0.5 s in the paper), from 0 to
+        :data:`mocaplab.goals.MAX_WINDOW`.
     footplants : "auto", "plant", "refine", "ik", callable or None
         Re-enforcement of the footplants after each step (see the module
         notes); a callable gets ``(motion, contacts, reference)``.
@@ -315,10 +317,9 @@ def touch_up(
     >>> history = touch_up(bent_walk)                          # doctest: +SKIP
     >>> history.passes, history.stopped, history.errors[history.best]  # doctest: +SKIP
     """
-    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
-        raise ValueError(f"Expected `iterations` to be an integer >= 0, got {iterations!r}")
-    if tol is not None and not (np.isfinite(tol) and tol >= 0):
-        raise ValueError(f"Expected `tol` >= 0 (a share of the error) or None, got {tol!r}")
+    iterations = integer(iterations, "iterations", low=0, why="passes over the schedule")
+    if tol is not None:
+        tol = real(tol, "tol", low=0.0, unit="(a share of the error) or None")
     state = start(
         motion, body=body, schedule=schedule, contacts=contacts, flight_window=flight_window, footplants=footplants,
         roles=roles,

@@ -83,6 +83,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import quat
+from .._checks import quaternion, real
 from ..displacement import blend_ramp
 from ..motion import Skeleton
 from ..roles import RolesError, resolve_roles
@@ -106,6 +107,7 @@ __all__ = [
     "succession",
     "succession_depths",
     "randomize",
+    "check_tau",
     "limb_groups",
     "LIMBS",
     "edit_pose",
@@ -455,6 +457,16 @@ def limb_groups(
     return np.concatenate([[0], group, group[np.asarray(translation_joints, dtype=np.int64)]]).astype(np.int64)
 
 
+def check_tau(sm: StaggeredMotion, tau: Any) -> float:
+    """The random timing bound ``tau``: seconds, from 0 to the clip's duration (TypeError/ValueError naming it).
+
+    An offset longer than the clip moves no knot further (knots keep their
+    order inside it), and a bound near the float range would overflow the
+    random draw.
+    """
+    return real(tau, "tau", low=0.0, high=sm.duration, unit="seconds (at most the clip's duration)")
+
+
 def randomize(
     sm: StaggeredMotion,
     tau: float,
@@ -470,8 +482,9 @@ def randomize(
     Parameters
     ----------
     sm : StaggeredMotion
-    tau : float >= 0
-        Bound of the offsets, seconds.
+    tau : float
+        Bound of the offsets, seconds, from 0 to the clip's duration
+        (:func:`check_tau`).
     joints : sequence of str, optional
         Variables to affect (joint names, ``"root_position"``,
         ``"<joint>.position"``); default every joint rotation.
@@ -506,8 +519,7 @@ def randomize(
     >>> bool(np.array_equal(a.refinements, ml.staggered.randomize(sm, 0.05, seed=1).refinements))
     True
     """
-    if not (np.isfinite(tau) and tau >= 0):
-        raise ValueError(f"Expected `tau` >= 0 seconds, got {tau!r}")
+    tau = check_tau(sm, tau)
     if by not in ("variable", "limb"):
         raise ValueError(f"Expected `by` in ('variable', 'limb'), got {by!r}")
     mask = _variables_mask(sm, joints, rotations_only=True)
@@ -693,13 +705,23 @@ def _rotation_targets(sm: StaggeredMotion, rotations: Any) -> tuple[Array, NDArr
     if isinstance(rotations, dict):
         for name, q in rotations.items():
             j = sm.skeleton.index(name)
-            out[j] = quat.normalize(np.asarray(q, dtype=float).reshape(4))
+            out[j] = quaternion(q, f"rotations[{name!r}]")
             mask[j] = True
         return out, mask
     arr = np.asarray(rotations, dtype=float)
     if arr.shape != (J, 4):
         raise ValueError(f"Expected `rotations` of shape ({J}, 4) or a dict joint -> quaternion, got {arr.shape}")
-    return quat.normalize(arr), np.ones(J, dtype=bool)
+    for j in range(J):
+        out[j] = quaternion(arr[j], f"rotations[{j}]", of=f"(joint {sm.skeleton.names[j]!r})")
+    return out, np.ones(J, dtype=bool)
+
+
+def _point(value: Any, name: str) -> Array:
+    """A finite (3,) position in metres, or ValueError naming ``name``."""
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"Expected `{name}` to be a finite (x, y, z) position in metres, got {value!r}")
+    return arr
 
 
 def _position_targets(
@@ -710,7 +732,7 @@ def _position_targets(
     out = np.zeros((P, 3))
     mask = np.zeros(P, dtype=bool)
     if root_position is not None:
-        out[0] = np.asarray(root_position, dtype=float).reshape(3)
+        out[0] = _point(root_position, "root_position")
         mask[0] = True
     if translations is not None:
         if not isinstance(translations, Mapping):
@@ -725,7 +747,7 @@ def _position_targets(
                     f"Expected `translations` keys among the joints with a translation variable {have}, got {name!r}"
                 )
             p = 1 + sm.translation_joints.index(j)
-            out[p] = np.asarray(value, dtype=float).reshape(3)
+            out[p] = _point(value, f"translations[{name!r}]")
             mask[p] = True
     return out, mask
 
@@ -749,7 +771,9 @@ def edit_pose(
     root_position : array_like, shape (3,), optional
         New root translation (metres).
     rotations : array_like, shape (J, 4), or dict of joint name -> (4,), optional
-        New local rotations; with a dict only the named joints change.
+        New local rotations; with a dict only the named joints change.  Each
+        a finite quaternion ``(x, y, z, w)`` of non-zero length (normalised
+        here); NaN or a zero quaternion is a ValueError naming the joint.
     translations : dict of joint name -> (3,), optional
         New local translations of joints with a translation variable
         (metres, parent frame).

@@ -29,10 +29,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import quat
+from .._checks import integer
 from ..motion import Motion
 from ..roles import resolve_roles
 from ..undo import Undoable, UndoStack
-from .edit import default_joint, exaggerate, randomize, succession
+from .edit import check_tau, default_joint, exaggerate, randomize, succession
 from .features import analyze
 from .fit import extract
 from .representation import StaggeredMotion, StaggeredTimingWarning
@@ -209,7 +210,8 @@ class StaggeredEditor(Undoable):
         self._bases: dict[int | None, StaggeredMotion] = {}
         self.message = ""
         params = EditorParams(
-            max_poses=None if max_poses is None else int(max_poses),
+            # as extract takes it (a count above the candidates keeps them all); set_pose_count is stricter
+            max_poses=None if max_poses is None else integer(max_poses, "max_poses", low=2, high=motion.n_frames),
             joint=joint,
             random_by=random_by,
             constraints=bool(constraints),
@@ -346,11 +348,21 @@ class StaggeredEditor(Undoable):
     def n_candidates(self) -> int:
         return int(self.analysis.candidates.size)
 
+    def _pose_count(self, n: Any, name: str) -> int:
+        """A pose count the clip holds: 2 (its first and last frames) to every candidate (TypeError/ValueError)."""
+        return integer(
+            n, name, low=2, high=self.n_candidates,
+            why=f"the pose count `max_poses`: the clip's first and last frames and its {self.n_candidates - 2} "
+            "candidate poses between",
+        )
+
     def set_pose_count(self, n: int | None) -> None:
-        """Cull to ``n`` poses (fits the representation once per count)."""
-        if n is not None and (isinstance(n, bool) or not isinstance(n, (int, np.integer))):
-            raise TypeError(f"Expected `n` to be an int or None, got {type(n).__name__}")
-        self._edit("max_poses", max_poses=None if n is None else int(n))
+        """Cull to ``n`` poses (fits the representation once per count).
+
+        ``n`` is an int from 2 to :attr:`n_candidates` (or None: every
+        candidate); anything else raises before anything is fitted or recorded.
+        """
+        self._edit("max_poses", max_poses=None if n is None else self._pose_count(n, "n"))
 
     def set_succession(self, s: float | None = None, l: float | None = None, joint: str | None = None) -> None:
         """Set the succession offset ``s`` (seconds), exponent ``l`` and/or the depth joint."""
@@ -367,12 +379,18 @@ class StaggeredEditor(Undoable):
     def set_random(
         self, tau: float | None = None, seed: int | None = None, by: Literal["variable", "limb"] | None = None
     ) -> None:
-        """Set the random timing bound ``tau`` (seconds), the seed and/or per variable or per limb."""
+        """Set the random timing bound ``tau`` (seconds), the seed and/or per variable or per limb.
+
+        ``tau`` from 0 to the clip's duration
+        (:func:`~mocaplab.staggered.edit.check_tau`) and ``seed`` an integer
+        >= 0: anything else raises TypeError/ValueError naming it, and
+        nothing is recorded.
+        """
         changes: dict[str, Any] = {}
         if tau is not None:
-            changes["tau"] = float(tau)
+            changes["tau"] = check_tau(self.base, tau)  # a bad bound raises; nothing is recorded
         if seed is not None:
-            changes["seed"] = int(seed)
+            changes["seed"] = integer(seed, "seed", low=0)
         if by is not None:
             if by not in ("variable", "limb"):
                 raise ValueError(f"Expected `by` in ('variable', 'limb'), got {by!r}")

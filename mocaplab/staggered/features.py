@@ -98,6 +98,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import quat
+from .._checks import integer, real
 from .._warnings import warn
 from ..contacts import stillness_contacts
 from ..motion import Motion
@@ -607,13 +608,11 @@ def cull_poses(
     interior = interior[keep[interior]]
     n_keep = interior.size
     if fraction is not None:
-        if not 0.0 <= fraction <= 1.0:
-            raise ValueError(f"Expected `fraction` in [0, 1], got {fraction!r}")
+        fraction = real(fraction, "fraction", low=0.0, high=1.0)
         n_keep = min(n_keep, int(round(fraction * interior.size)))
     if max_poses is not None:
-        if int(max_poses) < 2:
-            raise ValueError(f"Expected `max_poses` >= 2 (the first and last frames), got {max_poses!r}")
-        n_keep = min(n_keep, int(max_poses) - 2)
+        max_poses = integer(max_poses, "max_poses", low=2, why="the first and last frames and the poses between")
+        n_keep = min(n_keep, max_poses - 2)
     order = interior[np.argsort(-priorities[interior], kind="stable")]
     keep[order[n_keep:]] = False
     return frames[keep]

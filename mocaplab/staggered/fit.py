@@ -82,6 +82,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize
 
 from .. import quat
+from .._checks import integer, real
 from .._warnings import warn
 from ..motion import Motion
 from ..roles import resolve_roles
@@ -779,7 +780,8 @@ def extract(
     ----------
     motion : Motion
     max_poses, fraction, interval
-        Culling of the candidate poses by count, fraction or time interval
+        Culling of the candidate poses by count (an integer from 2 to the
+        clip's frame count), fraction (in [0, 1]) or time interval
         (see :func:`mocaplab.staggered.features.cull_poses`); default keeps
         every candidate.
     contacts : Contacts, "auto" or None
@@ -836,8 +838,13 @@ def extract(
         raise ValueError(f"Expected a clip of at least 2 frames, got {motion.n_frames}")
     # the filters' work grows with the rate and the widths: bounded before anything is computed
     check_rates(motion.fps, filter_sigma=filter_sigma, constraint_window=constraint_window)
-    if not 0.0 <= max_refinement:
-        raise ValueError(f"Expected `max_refinement` >= 0 seconds, got {max_refinement!r}")
+    max_refinement = real(max_refinement, "max_refinement", low=0.0, unit="seconds")
+    if max_poses is not None:
+        max_poses = integer(
+            max_poses, "max_poses", low=2, high=motion.n_frames, why="the first and last frames, at most one per frame"
+        )
+    if fraction is not None:
+        fraction = real(fraction, "fraction", low=0.0, high=1.0)
     if roles is not None:
         resolved = resolve_roles(motion, roles)
         motion = motion.replace(skeleton=motion.skeleton.with_roles(**dict(resolved)))

@@ -87,6 +87,15 @@ class Adjustment:
         Which frames this adjustment corrects.
     label : str
         A short description for displays.
+
+    Examples
+    --------
+    Rotate the lower body while the upper body keeps its global orientation:
+
+    >>> from mocaplab.physics import Adjustment
+    >>> step = Adjustment(("lower_body",), ("upper_body",))
+    >>> step.stage, round(step.sigma, 3), step.rho
+    ('ground', 1.333, 0.5)
     """
 
     s2: tuple[str, ...]
@@ -159,6 +168,26 @@ def default_schedule(
     and landing windows that the flight adjustments moved included; with
     ``contacts`` given, the flight part is left out when the clip has no
     flight frame.
+
+    Parameters
+    ----------
+    stage : {"both", "ground", "flight"}
+        Which schedule.
+    contacts : Contacts, optional
+        With ``stage="both"``: the clip's contacts, to leave out the flight part when it never leaves the ground.
+
+    Returns
+    -------
+    tuple of Adjustment
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> [a.label for a in ml.physics.default_schedule("ground")]
+    ['ground: lower body (S2), upper body (S3)', 'ground: upper body (S2)', 'ground: arms (S2)']
+    >>> walk = ml.cmu("16_15").resample(30)[:60]
+    >>> len(ml.physics.default_schedule()), len(ml.physics.default_schedule(contacts=ml.contacts.foot_contacts(walk)))
+    (6, 3)
     """
     if stage == "ground":
         return GROUND_SCHEDULE
@@ -247,6 +276,24 @@ def preset_mask(skeleton: Skeleton, name: str, *, roles: Mapping[str, Any] | Non
     name : str
     roles : mapping of role names to joint names, optional
         Role overrides (:func:`mocaplab.roles.resolve_roles`).
+
+    Returns
+    -------
+    ndarray of bool, shape (J,)
+
+    Raises
+    ------
+    KeyError
+        When ``name`` is neither a preset nor a joint of the skeleton (the message lists both).
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> sk = ml.cmu("16_15").skeleton
+    >>> [sk.names[j] for j, kept in enumerate(ml.physics.preset_mask(sk, "LeftLeg")) if kept]
+    ['LeftLeg', 'LeftFoot', 'LeftToeBase']
+    >>> int(ml.physics.preset_mask(sk, "arms").sum())
+    12
     """
     if name == "all":
         return np.ones(skeleton.n_joints, dtype=bool)
@@ -279,7 +326,9 @@ def preset_mask(skeleton: Skeleton, name: str, *, roles: Mapping[str, Any] | Non
 class LinkSets:
     """The S1/S2/S3 split of a skeleton for one adjustment.
 
-    Attributes
+    Built by :func:`link_sets`.
+
+    Parameters
     ----------
     roles : ndarray of int, shape (J,)
         1, 2 or 3 per joint.
@@ -294,6 +343,14 @@ class LinkSets:
         S2 part moving each joint (-1 for joints that do not move).
     carried_top : ndarray of int, shape (J,)
         For joints of a carried part, its top joint; -1 elsewhere.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mocaplab as ml
+    >>> sets = ml.physics.link_sets(ml.cmu("16_15").skeleton, ml.physics.Adjustment(("lower_body",), ("upper_body",)))
+    >>> np.bincount(sets.roles, minlength=4)[1:].tolist()       # joints in S1, S2, S3
+    [0, 11, 20]
     """
 
     roles: NDArray[np.int64]
@@ -311,10 +368,32 @@ class LinkSets:
 def link_sets(skeleton: Skeleton, adjustment: Adjustment, *, roles: Mapping[str, Any] | None = None) -> LinkSets:
     """Resolve an adjustment's S1/S2/S3 on a skeleton and check its shape.
 
-    ``roles`` overrides joint roles for the presets (see :func:`preset_mask`).
-    Raises ValueError when S3 does not hang below S2, when S2 hangs below S3,
-    or when an S1 part hangs below an S2 part that does not hold the root.
     Results are cached per skeleton, roles and link sets.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    adjustment : Adjustment
+    roles : mapping, optional
+        Joint-role overrides for the presets (see :func:`preset_mask`).
+
+    Returns
+    -------
+    LinkSets
+
+    Raises
+    ------
+    ValueError
+        When S3 does not hang below S2, when S2 hangs below S3, or when an S1
+        part hangs below an S2 part that does not hold the root.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> sk = ml.cmu("16_15").skeleton
+    >>> sets = ml.physics.link_sets(sk, ml.physics.Adjustment(("arms",)))
+    >>> [sk.names[j] for j in sets.s2_tops]
+    ['LeftArm', 'RightArm']
     """
     r = resolve_roles(skeleton, roles)
     return _link_sets(skeleton, adjustment.s2, adjustment.s3, tuple(r.items()))
@@ -390,6 +469,26 @@ def flight_stages(contacts: Contacts, *, min_frames: int = 2, at_ends: bool = Fa
     a parabola to (a clip that starts or stops in the air, or a contact
     detection gap there).  The touch-up adjusts neither ground nor flight
     constraints on such frames.
+
+    Parameters
+    ----------
+    contacts : Contacts
+    min_frames : int, default 2
+        Shortest flight, frames.
+    at_ends : bool, default False
+        Keep stretches that touch the clip's first or last frame.
+
+    Returns
+    -------
+    list of (int, int)
+        ``(start, stop)`` frame intervals.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15").resample(30)[:60]
+    >>> ml.physics.flight_stages(ml.contacts.foot_contacts(walk))     # a walk never flies
+    []
     """
     ground = np.asarray(contacts.mask, dtype=bool).any(axis=1)
     edges = np.diff(np.concatenate(([0], (~ground).astype(np.int8), [0])))

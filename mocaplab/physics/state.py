@@ -65,7 +65,19 @@ SLIDE_WARNING = 0.05
 
 
 class TouchUpWarning(UserWarning):
-    """Suspicious input to a touch-up (long flights, sliding feet, frames without a ZMP)."""
+    """Suspicious input to a touch-up (long flights, sliding feet, frames without a ZMP).
+
+    Parameters
+    ----------
+    *args
+        The message, as for any warning.
+
+    Examples
+    --------
+    >>> from mocaplab.physics import TouchUpWarning
+    >>> issubclass(TouchUpWarning, UserWarning)
+    True
+    """
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -73,9 +85,10 @@ class TouchUpState:
     """Where a touch-up stands: the current motion and what comes next.
 
     Every array it holds or computes (kinematics, violation, the balance's)
-    is read-only for good: a view of a read-only owner.
+    is read-only for good: a view of a read-only owner.  Made by
+    :func:`start` and :func:`step`, not by hand.
 
-    Attributes
+    Parameters
     ----------
     motion : Motion
         The motion after ``index`` steps.
@@ -112,6 +125,14 @@ class TouchUpState:
         Share in (0, 1] of each adjustment's ``rho`` that :func:`step` uses
         from this state on (the step size of :func:`mocaplab.physics.touch_up`'s line search;
         1 applies the schedule as written).
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15").resample(30)[:60]
+    >>> state = ml.physics.start(walk)
+    >>> state.index, state.label, len(state.schedule)
+    (0, 'input', 3)
     """
 
     motion: Motion
@@ -274,15 +295,53 @@ def start(
 ) -> TouchUpState:
     """The initial state of a touch-up (no step done).  See :func:`mocaplab.physics.touch_up`.
 
-    Raises ValueError when no frame has a planted joint (nothing to balance,
-    no take-off or landing to fit a flight to) and when the clip has no
-    frame between its uncorrected ends (fewer than 7 frames at 30 fps, 21
-    at 120 fps: :attr:`TouchUpState.edge_frames`); warns
-    (:class:`TouchUpWarning`) about flights longer than :data:`LONG_FLIGHT`,
-    feet that slide during their contacts (more than :data:`SLIDE_WARNING`
-    over a median contact: the touch-up keeps the feet where the input has
-    them, so plant them first with :func:`mocaplab.editing.refinement.refine`) and
-    ground frames without a ZMP.
+    Parameters
+    ----------
+    motion : Motion
+        The motion to touch up; never modified.
+    body : Body, optional
+        Masses; default :meth:`Body.from_skeleton` of the motion.
+    schedule : "default", "ground", "flight", Adjustment or sequence of Adjustment
+        The adjustments, cycled through (see :func:`mocaplab.physics.touch_up`).
+    contacts : "auto" or Contacts
+        Planted joints of the input, fixed for the whole touch-up (``"auto"``:
+        :func:`mocaplab.contacts.foot_contacts`).
+    flight_window : float, default 0.1
+        Seconds of ground frames around a flight adjusted as flight.
+    footplants : "auto", callable or None
+        How footplants are re-enforced after each step (see :func:`mocaplab.physics.touch_up`).
+    roles : mapping, optional
+        Joint-role overrides (:func:`mocaplab.roles.resolve_roles`).
+
+    Returns
+    -------
+    TouchUpState
+        ``index`` 0, the input's balance measured.
+
+    Raises
+    ------
+    ValueError
+        When no frame has a planted joint (nothing to balance, no take-off or
+        landing to fit a flight to) and when the clip has no frame between its
+        uncorrected ends (fewer than 7 frames at 30 fps, 21 at 120 fps:
+        :attr:`TouchUpState.edge_frames`).
+
+    Warns
+    -----
+    TouchUpWarning
+        About flights longer than :data:`LONG_FLIGHT`, feet that slide during
+        their contacts (more than :data:`SLIDE_WARNING` over a median contact:
+        the touch-up keeps the feet where the input has them, so plant them
+        first with :func:`mocaplab.editing.refinement.refine`) and ground
+        frames without a ZMP.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15").resample(30)[:60]
+    >>> state = ml.physics.start(walk, schedule="ground")
+    >>> state.index, state.next_adjustment.label
+    (0, 'ground: lower body (S2), upper body (S3)')
     """
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
@@ -380,7 +439,31 @@ def _check_input(motion: Motion, contacts: Contacts, bal: Balance, gpos: Array) 
 
 
 def step(state: TouchUpState) -> TouchUpState:
-    """Apply the next adjustment of the schedule: a new state (the input is untouched)."""
+    """Apply the next adjustment of the schedule: a new state (the input is untouched).
+
+    Parameters
+    ----------
+    state : TouchUpState
+        From :func:`start` or an earlier :func:`step`.
+
+    Returns
+    -------
+    TouchUpState
+        ``index`` one higher, labelled with the adjustment applied.
+
+    Raises
+    ------
+    TypeError
+        When ``state`` is not a TouchUpState.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15").resample(30)[:60]
+    >>> first = ml.physics.step(ml.physics.start(walk))
+    >>> first.index, first.label
+    (1, 'ground: lower body (S2), upper body (S3)')
+    """
     if not isinstance(state, TouchUpState):
         raise TypeError(f"Expected a TouchUpState (see mocaplab.physics.start), got {type(state).__name__}")
     adj = state.next_adjustment

@@ -137,7 +137,10 @@ ZMP_SLACK = 2e-3
 class TouchUpHistory:
     """Every state of a touch-up, index 0 the input.
 
-    Attributes
+    The per-step arrays (:attr:`errors`, :attr:`zmp_distance`, ...) are
+    computed once and read-only.
+
+    Parameters
     ----------
     states : tuple of TouchUpState
     stopped : str
@@ -146,8 +149,14 @@ class TouchUpHistory:
         the tolerance), ``"solved"`` (the error reached 0) or ``""`` (a
         history built from a session).
 
-    The per-step arrays (:attr:`errors`, :attr:`zmp_distance`, ...) are
-    computed once and read-only.
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> walk = ml.cmu("16_15").resample(30)[:60]
+    >>> state = ml.physics.start(walk)
+    >>> history = ml.physics.TouchUpHistory((state, ml.physics.step(state)))
+    >>> len(history.motions), history.stopped
+    (2, '')
     """
 
     states: tuple[TouchUpState, ...]
@@ -314,8 +323,16 @@ def touch_up(
 
     Examples
     --------
-    >>> history = touch_up(bent_walk)                          # doctest: +SKIP
-    >>> history.passes, history.stopped, history.errors[history.best]  # doctest: +SKIP
+    Two passes over two seconds of a walk: the mean ZMP distance outside the
+    support polygon (mm) before and after.
+
+    >>> import mocaplab as ml
+    >>> history = ml.physics.touch_up(ml.cmu("16_15").resample(30)[:60], iterations=2)
+    >>> history.passes, history.stopped
+    (2, 'iterations')
+    >>> before, after = history.mean_zmp_distance[[0, history.best]]
+    >>> round(1000 * float(before), 1), round(1000 * float(after), 1)
+    (12.5, 7.2)
     """
     iterations = integer(iterations, "iterations", low=0, why="passes over the schedule")
     if tol is not None:
@@ -453,6 +470,15 @@ class TouchUpSession:
     **options
         As for :func:`start` (``body``, ``schedule``, ``contacts``,
         ``flight_window``, ``footplants``, ``roles``).
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> session = ml.physics.TouchUpSession(ml.cmu("16_15").resample(30)[:60])
+    >>> session.forward().label
+    'ground: lower body (S2), upper body (S3)'
+    >>> session.back().index, session.index
+    (0, 0)
     """
 
     def __init__(self, motion: Motion, **options: object) -> None:

@@ -182,6 +182,11 @@ filters (whose widths are in seconds), got 10000.0: resample the clip first, e.g
 class NoContactsWarning(UserWarning):
     """Contact detection found no contact in a clip: no global evidence, an empty constraint layer.
 
+    Parameters
+    ----------
+    *args
+        The message, as for any warning.
+
     Examples
     --------
     >>> from mocaplab.staggered import NoContactsWarning

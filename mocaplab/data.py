@@ -1,6 +1,8 @@
 """CMU Graphics Lab motion capture clips, by trial id.
 
->>> walk = cmu("16_15")            # doctest: +SKIP
+>>> walk = cmu("16_15")
+>>> walk.n_frames, walk.fps
+(471, 120.0)
 >>> other = cmu("35_01")           # any trial of the CMU database  # doctest: +SKIP
 
 Which trials

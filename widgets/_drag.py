@@ -87,26 +87,6 @@ _STATUS_STYLE = "display:block; max-width:{px}px; white-space:normal; overflow-w
 #: One draggable handle: (constraint index, kind, position in data coordinates, shape (2,)).
 Handle = tuple[int, str, NDArray[np.float64]]
 
-#: Colours of characters 0, 1, ... (matplotlib's tab10 cycle).
-_TAB10 = (
-    "#1f77b4",
-    "#ff7f0e",
-    "#2ca02c",
-    "#d62728",
-    "#9467bd",
-    "#8c564b",
-    "#e377c2",
-    "#7f7f7f",
-    "#bcbd22",
-    "#17becf",
-)
-
-
-def character_colors(n: int) -> list[str]:
-    """Colours for ``n`` characters (the tab10 cycle, repeated)."""
-    return [_TAB10[k % len(_TAB10)] for k in range(n)]
-
-
 # --------------------------------------------------------------------------- canvas
 class CanvasView:
     """A matplotlib figure with an ipywidgets face.

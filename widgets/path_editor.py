@@ -88,7 +88,6 @@ from ._drag import (
     DragView,
     Handle,
     Marks,
-    character_colors,
     core_residual,
     frame_of,
     guarded,
@@ -97,8 +96,9 @@ from ._drag import (
     make_canvas,
     other_frame_of,
 )
+from .scene import character_colors
 
-__all__ = ["PathEditor", "make_canvas", "character_colors"]
+__all__ = ["PathEditor", "make_canvas"]
 
 
 def _tangent(path: NDArray[np.float64], i: int) -> NDArray[np.float64]:

@@ -32,6 +32,7 @@ Seen from where
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -44,8 +45,10 @@ from mocaplab.editing.paths import with_roles
 from mocaplab.motion import Motion
 
 __all__ = [
-    "COLORS",
     "FILL",
+    "TAB20",
+    "character_colors",
+    "srgb_to_lab",
     "Character",
     "Overlay",
     "OverlayData",
@@ -63,9 +66,113 @@ __all__ = [
     "tube_points",
 ]
 
-COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
+#: Matplotlib's tab20 colours, the dark ten (tab10) first: the first characters' colours everywhere.
+TAB20 = (
+    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf",
+    "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94", "#f7b6d2", "#c7c7c7", "#dbdb8d", "#9edae5",
+)  # fmt: skip
+#: The first characters' colours: tab20 less its light grey (#c7c7c7 is lost on the ground grid's #bbbbbb lines).
+_SEEDS = tuple(c for c in TAB20 if c != "#c7c7c7")
 # Share of the picture's area the characters' box may fill (the rest is margin).
 FILL = 0.9
+
+# sRGB (D65) to CIE XYZ, and the D65 white point (IEC 61966-2-1; CIE 15)
+_SRGB_TO_XYZ = np.array(
+    [[0.4124564, 0.3575761, 0.1804375], [0.2126729, 0.7151522, 0.0721750], [0.0193339, 0.1191920, 0.9503041]]
+)
+_WHITE_D65 = np.array([0.95047, 1.0, 1.08883])
+# the colours added after tab20: lightness and chroma (CIELAB) that read on the white page and the grey ground
+_LIGHTNESS = (30.0, 85.0)
+_MIN_CHROMA = 10.0
+_GRID_LEVELS = 18  # candidate sRGB colours: 18 levels per channel
+
+
+def srgb_to_lab(colors: ArrayLike | Sequence[str]) -> NDArray[np.float64]:
+    """CIELAB (D65) coordinates of sRGB colours: ``L`` in [0, 100], ``a``, ``b`` about [-128, 127].
+
+    Parameters
+    ----------
+    colors : sequence of str ("#rrggbb") or array_like, shape (..., 3)
+        Hex strings, or sRGB values in [0, 1].
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        ``(L, a, b)``; the CIE76 colour difference of two colours is the
+        Euclidean distance of their rows.
+
+    Examples
+    --------
+    >>> np.round(srgb_to_lab(["#ff0000"]), 2).tolist()
+    [[53.24, 80.09, 67.2]]
+    """
+    if isinstance(colors, (list, tuple)) and colors and all(isinstance(c, str) for c in colors):
+        bad = [c for c in colors if len(c) != 7 or c[0] != "#"]
+        if bad:
+            raise ValueError(f"Expected colours as '#rrggbb', got {bad[0]!r}")
+        rgb = np.array([[int(c[i : i + 2], 16) for i in (1, 3, 5)] for c in colors], dtype=float) / 255.0
+    else:
+        rgb = np.asarray(colors, dtype=float)
+    if rgb.shape[-1:] != (3,):
+        raise ValueError(f"Expected `colors` of shape (..., 3), got {rgb.shape}")
+    linear = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    xyz = linear @ _SRGB_TO_XYZ.T / _WHITE_D65
+    eps = (6.0 / 29.0) ** 3
+    f = np.where(xyz > eps, np.cbrt(xyz), xyz / (3 * (6.0 / 29.0) ** 2) + 4.0 / 29.0)
+    return np.stack([116.0 * f[..., 1] - 16.0, 500.0 * (f[..., 0] - f[..., 1]), 200.0 * (f[..., 1] - f[..., 2])], -1)
+
+
+@functools.lru_cache(maxsize=8)
+def _palette(count: int) -> tuple[str, ...]:
+    """The first ``count`` character colours (see :func:`character_colors`); a multiple of 80 is asked for."""
+    levels = np.linspace(0.0, 1.0, _GRID_LEVELS)
+    grid = np.stack(np.meshgrid(levels, levels, levels, indexing="ij"), axis=-1).reshape(-1, 3)
+    lab = srgb_to_lab(grid)
+    keep = (lab[:, 0] >= _LIGHTNESS[0]) & (lab[:, 0] <= _LIGHTNESS[1]) & (np.hypot(lab[:, 1], lab[:, 2]) >= _MIN_CHROMA)
+    grid, lab = grid[keep], lab[keep]
+    chosen = list(_SEEDS[:count])
+    # farthest-point sampling: each new colour is the candidate farthest (CIE76) from every colour chosen so far
+    nearest = np.min(np.linalg.norm(lab[:, None, :] - srgb_to_lab(list(_SEEDS))[None], axis=-1), axis=1)
+    while len(chosen) < count:
+        j = int(np.argmax(nearest))
+        chosen.append("#" + "".join(f"{round(255 * v):02x}" for v in grid[j]))
+        nearest = np.minimum(nearest, np.linalg.norm(lab - lab[j], axis=-1))
+    return tuple(chosen)
+
+
+def character_colors(n: int) -> list[str]:
+    """Distinct colours of ``n`` characters, the same in the 3D views and the matplotlib plots.
+
+    The first 19 are matplotlib's tab20 less its light grey (which vanishes
+    on the ground grid), tab10's dark ten first, so two or three characters
+    look as they always did; each further colour is the sRGB colour farthest
+    in CIELAB (CIE76) from all colours before it, among those light and
+    saturated enough to read on the white page and the grey ground.  Colour
+    ``k`` does not depend on ``n``.  Any two of the first 80 differ by a
+    CIE76 distance above 16 (tab20's own closest pair).
+
+    Parameters
+    ----------
+    n : int
+        How many characters (>= 0).
+
+    Returns
+    -------
+    list of str
+        ``"#rrggbb"`` colours.
+
+    Examples
+    --------
+    >>> character_colors(3)
+    ['#1f77b4', '#ff7f0e', '#2ca02c']
+    >>> len(set(character_colors(80)))
+    80
+    """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+        raise ValueError(f"Expected `n` to be an integer >= 0, got {n!r}")
+    count = 80 * max(1, -(-int(n) // 80))
+    return list(_palette(count)[: int(n)])
+
 
 OverlayData = ArrayLike | Sequence[ArrayLike] | Callable[[float], ArrayLike]
 OverlayKind = Literal["points", "lines", "polygon"]

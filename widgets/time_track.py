@@ -46,13 +46,13 @@ from ._drag import (
     DragView,
     Handle,
     Marks,
-    character_colors,
     core_residual,
     frame_of,
     is_a,
     kind_of,
     other_frame_of,
 )
+from .scene import character_colors
 
 __all__ = ["TimeTrackEditor"]
 

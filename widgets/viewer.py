@@ -150,7 +150,6 @@ from mocaplab.motion import Motion
 from . import vtkjs_page
 from ._controls import error_html
 from .scene import (
-    COLORS,
     Character,
     Overlay,
     OverlayData,
@@ -158,6 +157,7 @@ from .scene import (
     SphereSet,
     as_motions,
     box_corners,
+    character_colors,
     character_geometry,
     check_overlay_data,
     clock_of,
@@ -292,7 +292,9 @@ class MotionViewer:
     motions : Motion or sequence of Motion
         The characters; lengths and frame rates may differ.
     colors : sequence of str, optional
-        One colour per character (default a tab10-like cycle).
+        One colour per character, cycled (default
+        :func:`~mocaplab.widgets.scene.character_colors`: tab20, then colours
+        apart in CIELAB, distinct for at least 80 characters).
     labels : sequence of str, optional
         Names shown in the legend (default each motion's name).
     fps : float, optional
@@ -394,7 +396,7 @@ class MotionViewer:
         self.joint_radius = float(joint_radius)
         self.follow = bool(follow)
         self.end_sites = bool(end_sites)
-        self._colors = tuple(colors or COLORS)
+        self._colors = tuple(colors) if colors is not None else ()
         self._sides = 8
         self._spheres = sphere_set(self.joint_radius)
         self._small_spheres = sphere_set(self.joint_radius * 0.6, resolution=8)
@@ -480,7 +482,7 @@ class MotionViewer:
         if roles is not None and not isinstance(roles, Mapping):  # one per character
             roles = roles[k] if k < len(roles) else None
         pos, segs, path_joint = character_geometry(m, roles, end_sites=self.end_sites)
-        color = self._colors[k % len(self._colors)]
+        color = self._colors[k % len(self._colors)] if self._colors else character_colors(k + 1)[k]
         name = label if label is not None else (m.name or f"character {k}")
         return Character(m, color, str(name), pos, segs, path_joint)
 
@@ -520,16 +522,31 @@ class MotionViewer:
             actor.prop.interpolation = "gouraud"
 
     def legend_html(self) -> str:
-        """The legend (one coloured dot and escaped name per character); empty for one character."""
+        """The legend, grouped by name: each name once, after the coloured dots of its characters; empty for one.
+
+        Eight characters playing two clips read ``16_15 ●●●● 02_01 ●●●●``
+        (each dot's tooltip says which character it is), not the two names
+        eight times.  Names are HTML-escaped.
+        """
         if len(self.characters) < 2:
             return ""
-        items = "".join(
-            f"<span style='white-space:nowrap;margin-right:14px'>"
-            f"<span style='color:{html.escape(c.color, quote=True)};font-size:1.3em'>&#9679;</span> "
-            f"{html.escape(c.label)}</span> "
-            for c in self.characters
-        )
-        return f"<div style='display:flex;flex-wrap:wrap;align-items:center;line-height:1.6'>{items}</div>"
+        groups: dict[str, list[tuple[int, str]]] = {}
+        for k, c in enumerate(self.characters):
+            groups.setdefault(c.label, []).append((k, c.color))
+        items = []
+        for label, members in groups.items():
+            dots = "".join(
+                f"<span title='character {k}' style='color:{html.escape(color, quote=True)};font-size:1.3em'>"
+                "&#9679;</span>"
+                for k, color in members
+            )
+            count = f" ×{len(members)}" if len(members) > 1 else ""
+            wrap = "nowrap" if len(members) <= 10 else "normal"  # a long row of dots may wrap
+            items.append(
+                f"<span class='mocaplab-legend-group' style='white-space:{wrap};margin-right:14px'>"
+                f"{dots} {html.escape(label)}{count}</span> "
+            )
+        return f"<div style='display:flex;flex-wrap:wrap;align-items:center;line-height:1.6'>{''.join(items)}</div>"
 
     def _update_legend(self) -> None:
         if self._legend is not None:

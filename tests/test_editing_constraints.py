@@ -135,7 +135,7 @@ def test_end_effector_constraint_frames_mean_what_the_goal_layer_means():
         (lambda: PinPosition(0, None, (0, 0)), "give `frame`"),
         (lambda: PinPosition(0, position=(0, 0)), "got neither"),
         (lambda: PinPosition(0, 1, (0, 0), frames=(1, 5)), "not both"),
-        (lambda: PinPosition(0, -1, (0, 0)), "`frame` >= 0"),
+        (lambda: PinPosition(0, -1, (0, 0)), "`frame` to be an integer >= 0"),
         (lambda: PinPosition(0, 1, (0, np.nan)), "position"),
         (lambda: PinPosition(0, 1, (0, 0), weight=0.0), "weight"),
         (lambda: PinDirection(0, 1, (0.0, 0.0)), "non-zero"),

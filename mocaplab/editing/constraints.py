@@ -63,6 +63,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from .._checks import integer, real
 from ..goals import EndEffector
 
 __all__ = [
@@ -168,21 +169,15 @@ def _pair(value: Any, name: str) -> tuple[float, float]:
 
 
 def _scalar(value: Any, name: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"Expected `{name}` as a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"Expected a finite `{name}`, got {value!r}")
-    return v
+    """A finite real number (:func:`mocaplab._checks.real`: TypeError for a string or None, ValueError for NaN)."""
+    return real(value, name)
 
 
 def _index(value: Any, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"Expected `{name}` as an integer, got {type(value).__name__} {value!r}")
-    if value < 0:
-        raise ValueError(f"Expected `{name}` >= 0, got {value}")
-    return int(value)
+    """A frame or character index: an int >= 0 (a float, even 3.0, is a TypeError: indices are counted)."""
+    if isinstance(value, (float, np.floating)):
+        raise TypeError(f"Expected `{name}` to be an integer >= 0, got {type(value).__name__} {value!r}")
+    return integer(value, name, low=0)
 
 
 def _interval(value: Any, name: str, *, least: int = 2) -> tuple[int, int]:

@@ -70,6 +70,10 @@ polygon is built from them (:func:`mocaplab.physics.support_polygon`).
 
 Conventions are those of :mod:`mocaplab.motion`: metres, seconds, Y up,
 ground y = 0, kilograms.
+
+Longer than 800 lines because the body model, the table it is built from and
+the quantities of equations 1 and 2 share the link layout and the one
+smoothing rule, and each public function carries a runnable example.
 """
 
 from __future__ import annotations

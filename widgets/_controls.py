@@ -334,7 +334,12 @@ class ExportControl:
     ) -> None:
         self._motions = motions
         self._guard = guard or (lambda action: action())
-        self.path = W.Text(value=default, description="", layout=W.Layout(width="220px"))
+        self.path = W.Text(
+            value=default,
+            description="",
+            tooltip="file to write (relative to the notebook's folder); an existing file is kept, a numbered name used",
+            layout=W.Layout(width="220px"),
+        )
         self.path.add_class("mocaplab-export-path")
         self.button = W.Button(description="Export BVH", icon="download", tooltip="Write the edited motion as BVH")
         self.button.add_class("mocaplab-export")

@@ -276,6 +276,7 @@ class PathEditor(DragView):
             max=max(t1, t0 + 1e-6),
             step=self._time_step(),
             description="time (s)",
+            tooltip="the time marked on the paths (triangles) and shown in the 3D view",
             readout_format=".2f",
             continuous_update=True,
             layout=W.Layout(width="95%"),

@@ -204,36 +204,95 @@ class StaggeredExplorer:
     def _build_controls(self) -> None:
         ed = self.editor
         sk = ed.motion.skeleton
-        self.toggle = W.ToggleButton(value=ed.staggered, description="staggered", tooltip="refinements on/off")
+        self.toggle = W.ToggleButton(
+            value=ed.staggered,
+            description="staggered",
+            tooltip="staggered playback: the refinements on (off: they are zeroed, every joint keys at t_k)",
+        )
         self.toggle.add_class("mocaplab-staggered-toggle")
         slider = dict(continuous_update=False, style={"description_width": "110px"}, layout=W.Layout(width="330px"))
         self.s_slider = W.FloatSlider(
-            value=ed.s, min=-0.06, max=0.06, step=0.005, readout_format=".3f", description="succession s", **slider
+            value=ed.s,
+            min=-0.06,
+            max=0.06,
+            step=0.005,
+            readout_format=".3f",
+            description="succession s",
+            tooltip="timing offset per level of depth, s (positive: the extremities follow; negative: they lead)",
+            **slider,
         )
         self.s_slider.add_class("mocaplab-staggered-s")
-        self.l_slider = W.FloatSlider(value=ed.l, min=0.5, max=4.0, step=0.1, description="exponent l", **slider)
-        self.tau_slider = W.FloatSlider(
-            value=ed.tau, min=0.0, max=0.1, step=0.005, readout_format=".3f", description="random tau", **slider
+        self.l_slider = W.FloatSlider(
+            value=ed.l,
+            min=0.5,
+            max=4.0,
+            step=0.1,
+            description="exponent l",
+            tooltip="succession's nonlinearity (1: linear in the depth; larger loosens the extremities)",
+            **slider,
         )
-        self.limb_check = W.Checkbox(value=ed.random_by == "limb", description="random per limb", indent=False)
-        self.constraints_check = W.Checkbox(value=ed.constraints, description="feet planted", indent=False)
+        self.tau_slider = W.FloatSlider(
+            value=ed.tau,
+            min=0.0,
+            max=0.1,
+            step=0.005,
+            readout_format=".3f",
+            description="random tau",
+            tooltip="bound of the random timing offsets, s (0: none)",
+            **slider,
+        )
+        self.limb_check = W.Checkbox(
+            value=ed.random_by == "limb",
+            description="random per limb",
+            indent=False,
+            tooltip="one random offset per limb (off: one per joint variable)",
+        )
+        self.constraints_check = W.Checkbox(
+            value=ed.constraints,
+            description="feet planted",
+            indent=False,
+            tooltip="hold the feet where the input planted them (the contact constraint layer)",
+        )
         self.constraints_check.add_class("mocaplab-staggered-constraints")
         self.wr_slider = W.FloatSlider(
-            value=ed.w_r, min=-0.5, max=1.0, step=0.05, description="exaggerate w_r", **slider
+            value=ed.w_r,
+            min=-0.5,
+            max=1.0,
+            step=0.05,
+            description="exaggerate w_r",
+            tooltip="exaggeration away from the average pose (0: none; negative moves toward it)",
+            **slider,
         )
         self.count_slider = W.IntSlider(
-            value=ed.current.n_poses, min=2, max=ed.n_candidates, step=1, description="poses", **slider
+            value=ed.current.n_poses,
+            min=2,
+            max=ed.n_candidates,
+            step=1,
+            description="poses",
+            tooltip="how many staggered poses represent the clip (fewer: the least needed are culled)",
+            **slider,
         )
         self.joint_dropdown = W.Dropdown(
             options=list(ed.current.variables),
             value=ed.curve_joint,
             description="curves",
+            tooltip="the joint variable whose curves the plot shows",
             layout=W.Layout(width="260px"),
         )
         self.succession_dropdown = W.Dropdown(
-            options=list(sk.names), value=ed.joint, description="depth from", layout=W.Layout(width="260px")
+            options=list(sk.names),
+            value=ed.joint,
+            description="depth from",
+            tooltip="the joint the succession's depth is counted from (only its subtree moves)",
+            layout=W.Layout(width="260px"),
         )
-        self.pose_list = W.Select(options=[], rows=8, description="poses", layout=W.Layout(width="400px"))
+        self.pose_list = W.Select(
+            options=[],
+            rows=8,
+            description="poses",
+            tooltip="pick a pose: the 3D view jumps to its time t_k and overlays its non-staggered and true poses",
+            layout=W.Layout(width="400px"),
+        )
         edit = self._observer
         self.toggle.observe(edit(lambda v: self.editor.set_staggered(v)), names="value")
         self.s_slider.observe(edit(lambda v: self.editor.set_succession(s=v)), names="value")

@@ -115,10 +115,19 @@ class _Row:
         self.k = k
         # sent on Enter or leaving the box, not per keystroke (a half-typed name is no joint)
         self.s2 = W.Text(
-            value=", ".join(adj.s2), description="S2", continuous_update=False, layout=W.Layout(width="230px")
+            value=", ".join(adj.s2),
+            description="S2",
+            tooltip="S2, the links rotated: joint names (each with its descendants) or presets such as lower_body, "
+            "comma-separated; Enter applies",
+            continuous_update=False,
+            layout=W.Layout(width="230px"),
         )
         self.s3 = W.Text(
-            value=", ".join(adj.s3), description="S3", continuous_update=False, layout=W.Layout(width="200px")
+            value=", ".join(adj.s3),
+            description="S3",
+            tooltip="S3, links carried by S2 that keep their global orientation (empty in flight); Enter applies",
+            continuous_update=False,
+            layout=W.Layout(width="200px"),
         )
         self.sigma = W.BoundedFloatText(
             value=round(adj.sigma, 4),
@@ -126,6 +135,7 @@ class _Row:
             max=10.0,
             step=1 / 30,
             description="sigma (s)",
+            tooltip="width of the smoothing kernel of this adjustment's displacement map, in seconds",
             layout=W.Layout(width="170px"),
         )
         self.rho = W.FloatSlider(
@@ -134,10 +144,16 @@ class _Row:
             max=1.0,
             step=0.05,
             description="rho",
+            tooltip="damping: the share of the computed adjustment applied (1: all of it)",
             continuous_update=False,
             layout=W.Layout(width="250px"),
         )
-        self.stage = W.Dropdown(options=["ground", "flight"], value=adj.stage, layout=W.Layout(width="90px"))
+        self.stage = W.Dropdown(
+            options=["ground", "flight"],
+            value=adj.stage,
+            tooltip="which frames this adjustment corrects: ground (ZMP balance, s3.3) or flight (s3.4)",
+            layout=W.Layout(width="90px"),
+        )
         self.box = row([W.Label(f"{k + 1}."), self.s2, self.s3, self.sigma, self.rho, self.stage])
 
     def set(self, adj: Adjustment) -> None:
@@ -300,13 +316,26 @@ class TouchUpStepper:
         self.viewer_options = dict(viewer_options or {})
         self.viewer_updates = 0
 
-        self.back_button = W.Button(description="back", icon="step-backward", layout=W.Layout(width="90px"))
+        self.back_button = W.Button(
+            description="back",
+            icon="step-backward",
+            tooltip="Show the step before (the steps are kept: nothing is recomputed)",
+            layout=W.Layout(width="90px"),
+        )
         self.back_button.add_class(BACK_CLASS)
         self.step_button = W.Button(
-            description="step", icon="step-forward", button_style="primary", layout=W.Layout(width="90px")
+            description="step",
+            icon="step-forward",
+            button_style="primary",
+            tooltip="Apply the schedule's next adjustment (one step of the touch-up)",
+            layout=W.Layout(width="90px"),
         )
         self.step_button.add_class(STEP_CLASS)
-        self.iteration_button = W.Button(description="+1 iteration", layout=W.Layout(width="110px"))
+        self.iteration_button = W.Button(
+            description="+1 iteration",
+            tooltip="Run the whole schedule once more (one more pass of every adjustment)",
+            layout=W.Layout(width="110px"),
+        )
         self.reset_button = W.Button(
             description="reset",
             icon="refresh",

@@ -1172,6 +1172,7 @@ class MotionViewer:
             description=f"{self.time:.3f} s",
             continuous_update=True,
             style={"description_width": "72px"},
+            tooltip="the frame shown (drag or type a frame number); the label is its time on the clock",
             # a usable track (width less the time and the frame readout): at least 300 px wherever the viewer sits
             layout=w.Layout(flex="1 1 480px", min_width="480px", max_width="760px"),
         )

@@ -23,6 +23,8 @@ Examples
 [(1, 3), (4, 5)]
 >>> mask_from_intervals([(1, 3)], 4).tolist()
 [False, True, True, False]
+
+Longer than 800 lines because contact detection, the Contacts record, the one reader of ``contacts=`` and the floor estimate share the planted-sample logic, and each entry point carries a runnable example.
 """
 
 from __future__ import annotations

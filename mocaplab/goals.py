@@ -1207,7 +1207,7 @@ def _smooth_kinks(motion: Motion, out: Motion, goals: Sequence[Goal]) -> Motion:
     band[2, [0, -1]] = lam
     band[2, [1, -2]] = 5.0 * lam
     rot = np.array(out.rotations, copy=True)
-    for j in np.flatnonzero(moved & ~exact & (held.max(axis=1) > 0.0)):
+    for j in np.flatnonzero(moved & ~exact & (held.max(axis=1) > 0.0)).tolist():
         w = 1.0 + ((_KINK_SECONDS / _HELD_SECONDS) ** 4 - 1.0) * held[j] ** _HELD_POWER
         ab = band.copy()
         ab[2] += w

@@ -22,6 +22,8 @@ Conventions, written once for the whole package
 Both classes are frozen dataclasses whose arrays are private, read-only
 copies: no function in mocaplab mutates a Motion, every operation returns a
 new one.
+
+Longer than 800 lines because it holds the package's conventions, written once, beside the two classes every module uses and their examples.
 """
 
 from __future__ import annotations

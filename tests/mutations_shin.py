@@ -47,8 +47,42 @@ def no_flight_adjustment(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(state, "_flight_step", lambda posed, *args, **kwargs: posed)
 
 
+def _ground_adjustment_off_where(monkeypatch: pytest.MonkeyPatch, off: Callable[[object], bool]) -> None:
+    """The ground adjustments leave the motion as it is when ``off(balance)`` holds (the others run as ever)."""
+    from mocaplab.physics import state
+
+    real = state._ground_step
+
+    def step(posed, body, adj, sets, bal, *args, **kwargs):
+        return posed if off(bal) else real(posed, body, adj, sets, bal, *args, **kwargs)
+
+    monkeypatch.setattr(state, "_ground_step", step)
+
+
+def no_ground_adjustment_on_a_slope(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The ground adjustments are off on a sloped floor: lesson 09's uphill walk (section 4.4) is left as tilted.
+
+    The level walks of the lesson (the floor estimated at y = 0) are touched up as ever, so only the uphill
+    section's claims can fail.
+    """
+    from mocaplab.physics import zmp
+
+    _ground_adjustment_off_where(monkeypatch, lambda bal: not bal.__dict__.get("_ground", zmp._LEVEL).identity)
+
+
+def no_ground_adjustment_with_flights(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The ground adjustments are off on clips with flight frames: lesson 09's walk-to-jog (section 4.2) stays upright.
+
+    The walks of the lesson have no flight, so only the walk-to-jog section's claims can fail.
+    """
+    _ground_adjustment_off_where(monkeypatch, lambda bal: not bool(np.all(bal.ground)))
+
+
 CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
     (L08, no_horizontal_acceleration, "carry the ZMP away from the COM"),
     (L09, no_ground_adjustment, "one adjustment already helps"),
+    (L09, no_ground_adjustment_on_a_slope, "tilts the climber forward"),
+    (L09, no_ground_adjustment_with_flights, "leans forward while it speeds up"),
     (L10, no_flight_adjustment, "little swerve left in the air"),
+    (L10, no_ground_adjustment, "the landing gets a balancing action"),
 ]

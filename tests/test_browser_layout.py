@@ -25,11 +25,12 @@ Run: ``pytest -m browser tests/test_browser_layout.py``.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-from browser_support import LessonPage
+from browser_support import LessonPage, wait_until
 
 # the lab, the browser and the screenshots folder live there
 from test_browser import browser, lab, shots_dir  # noqa: F401 - fixtures are used by name
@@ -191,41 +192,90 @@ def measure(lesson: LessonPage, cls: str) -> dict[str, Any]:
     return lesson.page.evaluate(_MEASURE_JS, [cls, MIN_CONTROL_PX, TOUCH_PX])
 
 
-def test_editors_fit_a_laptop_with_the_file_browser_open(lab: Any, browser: Any, shots_dir: Path) -> None:  # noqa: F811
+@pytest.fixture(scope="module")
+def layout_page(lab: Any, browser: Any, shots_dir: Path) -> Iterator[LessonPage]:  # noqa: F811
+    """The layout notebook opened at the first size, all its cells run; closed after the module."""
     notebook = _notebook(lab.root_dir / "layout_check.ipynb")
     width, height = SIZES[0]
     context = browser.new_context(viewport={"width": width, "height": height})
     lesson = LessonPage(context, lab, notebook.name, shots_dir)
-    failures: list[str] = []
     try:
         lesson.open()
         lesson.run_all(timeout=300)
         lesson.wait_idle(settle=2.0)
-        for width, height in SIZES:
-            lesson.page.set_viewport_size({"width": width, "height": height})
-            browser_px = _open_file_browser(lesson)
-            lesson.page.wait_for_timeout(2000)  # JupyterLab lays the panels out again
-            for name in ("path", "time", "stepper", "explorer"):
-                cls = f"layout-{name}"
-                root = lesson.page.locator(f".{cls}").first
-                root.wait_for(timeout=60000)
-                root.scroll_into_view_if_needed()
-                lesson.page.wait_for_timeout(500)
-                m = measure(lesson, cls)
-                assert m["found"], f"{name}: no element with class {cls}"
-                lesson.screenshot(f"{width}x{height}-{name}")
-                print(
-                    f"\n{width}x{height} (file browser {browser_px:.0f} px, output {m['area_width']} px) {name}: "
-                    f"overflow {m['overflow']} px ({m['past']} elements past the edge), "
-                    f"squeezed {len(m['squeezed'])}, overlap {m['overlap_px2']} px2"
-                )
-                if m["overflow"] or m["squeezed"] or m["overlap_px2"]:
-                    failures.append(
-                        f"{width}x{height} {name}: overflow {m['overflow']} px over {m['past']} elements "
-                        f"{m['past_examples']}; squeezed {m['squeezed'][:8]}; overlap {m['overlap_px2']} px2 "
-                        f"{m['overlaps']}"
-                    )
+        yield lesson
     finally:
         lesson.close()
         context.close()
+
+
+def test_editors_fit_a_laptop_with_the_file_browser_open(layout_page: LessonPage) -> None:
+    lesson = layout_page
+    failures: list[str] = []
+    for width, height in SIZES:
+        lesson.page.set_viewport_size({"width": width, "height": height})
+        browser_px = _open_file_browser(lesson)
+        lesson.page.wait_for_timeout(2000)  # JupyterLab lays the panels out again
+        for name in ("path", "time", "stepper", "explorer"):
+            cls = f"layout-{name}"
+            root = lesson.page.locator(f".{cls}").first
+            root.wait_for(timeout=60000)
+            root.scroll_into_view_if_needed()
+            lesson.page.wait_for_timeout(500)
+            m = measure(lesson, cls)
+            assert m["found"], f"{name}: no element with class {cls}"
+            lesson.screenshot(f"{width}x{height}-{name}")
+            print(
+                f"\n{width}x{height} (file browser {browser_px:.0f} px, output {m['area_width']} px) {name}: "
+                f"overflow {m['overflow']} px ({m['past']} elements past the edge), "
+                f"squeezed {len(m['squeezed'])}, overlap {m['overlap_px2']} px2"
+            )
+            if m["overflow"] or m["squeezed"] or m["overlap_px2"]:
+                failures.append(
+                    f"{width}x{height} {name}: overflow {m['overflow']} px over {m['past']} elements "
+                    f"{m['past_examples']}; squeezed {m['squeezed'][:8]}; overlap {m['overlap_px2']} px2 "
+                    f"{m['overlaps']}"
+                )
     assert not failures, "widgets do not fit a laptop with the file browser open:\n" + "\n".join(failures)
+
+
+def _kernel_value(lesson: LessonPage, expression: str) -> Any:
+    out = lesson.kernel_eval(f"import json as _j; print('@@json@@' + _j.dumps({expression})); del _j")
+    found = [line[8:] for line in out.splitlines() if line.startswith("@@json@@")]
+    assert found, f"kernel said {out!r} to {expression}"
+    return json.loads(found[-1])
+
+
+def test_keys_reach_the_editor_from_the_plot(layout_page: LessonPage) -> None:
+    """After a click on the path editor's plot (ipympl gives it the focus), the arrows move its time, ctrl+z undoes."""
+    lesson = layout_page
+    page = lesson.page
+    root = page.locator(".layout-path").first
+    root.scroll_into_view_if_needed()
+    canvas = root.locator(".jupyter-matplotlib-canvas-div canvas").last
+    canvas.scroll_into_view_if_needed()
+    page.wait_for_timeout(300)
+    box = canvas.bounding_box()
+    assert box is not None
+    n = _kernel_value(lesson, "len(path_editor.editor.constraints)")
+    page.mouse.click(box["x"] + 0.85 * box["width"], box["y"] + 0.12 * box["height"])  # the focus: an empty spot
+    lesson.wait_idle()
+    focused = page.evaluate("() => document.activeElement ? document.activeElement.className : ''")
+    assert "jupyter-matplotlib-canvas-div" in focused, f"the click gave the focus to {focused!r}, not the plot"
+    assert _kernel_value(lesson, "len(path_editor.editor.constraints)") == n, "the click added no pin"
+    t0 = _kernel_value(lesson, "path_editor.time.value")
+    page.keyboard.press("ArrowRight")
+    page.keyboard.press("ArrowRight")
+    wait_until(lambda: _kernel_value(lesson, "path_editor.time.value") > t0, timeout=20, what="the time to move")
+    step = _kernel_value(lesson, "path_editor.time.step")
+    assert _kernel_value(lesson, "path_editor.time.value") == pytest.approx(t0 + 2 * step)
+    lesson.kernel_eval(
+        "path_editor.editor.drag(1, path_editor.editor.constraints[1].position + np.array([0.5, 0.0]));"
+        " path_editor.editor.checkpoint(); path_editor.refresh(); path_editor.history_buttons.sync()"
+    )
+    page.keyboard.press("Control+z")
+    wait_until(
+        lambda: _kernel_value(lesson, "path_editor.editor.can_undo") is False, timeout=20, what="ctrl+z to undo"
+    )
+    status = root.locator(".mocaplab-path-status").first.text_content() or ""
+    assert status.startswith("undid: moved hard pin at frame"), status

@@ -14,6 +14,7 @@ import os
 import re
 import traceback
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +25,7 @@ from mocaplab.motion import Motion
 
 __all__ = [
     "HistoryButtons", "ExportControl", "export_paths", "error_html", "ERROR_STYLE", "MAX_ERROR_TEXT", "row", "keep_width",
-    "export_name", "free_paths", "history_status",
+    "export_name", "free_paths", "history_status", "Shortcut", "bind_keys", "viewer_shortcuts",
 ]
 
 #: Widgets kept at their own width in a :func:`row`: controls (a squeezed one reads "..."), pictures and boxes.
@@ -176,6 +177,79 @@ def error_html(
         return f"<pre class='mocaplab-error' style='{ERROR_STYLE}'>an error occurred and could not be shown</pre>"
 
 
+@dataclass(frozen=True)
+class Shortcut:
+    """A keyboard shortcut of a widget: matplotlib key names, what the help line calls it, the action.
+
+    ``keys`` are matplotlib's names (``"ctrl+z"``, ``" "`` for space,
+    ``"left"``); ``shown`` is how the help line writes them.
+    """
+
+    keys: tuple[str, ...]
+    shown: str
+    label: str
+    action: Callable[[], object]
+
+
+def bind_keys(
+    canvas: Any, shortcuts: Sequence[Shortcut], *, guard: Callable[[Callable[[], object]], None] | None = None
+) -> str:
+    """Run each shortcut's action when its key is pressed over ``canvas``; returns the help line.
+
+    With ipympl the keys pressed while the plot has the focus (after a
+    click on it) reach the kernel as matplotlib key press events
+    (the Agg fallback gets no keys); matplotlib's own keys
+    there (``l`` log scale, ``s`` save, ``g`` grid, arrows through the zoom
+    history) are switched off, so a key never does something the widget
+    does not say.  Tests press keys with
+    ``canvas.callbacks.process("key_press_event", KeyEvent(...))``.
+
+    Parameters
+    ----------
+    canvas : matplotlib FigureCanvas
+    shortcuts : sequence of Shortcut
+    guard : callable, optional
+        Wraps each action (the widget's error display).
+
+    Returns
+    -------
+    str
+        ``"keys (click the plot first): ctrl+z undo · ..."`` (empty without shortcuts).
+    """
+    run = guard or (lambda action: action())
+    manager: Any = getattr(canvas, "manager", None)
+    default = getattr(manager, "key_press_handler_id", None)
+    if manager is not None and default is not None:
+        canvas.mpl_disconnect(default)
+        manager.key_press_handler_id = None
+    table = {key: s.action for s in shortcuts for key in s.keys}
+
+    def on_key(event: Any) -> None:
+        action = table.get(getattr(event, "key", None) or "")
+        if action is not None:
+            run(action)
+
+    canvas.mpl_connect("key_press_event", on_key)
+    if not shortcuts:
+        return ""
+    return "keys (click the plot first): " + " · ".join(f"{s.shown} {s.label}" for s in shortcuts)
+
+
+def viewer_shortcuts(viewer: Callable[[], Any]) -> list[Shortcut]:
+    """Space and the arrows press the play and step buttons of the 3D view ``viewer()`` (None: nothing)."""
+
+    def press(name: str) -> None:
+        button = getattr(viewer(), name, None)
+        if isinstance(button, W.Button) and not button.disabled:
+            button.click()
+
+    return [
+        Shortcut((" ",), "space", "play/pause", lambda: press("play")),
+        Shortcut(("left",), "\u2190", "frame back", lambda: press("back")),
+        Shortcut(("right",), "\u2192", "frame forward", lambda: press("forward")),
+    ]
+
+
 class HistoryButtons:
     """Undo, redo and reset buttons over an editor with ``undo``/``redo``/``reset``/``can_undo``/``can_redo``.
 
@@ -231,6 +305,18 @@ class HistoryButtons:
             self._after()
 
         self._guard(action)
+
+    def press(self, name: str) -> None:
+        """Undo, redo or reset (``name``) as its button does, when the button is enabled (a shortcut)."""
+        if not getattr(self, name).disabled:
+            self._run(name)
+
+    def shortcuts(self) -> list[Shortcut]:
+        """Ctrl+Z undoes, Ctrl+Y (or Ctrl+Shift+Z) redoes."""
+        return [
+            Shortcut(("ctrl+z",), "ctrl+z", "undo", lambda: self.press("undo")),
+            Shortcut(("ctrl+y", "ctrl+Z", "ctrl+shift+z"), "ctrl+y", "redo", lambda: self.press("redo")),
+        ]
 
     def sync(self) -> None:
         """Enable each button exactly when its action is possible."""

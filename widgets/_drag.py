@@ -73,7 +73,16 @@ from numpy.typing import NDArray
 
 from mocaplab import editing
 
-from ._controls import ExportControl, HistoryButtons, error_html, export_name, history_status, row
+from ._controls import (
+    ExportControl,
+    HistoryButtons,
+    Shortcut,
+    bind_keys,
+    error_html,
+    export_name,
+    history_status,
+    row,
+)
 
 Backend = Literal["auto", "ipympl", "agg"]
 
@@ -385,9 +394,14 @@ class DragView:
         self.canvas.mpl_connect("button_press_event", self._on_press)
         self.canvas.mpl_connect("motion_notify_event", self._on_motion)
         self.canvas.mpl_connect("button_release_event", self._on_release)
+        self.keys_help = bind_keys(self.canvas, self._shortcuts(), guard=self._guard)
         self._fit_view()
         self._redraw(final=True)
-        self._set_status(hint)
+        self._set_status(f"{hint} · {self.keys_help}" if self.keys_help else hint)
+
+    def _shortcuts(self) -> list[Shortcut]:
+        """The keyboard shortcuts of the plot (:func:`bind_keys`): ctrl+z undo, ctrl+y redo; subclasses add."""
+        return self.history_buttons.shortcuts()
 
     # -- editing
     def _apply(self, result: Any) -> None:

@@ -81,7 +81,7 @@ from mocaplab import editing
 from mocaplab.contacts import foot_contacts, intervals_from_mask
 from mocaplab.plot import literal
 
-from ._controls import row
+from ._controls import Shortcut, row, viewer_shortcuts
 from ._drag import (
     Backend,
     Drag,
@@ -572,6 +572,21 @@ class PathEditor(DragView):
         return None if np.linalg.norm(d) < 1e-12 else d
 
     @guarded
+    def _shortcuts(self) -> list[Shortcut]:
+        """Undo and redo, space plays the 3D view, the arrows move the time slider one frame."""
+        keys = super()._shortcuts()
+        if self.viewer is not None:
+            keys += viewer_shortcuts(lambda: self.viewer)[:1]
+        return keys + [
+            Shortcut(("left",), "\u2190", "earlier", lambda: self._step_time(-1)),
+            Shortcut(("right",), "\u2192", "later", lambda: self._step_time(+1)),
+        ]
+
+    def _step_time(self, steps: int) -> None:
+        """Move the time slider by ``steps`` of its step (clipped to its range)."""
+        slider = self.time
+        slider.value = float(np.clip(slider.value + steps * slider.step, slider.min, slider.max))
+
     def _on_time(self, change: dict[str, Any]) -> None:
         self._draw_now()
         self._sync_viewer_time()

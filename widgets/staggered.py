@@ -63,7 +63,16 @@ from mocaplab.motion import Motion
 from mocaplab.plot import literal
 from mocaplab.staggered import StaggeredEditor
 
-from ._controls import ExportControl, HistoryButtons, error_html, export_name, history_status, row
+from ._controls import (
+    ExportControl,
+    HistoryButtons,
+    bind_keys,
+    error_html,
+    export_name,
+    history_status,
+    row,
+    viewer_shortcuts,
+)
 from ._drag import TOOLBAR_PX, make_canvas
 
 __all__ = ["StaggeredExplorer", "params_change"]
@@ -196,6 +205,11 @@ class StaggeredExplorer:
         self._build_figure(backend)
         self.view_box = W.Box(layout=W.Layout(min_height="40px"))
         self.viewer: Any = None
+        # ctrl+z / ctrl+y undo and redo, space and the arrows play and step the 3D view
+        shortcuts = self.history.shortcuts() + viewer_shortcuts(lambda: self.viewer)
+        self.keys_help = bind_keys(self.canvas, shortcuts, guard=self._run)
+        self.help = W.HTML(f"<span style='color:#555; font-size:0.9em'>{html.escape(self.keys_help)}</span>")
+        self.help.add_class("mocaplab-keys-help")
         self.curves_info = W.HTML(value="", layout=W.Layout(display="none"))
         self.curves_info.add_class("mocaplab-staggered-curves")
         self._refresh_all(move_clock=True)
@@ -522,6 +536,7 @@ class StaggeredExplorer:
             self._box = W.VBox(
                 [
                     row([canvas, controls], align="flex-start"),
+                    self.help,
                     self.view_box,
                     self.status,
                     self.export.box,

@@ -56,7 +56,7 @@ from mocaplab.motion import Motion
 from mocaplab.physics import Adjustment, TouchUpSession
 from mocaplab.plot import literal
 
-from ._controls import ExportControl, error_html, export_name, row
+from ._controls import ExportControl, Shortcut, bind_keys, error_html, export_name, row, viewer_shortcuts
 from ._drag import TOOLBAR_PX
 
 __all__ = ["TouchUpStepper", "plot_zmp_distance", "plot_mean_distance", "plot_balance_top"]
@@ -381,6 +381,15 @@ class TouchUpStepper:
             + [r.box for r in self.rows]
         )
         plots = row([self._plot8.widget, self._plot9.widget], align="flex-start")
+        shortcuts = [
+            Shortcut(("right",), "\u2192", "step", self._press(self.step_button)),
+            Shortcut(("left", "ctrl+z"), "\u2190 or ctrl+z", "back", self._press(self.back_button)),
+            *viewer_shortcuts(lambda: self.viewer)[:1],
+        ]
+        for plot in (self._plot8, self._plot9):
+            self.keys_help = bind_keys(plot.canvas, shortcuts)
+        self.help = W.HTML(f"<span style='color:#555; font-size:0.9em'>{html.escape(self.keys_help)}</span>")
+        self.help.add_class("mocaplab-keys-help")
         self.widget = W.VBox(
             [
                 controls,
@@ -388,6 +397,7 @@ class TouchUpStepper:
                 self.step_label,
                 schedule,
                 plots,
+                self.help,
                 self._viewer_box,
                 self.status,
                 self.export.box,
@@ -432,6 +442,11 @@ class TouchUpStepper:
         if changes:
             self.session.set_adjustment(row.k, **changes)
             self._refresh(viewer=False)
+
+    @staticmethod
+    def _press(button: W.Button) -> Any:
+        """An action clicking ``button`` when it is enabled (a keyboard shortcut; the button's handler guards)."""
+        return lambda: None if button.disabled else button.click()
 
     def _guard(self, action: Any) -> None:
         try:

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mocaplab.widgets._constraints import constraint_change
 from mocaplab.widgets._controls import ExportControl, export_name, free_paths, history_status
-from mocaplab.widgets._drag import constraint_change
 from mocaplab.widgets.path_editor import PathEditor
 from mocaplab.widgets.staggered import params_change
 from mocaplab.widgets.time_track import TimeTrackEditor

@@ -81,6 +81,7 @@ from mocaplab import editing
 from mocaplab.contacts import foot_contacts, intervals_from_mask
 from mocaplab.plot import literal
 
+from ._constraints import core_residual, frame_of, is_a, kind_of, other_frame_of
 from ._controls import Shortcut, row, viewer_shortcuts
 from ._drag import (
     Backend,
@@ -88,13 +89,8 @@ from ._drag import (
     DragView,
     Handle,
     Marks,
-    core_residual,
-    frame_of,
     guarded,
-    is_a,
-    kind_of,
     make_canvas,
-    other_frame_of,
 )
 from .scene import character_colors
 

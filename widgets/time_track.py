@@ -40,17 +40,13 @@ from numpy.typing import NDArray
 from mocaplab import editing
 from mocaplab.plot import literal
 
+from ._constraints import core_residual, frame_of, is_a, kind_of, other_frame_of
 from ._drag import (
     Backend,
     Drag,
     DragView,
     Handle,
     Marks,
-    core_residual,
-    frame_of,
-    is_a,
-    kind_of,
-    other_frame_of,
 )
 from .scene import character_colors
 

@@ -679,8 +679,10 @@ def _stiffness(goal: Goal) -> Array:
     return np.ones(goal.n_frames) if goal.stiffness is None else goal.stiffness
 
 
-def _foot_targets(gpos: Array, ankle: int, g_ankle: Goal | None, toe: tuple[int, Goal] | None) -> Array:
-    """Ankle positions that plant the ankle and/or the toe (see solve_goals)."""
+def _foot_targets(
+    gpos: Array, ankle: int, g_ankle: Goal | None, toe: tuple[int, Goal] | None, fps: float, hip: int
+) -> Array:
+    """Ankle positions that plant the ankle and/or the toe (see solve_goals), ``hip`` the leg's upper joint."""
     a_cur = gpos[:, ankle]
     if g_ankle is None:
         wa = np.zeros(len(a_cur))
@@ -693,12 +695,16 @@ def _foot_targets(gpos: Array, ankle: int, g_ankle: Goal | None, toe: tuple[int,
     jt, gt = toe
     t_cur = gpos[:, jt]
     wt = gt.weights
-    # where the ankle is free, carry the foot rigidly toward the toe plant
-    target = target + ((1.0 - wa) * wt)[:, None] * (gt.targets - t_cur)
-    # then slide the ankle along the ankle -> toe-goal line so the foot's
-    # length fits, shared by stiffness k w / (1 - w): (nearly) all on the
-    # ankle when only the toe is planted (wt = 1), none when only the ankle
-    # is, by the goals' stiffness (stillness) when both are
+    # where the ankle is free, carry the foot rigidly toward the toe plant, by the toe's correction smoothed
+    # over a few frames: a captured toe joint can jitter by centimetres from frame to frame about a still
+    # ankle (CMU 05_02: 40 mm), and carried as it is that jitter moved the ankle, the knee and the hip with it
+    # (the slide below puts the ankle at the foot's length from the toe goal whatever the carry)
+    carry = _whittaker(gt.targets - t_cur, np.ones(len(t_cur)), fps * _CARRY_SECONDS)
+    target = target + ((1.0 - wa) * wt)[:, None] * carry
+    # then slide the ankle until the foot's length fits, shared by stiffness
+    # k w / (1 - w): (nearly) all on the ankle when only the toe is planted
+    # (wt = 1), none when only the ankle is, by the goals' stiffness
+    # (stillness) when both are
     toe_goal = _blend(t_cur, gt)
     length = np.linalg.norm(t_cur - a_cur, axis=-1)
     d = toe_goal - target
@@ -707,8 +713,54 @@ def _foot_targets(gpos: Array, ankle: int, g_ankle: Goal | None, toe: tuple[int,
     kt = wt * _stiffness(gt) / (1.0 - wt + _SOFT)
     den = ka + kt
     share = np.where(den > 1e-12, kt / np.maximum(den, 1e-12), 0.5)
-    shift = (dist - length) * share / np.maximum(dist, 1e-12)
-    return target + shift[:, None] * d
+    # along the ankle -> toe-goal line ...
+    along_line = target + ((dist - length) * share / np.maximum(dist, 1e-12))[:, None] * d
+    # ... or, better, across the leg (perpendicular to the hip -> ankle axis), where the slide changes the
+    # leg's reach least: a near-straight knee bends fast for a small change of reach, and the fit takes up
+    # whatever the toe goal's height does (it follows the captured toe's, jitter and all).  The line across
+    # the leg meets the sphere of the foot's length about the toe goal where the foot is not along the leg
+    # (the slide along the foot's line takes over, smoothly, as the foot turns toward the leg's axis)
+    axis = target - gpos[:, hip]
+    axis /= np.maximum(np.linalg.norm(axis, axis=-1), 1e-12)[:, None]
+    across = d - np.sum(d * axis, axis=-1)[:, None] * axis
+    across /= np.maximum(np.linalg.norm(across, axis=-1), 1e-12)[:, None]
+    b = np.sum(across * d, axis=-1)
+    disc = b**2 - dist**2 + length**2
+    step = b - np.sqrt(np.maximum(disc, 0.0))  # the nearer of the line's two points on the sphere
+    across_leg = target + (share * step)[:, None] * across
+    f = blend_ramp((disc / np.maximum(length**2, 1e-12) - _ACROSS_FADE[0]) / (_ACROSS_FADE[1] - _ACROSS_FADE[0]))
+    return f[:, None] * across_leg + (1.0 - f)[:, None] * along_line
+
+
+# How well the line across the leg must meet the foot's sphere (its discriminant over the foot's length
+# squared) for the ankle's slide to take it (_foot_targets): about where the foot is more than 8 to 18
+# degrees from the leg's axis.
+_ACROSS_FADE = (0.02, 0.1)
+# The time scale over which a free ankle's carry toward its toe plant is smoothed, seconds (_foot_targets).
+_CARRY_SECONDS = 0.05
+
+
+def _whittaker(values: Array, weights: Array, frames: float) -> Array:
+    """``values`` (F, k) refitted by a weighted second-difference (Whittaker) smoother, shape (F, k).
+
+    Minimises ``sum_i W_i |x_i - v_i|^2 + lam sum_i |x_{i-1} - 2 x_i + x_{i+1}|^2`` with
+    ``lam = frames^4 / 16``: with ``W = 1`` a smoother over about ``frames`` frames (it halves a
+    sine of period ``pi * frames`` frames), much less where ``W`` is large.  One banded solve.
+    """
+    n = len(values)
+    if n < 4 or frames <= 0.0:
+        return np.array(values, copy=True)
+    lam = frames**4 / 16.0
+    # lam D2^T D2 in banded upper form (second differences over frames)
+    ab = np.zeros((3, n))
+    ab[0, 2:] = lam
+    ab[1, 1:] = -4.0 * lam
+    ab[1, 1] = ab[1, -1] = -2.0 * lam
+    ab[2] = 6.0 * lam
+    ab[2, [0, -1]] = lam
+    ab[2, [1, -2]] = 5.0 * lam
+    ab[2] += weights
+    return solveh_banded(ab, weights[:, None] * values, check_finite=False)
 
 
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
@@ -963,8 +1015,8 @@ def _solve_goals(
     drop = np.zeros(n)
     if adjust_root and foot_joints:
         for ankle in foot_joints:
-            target = _foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle))
             u, m, e = limb_joints(sk, ankle)
+            target = _foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle), motion.fps, u)
             full = np.linalg.norm(gpos[:, m] - gpos[:, u], axis=-1) + np.linalg.norm(gpos[:, e] - gpos[:, m], axis=-1)
             # a leg may stay as straight as it already is (up to `max_reach`), else up to `reach`
             current = np.minimum(np.linalg.norm(gpos[:, e] - gpos[:, u], axis=-1), max_reach * full)
@@ -1003,7 +1055,10 @@ def _solve_goals(
         grot, gpos = _fk(rot, root, motion)
     if foot_joints:
         legs = [limb_joints(sk, ankle) for ankle in foot_joints]
-        targets = [_foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle)) for ankle in foot_joints]
+        targets = [
+            _foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle), motion.fps, leg[0])
+            for ankle, leg in zip(foot_joints, legs, strict=True)
+        ]
         ankles = np.array(list(toes), dtype=np.int64)
         tips = np.array([jt for jt, _ in toes.values()], dtype=np.int64)
         if len({j for leg in legs for j in leg}) == 3 * len(legs):
@@ -1155,6 +1210,9 @@ def enforce_goals(
 _KINK_SECONDS = 0.1
 _HELD_SECONDS = 0.01
 _HELD_POWER = 50
+# How far (metres) the smoother may move a held toe before the foot is turned back toward it: not at all
+# below the first, fully above the second.
+_TOE_SLACK = (0.002, 0.008)
 
 
 def _smooth_kinks(motion: Motion, out: Motion, goals: Sequence[Goal]) -> Motion:
@@ -1179,7 +1237,9 @@ def _smooth_kinks(motion: Motion, out: Motion, goals: Sequence[Goal]) -> Motion:
     toe, where the exact pass's correction is least smooth).  Only the legs are smoothed: joints above an end
     effector (a ``"limb"`` goal: a hand on its target, met exactly), joints
     above no goal and uncorrected joints are left as they are, and so is
-    the root's translation (its lowering is smooth already).
+    the root's translation (its lowering is smooth already).  Last, where
+    the smoother moved a fully held toe by more than 2 to 8 mm, the foot
+    turns about its ankle back toward where the exact pass put the toe.
     """
     n = motion.n_frames
     if n < 4 or not goals:
@@ -1197,22 +1257,28 @@ def _smooth_kinks(motion: Motion, out: Motion, goals: Sequence[Goal]) -> Motion:
             else:
                 held[j] = np.maximum(held[j], g.weights)
             j = int(sk.parents[j])
-    lam = (_KINK_SECONDS * motion.fps) ** 4 / 16.0
-    # lam D2^T D2 in banded upper form (second differences over frames)
-    band = np.zeros((3, n))
-    band[0, 2:] = lam
-    band[1, 1:] = -4.0 * lam
-    band[1, 1] = band[1, -1] = -2.0 * lam
-    band[2] = 6.0 * lam
-    band[2, [0, -1]] = lam
-    band[2, [1, -2]] = 5.0 * lam
     rot = np.array(out.rotations, copy=True)
     for j in np.flatnonzero(moved & ~exact & (held.max(axis=1) > 0.0)).tolist():
         w = 1.0 + ((_KINK_SECONDS / _HELD_SECONDS) ** 4 - 1.0) * held[j] ** _HELD_POWER
-        ab = band.copy()
-        ab[2] += w
-        x = solveh_banded(ab, w[:, None] * d[:, j], check_finite=False)
-        rot[:, j] = displace(motion.rotations[:, j], x)
+        rot[:, j] = displace(motion.rotations[:, j], _whittaker(d[:, j], w, _KINK_SECONDS * motion.fps))
+    # a planted toe goes back where the exact pass put it: the foot turns about its ankle by the shortest arc,
+    # on the frames its goal holds fully (w^50).  The smoother moves a held ankle by a millimetre or so, but
+    # the foot's own correction is as jittery as the captured foot it steadies (a toe that jumps 40 mm a frame
+    # about a still ankle, CMU 05_02), and smoothing it gave the toe back part of its jitter
+    toes = [(sk.index(g.joint), g) for g in goals if g.kind == "toe"]
+    feet = np.array([int(sk.parents[j]) for j, _ in toes], dtype=np.int64)
+    if toes and not np.all(exact[feet]):
+        grot, gpos = _fk(rot, out.root_positions, out)
+        tips = np.array([j for j, _ in toes], dtype=np.int64)
+        want = out.global_positions()[:, tips]
+        # only where the smoother moved a held toe off by more than a few millimetres (weighted smoothly):
+        # elsewhere the smoothed foot is kept, because it also took out the exact pass's own kinks
+        off = np.linalg.norm(gpos[:, tips] - want, axis=-1)
+        hold = np.stack([g.weights for _, g in toes], axis=1) ** _HELD_POWER * ~exact[feet]
+        hold = hold * blend_ramp((off - _TOE_SLACK[0]) / (_TOE_SLACK[1] - _TOE_SLACK[0]))
+        q = aim_deltas(gpos[:, feet], gpos[:, tips], want, weight=hold)
+        parent = grot[:, sk.parents[feet]]
+        rot[:, feet] = quat.normalize(quat.mul(quat.inv(parent), quat.mul(q, grot[:, feet])))
     return out.replace(rotations=_owned(rot))
 
 

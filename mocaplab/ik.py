@@ -100,6 +100,8 @@ _STRAIGHT_FADE = (1e-3, 4e-3)
 # A limb counts as bent on its hinge's side by the cosine between its bend
 # axis and the hinge, blended over this range (about 73 to 107 degrees).
 _SIDE_FADE = (-0.3, 0.3)
+# Below this sine of its bend (about 3 to 11.5 degrees) a limb with a hinge bends about the hinge, blended.
+_HINGE_FADE = (0.05, 0.2)
 
 
 def _ramp(x: Array, edges: tuple[float, float]) -> Array:
@@ -316,7 +318,9 @@ def two_bone_deltas(
         :func:`hinge_axes` estimates it from a clip.  The solution is
         continuous through straight: within about 0.2 degrees of straight
         (where the current bend axis is rounding noise) the bend blends into
-        one about the hinge.
+        one about the hinge; and a limb within about 3 degrees of straight
+        (blended out by 11.5, and by ``weight``) bends in the hinge's plane,
+        since a captured near-straight knee's own bend axis is noise.
     weight : array_like, shape (...,), optional
         How firmly the goal holds, in [0, 1] (default 1), used with
         ``hinge``: a limb bent against its hinge is carried to the hinge's
@@ -423,6 +427,22 @@ def two_bone_deltas(
             middle_delta[mixed] = _swivel_between(
                 middle_delta[mixed], bend(against)[mixed], u[mixed], v[mixed], hn[mixed], side[mixed]
             )
+    if hinge is not None:
+        # a nearly straight limb bends about its hinge: its own bend axis is noise there (a knee captured 2
+        # degrees from straight can swing its axis by 100 degrees in two frames, and a goal that bends it
+        # to 8 degrees would swing the knee across with it).  Blended by how straight the limb is (fully
+        # below about 3 degrees of flexion, not at all above about 11.5) and by the goal's weight, the
+        # bending direction swivels about the upper bone toward the hinge's plane at the same flexion: the
+        # limb is straightened, then bent to the new flexion about the hinge
+        loose = (1.0 - _ramp(sin_rel, _HINGE_FADE)) * w
+        if np.any(loose > 0.0):
+            lax = loose > 0.0
+            onto, _ = _unit(hn - _dot(hn, u)[..., None] * u / np.maximum(l1**2, _TINY)[..., None])
+            straighten = quat.normalize(_axis_angle(axis, flex))  # (axis is not unit where straight: flex is 0)
+            about = quat.mul(_axis_angle(onto, -flex_new), straighten)
+            mixed = np.array(middle_delta, copy=True)
+            mixed[lax] = _swivel_between(middle_delta[lax], about[lax], u[lax], v[lax], hn[lax], 1.0 - loose[lax])
+            middle_delta = mixed
     c1 = b + quat.rotate(middle_delta, v)
 
     # step 2: swing the limb toward the target (shortest arc)

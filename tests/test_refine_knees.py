@@ -91,3 +91,60 @@ def test_end_effector_arms_and_unheld_joints_are_left_exact(clip, monkeypatch):
     # the head is above no goal: untouched
     head = sk.index(sk.roles["head"]) if "head" in sk.roles else sk.index("Head")
     np.testing.assert_array_equal(out.rotations[:, head], raw.rotations[:, head])
+
+
+def test_a_jittery_toe_does_not_shake_the_leg(cmu):
+    # CMU 05_02's left toe jumps by up to 40 mm a frame about a still ankle (frames 150-180, toe planted, heel
+    # up, ankle free); the foot solve used to carry the ankle rigidly with it, 52 mm in one frame, knee and hip
+    # following
+    dance = cmu("05_02")[:960]
+    gs = foot_goals(dance, foot_contacts(dance))
+    sk = dance.skeleton
+    ankle, toe = sk.index("LeftFoot"), sk.index("LeftToeBase")
+    solved = goals.solve_goals(dance, gs).global_positions()
+    held = next(g for g in gs if g.joint == "LeftToeBase").weights >= 1.0
+    assert held[150:181].all()
+    assert (next(g for g in gs if g.joint == "LeftFoot").weights[150:181] == 0.0).all()
+    step = np.linalg.norm(np.diff(solved[150:181, ankle], axis=0), axis=-1)
+    jump = np.linalg.norm(np.diff(dance.global_positions()[150:181, toe], axis=0), axis=-1)
+    assert jump.max() > 0.03  # the input's toe does jump
+    assert step.max() < 0.025, step.max()  # 49 mm before; what is left follows the toe goal's jittery height
+    # and the toe is still on its plant's spot on the ground (its height goal follows the jittery toe's own)
+    target = next(g for g in gs if g.joint == "LeftToeBase").targets
+    np.testing.assert_allclose(solved[150:181, toe][:, [0, 2]], target[150:181][:, [0, 2]], atol=6e-3)
+
+
+def test_held_toes_drift_little_after_the_kink_smoothing(dance, monkeypatch):
+    gs = foot_goals(dance, foot_contacts(dance))
+    raw = _enforce(dance, gs, monkeypatch, smooth=False)
+    out = _enforce(dance, gs, monkeypatch, smooth=True)
+    sk = dance.skeleton
+    for g in gs:
+        if g.kind != "toe":
+            continue
+        j, held = sk.index(g.joint), g.weights >= 1.0
+        off = np.linalg.norm(out.global_positions()[held, j] - raw.global_positions()[held, j], axis=-1)
+        assert off.max() < 0.01, (g.joint, off.max())
+
+
+def test_a_nearly_straight_knee_bends_about_its_hinge():
+    # a knee 2 degrees from straight whose bend axis swings by 100 degrees over 11 frames (capture noise), asked
+    # to bend to about 8 degrees: it bends in its hinge's plane, so the knee does not swing across with the axis
+    from mocaplab import ik, quat
+
+    n = 11
+    hip, knee = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.55, 0.0])
+    swing = np.radians(np.linspace(0.0, 100.0, n))
+    axes = np.stack([np.sin(swing), np.zeros(n), -np.cos(swing)], axis=1)  # from -z toward +x
+    tilt = ik._axis_angle(axes, np.full(n, -np.radians(2.0)))
+    ankle = knee + quat.rotate(tilt, np.array([0.0, -0.45, 0.0]))
+    hinge = np.array([0.0, 0.0, 1.0])
+    target = hip + (ankle - hip) * 0.998
+    q_up, q_mid = ik.two_bone_deltas(hip, knee, ankle, target, hinge=hinge)
+    new_knee = hip + quat.rotate(q_up, knee - hip)
+    new_ankle = new_knee + quat.rotate(quat.mul(q_up, q_mid), ankle - knee)
+    np.testing.assert_allclose(new_ankle, target, atol=1e-9)
+    bend = np.cross(hip - new_knee, new_ankle - new_knee)
+    bend /= np.linalg.norm(bend, axis=1, keepdims=True)
+    assert np.degrees(np.arccos(np.clip(bend @ hinge, -1, 1))).max() < 10.0
+    assert np.linalg.norm(np.diff(new_knee, axis=0), axis=1).max() < 2e-3

@@ -8,8 +8,17 @@ import numpy as np
 import pytest
 
 from mocaplab import quat
-from mocaplab.staggered import StaggeredTimingWarning, delete_pose, edit_pose, extract, insert_pose, retime, succession
-from mocaplab.staggered.noise import filter_mask, jitter, orientation_filter
+from mocaplab.staggered import (
+    StaggeredTimingWarning,
+    delete_pose,
+    edit_pose,
+    exaggerate,
+    extract,
+    insert_pose,
+    retime,
+    succession,
+)
+from mocaplab.staggered.noise import filter_mask, jitter, orientation_filter, sharp_detail
 
 
 def angle(a, b):
@@ -56,9 +65,12 @@ def test_noise_layer_reproduces_the_clip(cmu) -> None:
     assert sm.rotation_noise is not None and sm.noise_u is not None
     assert sm.rotation_noise.shape == (walk.n_frames, walk.n_joints, 3)
     assert angle(sm.evaluate().rotations, walk.rotations).max() < 1e-9
-    # the other layers carry the filtered clip
+    # the splines and displacement maps carry the filtered clip, the sharp layer its sharp motions
     smooth = orientation_filter(walk.rotations, 0.03, walk.fps)
     assert angle(sm.evaluate(noise=False).rotations, smooth).max() < 1e-9
+    sharp = sharp_detail(walk.rotations, smooth, walk.skeleton, walk.fps)
+    assert np.array_equal(sm.rotation_sharp, sharp)  # on the frames, which are the displacement samples
+    assert 0.9 < np.all(sharp == 0.0, axis=-1).mean() < 1.0  # a walk: a few flicks (toes, fingers), the rest noise
     # still joints have no noise, so they stay skipped by evaluation
     st = sm.static_joints()
     assert st.any() and np.all(sm.rotation_noise[:, st] == 0.0)
@@ -114,3 +126,81 @@ def test_timing_edits_do_not_amplify_capture_noise(cmu) -> None:
         unfiltered = jitter(succession(extract(walk, filter_sigma=None), 0.03, 2.0).evaluate(), head)
     assert filtered < 1.5 * before
     assert unfiltered > 3.0 * before  # without the filter the decorrelated noise shows
+
+
+def angular_speed(motion, joint: str) -> np.ndarray:
+    """Local angular speed of one joint, degrees per second, shape (F - 1,)."""
+    q = motion.rotations[:, motion.skeleton.index(joint)]
+    return np.degrees(angle(q[:-1], q[1:])) * motion.fps
+
+
+@pytest.mark.parametrize(
+    ("trial", "joint"),
+    # the foot slapping down at the broad jump's landing, a dancer's toe flick, the foot at a run's jump
+    [("16_05", "RightFoot"), ("05_02", "RightToeBase"), ("127_21", "RightFoot")],
+)
+def test_a_sharp_motion_is_retimed_whole(cmu, trial: str, joint: str) -> None:
+    """Issue 25 item 3: a flick above the filter's band moves with its joint's knots, once, by the shift asked.
+
+    Before, the noise layer held the flick at the original time while the
+    filtered layers moved: the foot of 16_05 turned fastest at frame 188
+    (669 deg/s) and again at 202 (464 deg/s), against 1103 deg/s once in the capture.
+    """
+    clip = cmu(trial)
+    sm = extract(clip)
+    shift = 0.1
+    parent = clip.skeleton.names[clip.skeleton.parents[clip.skeleton.index(joint)]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StaggeredTimingWarning)
+        late = succession(sm, shift, 1.0, joint=parent)  # the joint's knots 100 ms later, its parent's in place
+    w0 = angular_speed(clip, joint)
+    w = angular_speed(late.evaluate(constraints=False), joint)
+    f0 = int(w0.argmax())  # the flick: the clip's fastest turn of that joint
+    n = int(round(shift * clip.fps))
+    window = slice(f0 - 2 * n, f0 + 3 * n)
+    peak = window.start + int(w[window].argmax())
+    assert abs(peak - (f0 + n)) <= 0.3 * n  # at the shifted time (within 30 %)
+    assert 0.8 < w[peak] / w0[f0] < 1.25  # whole, not split between two times
+    assert w[f0 - 2 : f0 + 3].max() < 0.3 * w[peak]  # and not also at the original time
+
+
+def test_capture_glitches_stay_on_the_pose_timing(cmu) -> None:
+    """A glitch that sequential joints cancel is noise, not a sharp motion: succession does not pull it apart.
+
+    16_11 has one at frame 398 (the pelvis, both hips and the lower back turn
+    about 10 degrees and back in a few frames, cancelling on their children) and
+    another in the neck (frame 515): moving every residual above 2 degrees
+    with its knots raised the head's jitter after a whole-body succession
+    from 1.07 to 1.49 times the capture's (above 1.5 degrees: 3.6 times).  In
+    the dance 05_02 the right upper arm twists 31 degrees and back in a few
+    frames and the hand takes it back (the wrist's path does not show it).
+    The sharp part is what reaches the ends of a joint's subtree.
+    """
+    glitches = {
+        "16_11": ((398, ["Hips", "LowerBack", "LeftUpLeg", "RightUpLeg"]), (515, ["Neck", "Neck1"])),
+        "05_02": ((659, ["RightArm", "RightHand"]),),  # a twist of the upper arm the hand takes back
+    }
+    for trial, cases in glitches.items():
+        clip = cmu(trial)
+        smooth = orientation_filter(clip.rotations, 0.03, clip.fps)
+        residual = np.degrees(angle(smooth, clip.rotations))
+        sharp = np.degrees(np.linalg.norm(sharp_detail(clip.rotations, smooth, clip.skeleton, clip.fps), axis=-1))
+        for frame, joints in cases:
+            js = [clip.skeleton.index(j) for j in joints]
+            assert residual[frame, js].min() > 8.0  # the glitch: 8 to 30 degrees and back within a few frames
+            assert sharp[frame - 5 : frame + 6, js].max() < 0.5  # noise: none of it is moved with the knots
+    walk = cmu("16_11")
+    head = walk.skeleton.roles["head"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StaggeredTimingWarning)
+        out = succession(extract(walk), 0.03, 2.0).evaluate()
+    assert jitter(out, head) < 1.25 * jitter(walk, head)
+
+
+def test_geometric_edits_leave_the_sharp_layer_alone(cmu) -> None:
+    """The sharp layer is detail, like the displacement maps: an exaggeration scales the knots, not a flick."""
+    sm = extract(cmu("16_05"))
+    assert sm.rotation_sharp is not None and np.any(sm.rotation_sharp != 0.0)
+    out = exaggerate(sm, 0.3)
+    assert np.array_equal(out.rotation_sharp, sm.rotation_sharp)
+    assert not np.allclose(out.rotation_values, sm.rotation_values)

@@ -45,7 +45,7 @@ from .fit import (
     gauss_newton_tangents,
     rotation_objective,
 )
-from .noise import jitter, orientation_filter
+from .noise import jitter, orientation_filter, sharp_detail
 from .representation import (
     ROOT_POSITION,
     TRANSLATION_SUFFIX,
@@ -82,6 +82,7 @@ __all__ = [
     "gauss_newton_tangents",
     "rotation_objective",
     "orientation_filter",
+    "sharp_detail",
     "jitter",
     "bezier",
     "quat_bezier",

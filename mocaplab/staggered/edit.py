@@ -685,13 +685,15 @@ def _true_layers(sm: StaggeredMotion, k: int) -> tuple[Array, Array, Array, Arra
     """Spline and displacement of every variable at ``t_k``: s_pos (P, 3), d_pos (P, 3), s_rot, D_rot (J, 4).
 
     ``D_rot`` is everything composed after the spline: the displacement
-    then the noise layer, ``exp(d) exp(n)``.
+    then the sharp and noise layers, ``exp(d) exp(h) exp(n)``.
     """
     t = np.array([sm.times[k]])
     k0, k1, tn = sm.locate(t)
     s_pos, s_rot = sm._spline_layers(k0, tn)
-    d_pos, d_rot = sm._displacement_layers(k0 + tn * (k1 - k0))
-    D = quat.mul(quat.exp(d_rot[0]), quat.exp(sm.noise_values(t)[0]))
+    u = k0 + tn * (k1 - k0)
+    d_pos, d_rot = sm._displacement_layers(u)
+    h = sm.sharp_values(u[:, 1 : sm.n_joints + 1])
+    D = quat.mul(quat.mul(quat.exp(d_rot[0]), quat.exp(h[0])), quat.exp(sm.noise_values(t)[0]))
     return s_pos[0], d_pos[0], s_rot[0], D
 
 

@@ -93,7 +93,7 @@ from ..motion import Motion
 from ..roles import resolve_roles
 from .constraints import ConstraintLayer
 from .features import NoContactsWarning, analyze, check_rates
-from .noise import FILTER_SIGMA, orientation_filter
+from .noise import FILTER_SIGMA, orientation_filter, sharp_detail
 from .representation import StaggeredMotion, casteljau, locate, next_active, pose_u, quat_bezier, translation_joints
 
 __all__ = [
@@ -637,7 +637,9 @@ def fit_representation(
         filtered by :func:`~mocaplab.staggered.noise.orientation_filter`
         (Gaussian sigma in seconds, default 0.03 s) and keep the rest as the
         noise layer on the pose timing (section 6, see
-        :mod:`mocaplab.staggered.noise`).  ``None`` or 0: no filter, no
+        :mod:`mocaplab.staggered.noise`), except its sharp motions
+        (:func:`~mocaplab.staggered.noise.sharp_detail`), kept as the sharp
+        layer, which moves with each joint's knots.  ``None`` or 0: no filter, no
         noise layer.
 
     Returns
@@ -676,13 +678,19 @@ def fit_representation(
         )
     act = np.ones((K, V), dtype=bool) if active is None else np.asarray(active, dtype=bool)
     captured = quat.unroll(motion.rotations, axis=0)
-    noise = None
+    noise = sharp = None
+    rotations = captured
     if filter_sigma:
         # section 6: the layers that timing edits move are fitted to filtered rotations
         rotations = orientation_filter(captured, float(filter_sigma), motion.fps)
-        noise = quat.log(quat.mul(quat.inv(rotations), captured))
-    else:
-        rotations = captured
+        # what the filter removed from a sharp motion moves with its joint's knots (the sharp layer, issue 25
+        # item 3); the capture noise stays on the pose timing
+        sharp = sharp_detail(captured, rotations, motion.skeleton, motion.fps, sigma=float(filter_sigma))
+        moved = np.any(sharp != 0.0, axis=-1, keepdims=True)
+        carried = np.where(moved, quat.mul(rotations, quat.exp(sharp)), rotations)
+        noise = quat.log(quat.mul(quat.inv(carried), captured))
+        if not moved.any():
+            sharp = None
     positions = np.asarray(motion.root_positions)[:, None]
     if T:
         positions = np.concatenate([positions, np.asarray(motion.translations)[:, list(tj)]], axis=1)
@@ -753,6 +761,7 @@ def fit_representation(
         translation_displacement=d_pos[:, 1:],
         noise_u=None if noise is None else pose_u(times, t),
         rotation_noise=noise,
+        rotation_sharp=sharp,
     )
 
 

@@ -77,8 +77,16 @@ layer ``n_i`` on the *pose timing* shared by all joints,
     u(t) = k + (t - t_k) / (t_{k+1} - t_k)   for t_k <= t < t_{k+1},
 
 so the clip is still reproduced exactly and the noise moves with the poses
-but not with the refinements (:mod:`mocaplab.staggered.noise`).  The true
-pose at ``t_k`` includes it; extreme values and editing knots do not.
+but not with the refinements (:mod:`mocaplab.staggered.noise`).  What the
+filter removed from a sharp motion (a flick faster than its band) is not
+noise: it is a *sharp layer* ``h_i`` sampled like the displacement maps, on
+each variable's own normalised time, so it moves with the variable's knots
+(:func:`~mocaplab.staggered.noise.sharp_detail`):
+
+    v_i(t) = s_i(t') (+) d_i(t') (+) h_i(t') (+) n_i(u(t)).
+
+Geometric edits leave it alone, as they leave the displacement maps.  The true
+pose at ``t_k`` includes both; extreme values include neither.
 
 Partial poses (section 6) control a subset of the variables: ``active[k, i]``
 says whether pose ``k`` has a knot for variable ``i``; a variable's spline
@@ -478,6 +486,10 @@ class StaggeredMotion:
     rotation_noise : ndarray, shape (M, J, 3), optional
         The noise layer (module notes): rotation vectors applied last,
         ``mul(v, exp(n))``.  ``None`` (with ``noise_u``): no noise layer.
+    rotation_sharp : ndarray, shape (N, J, 3), optional
+        The sharp layer (module notes): rotation vectors sampled at
+        ``sample_u`` like the displacement maps, applied after them.
+        ``None``: no sharp layer.
 
     Examples
     --------
@@ -513,6 +525,7 @@ class StaggeredMotion:
     rest_translations: Array | None = None
     noise_u: Array | None = None
     rotation_noise: Array | None = None
+    rotation_sharp: Array | None = None
 
     def __post_init__(self) -> None:
         J = self.skeleton.n_joints
@@ -594,6 +607,8 @@ class StaggeredMotion:
                 raise ValueError(f"Expected increasing `noise_u` (pose-index units), got {M} values")
             object.__setattr__(self, "noise_u", arr(nu, (M,), "noise_u"))
             object.__setattr__(self, "rotation_noise", arr(self.rotation_noise, (M, J, 3), "rotation_noise"))
+        if self.rotation_sharp is not None:
+            object.__setattr__(self, "rotation_sharp", arr(self.rotation_sharp, (N, J, 3), "rotation_sharp"))
         pr = np.full(K, np.nan) if self.priorities is None else np.array(self.priorities, dtype=float, copy=True)
         if pr.shape != (K,):
             raise ValueError(f"Expected `priorities` of shape ({K},), got {pr.shape}")
@@ -795,13 +810,13 @@ class StaggeredMotion:
         constraints : bool
             Apply the contact constraint layer if this object has one.
         noise : bool
-            Apply the noise layer if this object has one (False gives the
-            filtered motion the other layers carry).
+            Apply the sharp and noise layers if this object has them (False
+            gives the filtered motion the splines and displacement maps carry).
 
         Returns
         -------
         Motion
-            At ``fps``.  Rotations are ``s (+) d (+) n = mul(mul(s, exp(d)), exp(n))``,
+            At ``fps``.  Rotations are ``s (+) d (+) h (+) n``, ``mul(s, exp(d), exp(h), exp(n))``,
             the root position and the translation variables ``s + d``; the
             motion has ``translations`` (F, J, 3) when the source clip had them.
         """
@@ -888,10 +903,12 @@ class StaggeredMotion:
             return pos, rot
         k0, k1, tn = self.locate(t, staggered=staggered)
         s_pos, s_rot = self._spline_layers(k0, tn)
-        d_pos, d_rot = self._displacement_layers(k0 + tn * (k1 - k0))
+        u = k0 + tn * (k1 - k0)
+        d_pos, d_rot = self._displacement_layers(u)
         rot = quat.mul(s_rot, quat.exp(d_rot))
         if noise:
-            rot = self._add_noise(rot, t, np.arange(self.n_joints))
+            js = np.arange(self.n_joints)
+            rot = self._add_noise(self._add_sharp(rot, u[:, 1 : self.n_joints + 1], js), t, js)
         return s_pos + d_pos, rot
 
     def noise_values(self, t: ArrayLike, joints: ArrayLike | None = None) -> Array:
@@ -914,6 +931,25 @@ class StaggeredMotion:
         g0 = f[lo]
         return g0 + w[:, None, None] * (f[lo + 1] - g0)
 
+    def sharp_values(self, u: NDArray[Any], joints: ArrayLike | None = None) -> Array:
+        """The sharp layer at positions ``u`` (F, j), the joints' own columns of :meth:`locate`'s ``k0 + t' (k1 - k0)``.
+
+        Rotation vectors (F, j, 3), interpolated linearly between samples as
+        the displacement maps (zeros without a sharp layer); ``joints``
+        selects columns (default all).
+        """
+        js = np.arange(self.n_joints) if joints is None else np.asarray(joints, dtype=np.int64)
+        u = np.asarray(u, dtype=float)
+        if self.rotation_sharp is None:
+            return np.zeros((u.shape[0], js.size, 3))
+        return _interp_block(self.sample_u[:, 1 + js], self.rotation_sharp[:, js], u)
+
+    def _add_sharp(self, rot: Array, u: NDArray[Any], js: NDArray[np.int64]) -> Array:
+        """``rot (+) exp(h)`` for the joints ``js`` at their positions ``u`` (F, len(js))."""
+        if self.rotation_sharp is None or js.size == 0:
+            return rot
+        return quat.mul(rot, quat.exp(self.sharp_values(u, js)))
+
     def _add_noise(self, rot: Array, t: Array, js: NDArray[np.int64]) -> Array:
         """``rot (+) exp(n)`` for the joints ``js`` (rot has shape (F, len(js), 4))."""
         if self.rotation_noise is None or js.size == 0:
@@ -934,6 +970,8 @@ class StaggeredMotion:
             still = np.all(np.abs(self.rotation_displacement) < 1e-15, axis=(0, 2))
             if self.rotation_noise is not None:
                 still &= np.all(self.rotation_noise == 0.0, axis=(0, 2))
+            if self.rotation_sharp is not None:
+                still &= np.all(self.rotation_sharp == 0.0, axis=(0, 2))
             st = same & ident & still
             st = readonly(st)
             object.__setattr__(self, "_static", st)
@@ -942,7 +980,7 @@ class StaggeredMotion:
     def _compose_columns(
         self, t: Array, cols: NDArray[np.int64], *, staggered: bool = True, noise: bool = True
     ) -> tuple[Array, NDArray[np.int64], Array, NDArray[np.int64]]:
-        """Composition of a subset of variables at times ``t`` (the noise layer included unless ``noise=False``).
+        """Composition of a subset of variables at times ``t`` (the sharp and noise layers unless ``noise=False``).
 
         Returns positions (F, p, 3) with their indices into the position
         block (p,), rotations (F, r, 4) and their joint indices (r,).
@@ -966,7 +1004,7 @@ class StaggeredMotion:
         d_rot = _interp_block(self.sample_u[:, cols[rc]], self.rotation_displacement[:, js], u[:, rc])
         rot = quat.mul(s_rot, quat.exp(d_rot))
         if noise:
-            rot = self._add_noise(rot, t, js)
+            rot = self._add_noise(self._add_sharp(rot, u[:, rc], js), t, js)
         return s_pos + d_pos, ps, rot, js
 
     def _pose(self, k: int, which: str) -> tuple[Array, Array]:

@@ -87,7 +87,6 @@ KNOWN_DEFECTS: dict[tuple[str, str, str], str] = {
     ('motionmachine/animation', 'staggered', 'displacement'): 'the staggered constraint layer / exaggeration adds it (issue 25): displacement 339 -> 513 mm/frame at RightHandMiddle2',
     ('motionmachine/animation', 'staggered', 'angular_acceleration'): 'the staggered constraint layer / exaggeration adds it (issue 25): angular_acceleration 101 -> 343 rad/s^2 at RightHand',
     ('motionmachine/animation', 'staggered', 'hinge_flips'): 'the staggered constraint layer / exaggeration adds it (issue 25): hinge_flips 0 -> 2 frames at left_elbow',
-    ('optitrack_mda/test_optitrack', 'staggered', 'displacement'): 'the staggered constraint layer / exaggeration adds it (issue 25): displacement 16.9 -> 33.3 mm/frame at RightHand',
     ('optitrack_mda/test_optitrack', 'staggered', 'hinge_flips'): 'the staggered constraint layer / exaggeration adds it (issue 25): hinge_flips 0 -> 11 frames at right_elbow',
     ('perfume/A_test', 'bend', 'displacement'): 'the raw path edit moves a rigid stationary segment or turns the body in one frame (issue 23): displacement 41 -> 122 mm/frame at Hips',
     ('perfume/A_test', 'bend+refine', 'displacement'): "refinement's leg IK pops a knee or foot (issue 23 item 8): displacement 41 -> 122 mm/frame at Hips",
@@ -104,7 +103,6 @@ KNOWN_DEFECTS: dict[tuple[str, str, str], str] = {
     ('16_15', 'squeeze+refine', 'penetration'): 'refinement lowers the pelvis for a stance leg that cannot reach, pushing the swing foot under the floor (issue 23 item 8): penetration 1.31 -> 7.07 mm at frame 353',
     ('16_15', 'refine', 'angular_acceleration'): "refinement's foot goals ramp in before contact and the leg IK bends near-straight knees fast (issue 23 item 8): angular_acceleration 110 -> 358 rad/s^2 at LeftLeg",
     ('16_05', 'bend+refine+touch_up', 'skate_max'): 'the touch-up adds it (issue 24): the footplant goals fade out on the ground frames before take-off and the toes planted there slide: skate_max 1.97 -> 15.8 mm/frame at frame 130',
-    ('05_02', 'staggered', 'displacement'): 'the staggered constraint layer / exaggeration adds it (issue 25): displacement 48.2 -> 92 mm/frame at RightHandIndex1',
     ('05_02', 'staggered', 'hinge_flips'): 'the staggered constraint layer / exaggeration adds it (issue 25): hinge_flips 0 -> 16 frames at right_elbow',
 }
 

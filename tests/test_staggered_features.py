@@ -176,6 +176,27 @@ def test_refinements_from_local_peaks_within_bounds() -> None:
     # a peak closer to the neighbouring pose than to its own is ignored
     r2 = timing_refinements(sig, np.array([0, 100, 110, 199]), fps)
     assert r2[1, 0] == 0.0 and r2[2, 0] == pytest.approx(-0.02)
+    # so is one nearer its own pose but beyond a third of the gap (8 frames of 20; 6 is a third)
+    r3 = timing_refinements(sig, np.array([0, 100, 120, 199]), fps)
+    assert r3[1, 0] == 0.0
+    sig[106, 0] = 1.0
+    assert timing_refinements(sig, np.array([0, 100, 120, 199]), fps)[1, 0] == pytest.approx(0.06)
+
+
+@pytest.mark.parametrize("trial", ["16_15", "05_02", "49_03"])
+def test_knots_of_a_variable_are_a_third_of_the_pose_gap_apart(cmu, trial: str) -> None:
+    """Issue 25: consecutive knots of one variable at least a third of their poses' gap apart, at any rate.
+
+    With knots only nearer their own pose than the neighbours', the walk had
+    right-arm knots 42 ms apart between poses 308 ms apart.
+    """
+    m = cmu(trial)
+    for fps in (120.0, 30.0):
+        clip = m if fps == m.fps else m.resample(fps)
+        sm = extract(clip)
+        knots = sm.knot_times
+        gaps = np.diff(knots, axis=0) / np.diff(sm.times)[:, None]
+        assert gaps.min() >= 1.0 / 3.0 - 1e-9, (fps, gaps.min())
 
 
 def test_trails_cover_children_and_end_sites(cmu) -> None:

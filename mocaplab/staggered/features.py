@@ -29,7 +29,8 @@ The pipeline, one function per step:
    candidates at the *distinct* local maxima of ``P`` plus the first and
    last frames (see "Sparse poses" below); priorities
    ``w_k = P(t_k) (t_{k+1} - t_{k-1})``; culling by count, by fraction or
-   by a time interval.
+   by a time interval, greedily (the lowest priority goes, its neighbours'
+   priorities are recomputed, and so on).
 7. :func:`timing_refinements`: for each pose and variable, the highest local
    maximum of ``p_i`` within 0.25 s of the pose time and within a third of
    the gap to either neighbouring pose (so a variable's knots stay at least
@@ -92,6 +93,7 @@ the filter (:mod:`~mocaplab.staggered.noise`) and the fit
 from __future__ import annotations
 
 import dataclasses
+import heapq
 from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
@@ -583,11 +585,21 @@ def cull_poses(
 ) -> NDArray[np.int64]:
     """Keep the highest-priority candidates (section 4.1, 'Prioritized Pose Extraction').
 
+    Greedy: the interior pose of lowest priority goes first, and its two
+    neighbours' priorities are recomputed before the next one goes.  A
+    priority ``w_k = P(t_k) (t_{k+1} - t_{k-1})`` depends on the neighbours,
+    so removing a pose raises theirs; ranking once by the candidates'
+    priorities instead removed runs of neighbours together (the hops 49_03
+    with ``max_poses=4`` kept no pose for 10.4 of its 12.5 s; greedily the
+    longest stretch is 5.1 s, with 6 poses 6.7 -> 3.5 s).
+
     Parameters
     ----------
     frames : ndarray of int, shape (C,)
         Candidate frames, sorted, first and last frames included.
     priorities : ndarray, shape (C,)
+        ``w_k`` of the candidates, neighbours taken in ``frames``
+        (:func:`pose_priorities`); ``P(t_k)`` is recovered from them.
     fps : float
     max_poses : int, optional
         Keep at most this many poses in total (first and last included, so
@@ -601,10 +613,25 @@ def cull_poses(
     -------
     ndarray of int, shape (K,)
         Kept frames, sorted; the first and last frames always.
+
+    Examples
+    --------
+    Two strong poses and a weak one near the start of a long clip: the weak
+    one goes first, which widens the span (and the priority) of the pose
+    beside it, so of the two strong ones the one nearer the middle stays
+    (ranked once by the candidates' priorities, 10 and 20 tie and 10 stays):
+
+    >>> import numpy as np
+    >>> P = np.zeros(101)
+    >>> P[[10, 20, 30]] = [1.0, 1.0, 0.2]
+    >>> frames = np.array([0, 10, 20, 30, 100])
+    >>> cull_poses(frames, pose_priorities(P, frames, 1.0), 1.0, max_poses=3).tolist()
+    [0, 20, 100]
     """
     frames = np.asarray(frames, dtype=np.int64)
-    keep = np.ones(frames.size, dtype=bool)
-    interior = np.arange(frames.size)[1:-1]
+    C = frames.size
+    keep = np.ones(C, dtype=bool)
+    interior = np.arange(C)[1:-1]
     if interval is not None:
         t0, t1 = (float(v) for v in interval)
         if not t0 <= t1:
@@ -619,8 +646,41 @@ def cull_poses(
     if max_poses is not None:
         max_poses = integer(max_poses, "max_poses", low=2, why="the first and last frames and the poses between")
         n_keep = min(n_keep, max_poses - 2)
-    order = interior[np.argsort(-priorities[interior], kind="stable")]
-    keep[order[n_keep:]] = False
+    if n_keep >= interior.size:
+        return frames[keep]
+    t = frames / float(fps)
+    w = np.asarray(priorities, dtype=float)
+    strength = np.zeros(C)  # P(t_k), from w_k over the candidates' own spans
+    if C > 2:
+        strength[1:-1] = w[1:-1] / (t[2:] - t[:-2])
+    alive = np.flatnonzero(keep)
+    prev = np.full(C, -1)
+    nxt = np.full(C, -1)
+    prev[alive[1:]] = alive[:-1]
+    nxt[alive[:-1]] = alive[1:]
+
+    def priority(k: int) -> float:
+        return float(strength[k] * (t[nxt[k]] - t[prev[k]]))
+
+    # a heap with lazy deletion: an entry is current while its priority is the pose's own; on ties the later
+    # pose goes first, so the earlier stays (the order of a stable ranking)
+    current = {int(k): priority(int(k)) for k in interior}
+    heap = [(p, -k) for k, p in current.items()]
+    heapq.heapify(heap)
+    for _ in range(interior.size - n_keep):
+        while True:
+            p, neg = heapq.heappop(heap)
+            k = -neg
+            if current.get(k) == p:
+                break
+        del current[k]
+        keep[k] = False
+        a, b = int(prev[k]), int(nxt[k])
+        nxt[a], prev[b] = b, a
+        for n in (a, b):
+            if n in current:
+                current[n] = priority(n)
+                heapq.heappush(heap, (current[n], -n))
     return frames[keep]
 
 

@@ -204,3 +204,20 @@ def test_geometric_edits_leave_the_sharp_layer_alone(cmu) -> None:
     out = exaggerate(sm, 0.3)
     assert np.array_equal(out.rotation_sharp, sm.rotation_sharp)
     assert not np.allclose(out.rotation_values, sm.rotation_values)
+
+
+def test_no_sharp_detail_at_the_clip_ends() -> None:
+    """Within the filter's half-width of the ends the residual is its end condition: the weight fades to 0 there."""
+    from mocaplab.motion import Skeleton
+
+    sk = Skeleton(["hip", "knee", "foot"], [-1, 0, 1], [[0, 1, 0], [0, -0.5, 0], [0, -0.5, 0]])
+    t = np.arange(120) / 120.0
+    q = np.tile([0.0, 0.0, 0.0, 1.0], (120, 3, 1))
+    bump = np.exp(-0.5 * ((t[:, None] - np.array([0.01, 0.5, 0.98])) / 0.01) ** 2).sum(axis=1)
+    q[:, 1] = quat.from_axis_angle([1, 0, 0], np.radians(40.0) * bump)  # the knee flicks at both ends and mid-clip
+    smooth = orientation_filter(q, 0.03, 120.0)
+    sharp = np.degrees(np.linalg.norm(sharp_detail(q, smooth, sk, 120.0)[:, 1], axis=-1))
+    residual = np.degrees(angle(smooth[:, 1], q[:, 1]))
+    assert residual[[1, 118]].min() > 10.0  # at the ends the residual is as large as mid-clip's
+    assert sharp[[0, -1]].max() == 0.0 and sharp[:3].max() < 0.2 * residual[:3].max()
+    assert sharp[60] == pytest.approx(residual[60])  # mid-clip the whole flick is sharp

@@ -195,7 +195,14 @@ def sharp_detail(
     3. its local RMS over a Gaussian of ``sigma`` seconds, ``e_j``, gives the
        weight ``g_j = blend_ramp((e_j - lo) / (hi - lo))`` with
        ``(lo, hi) = angles``;
-    4. the sharp detail is ``g_j n_j``.
+    4. the sharp detail is ``g_j n_j``, faded in and out with a
+       :func:`~mocaplab.displacement.blend_ramp` over the mask's half-width
+       (3 sigma) at the clip's ends, where the residual is the filter's end
+       condition (the orientation held beyond them) as much as motion, and
+       where the first and last poses never move.  (The CMU run 09_06 ends on
+       finger jitter of 10 to 16 degrees; carried with the fingers' knots
+       into a last segment a strong arm succession squeezes, it doubled
+       their angular acceleration.)
 
     :func:`~mocaplab.staggered.fit_representation` keeps it as the sharp
     layer, which moves with each variable's knots, and leaves the rest on
@@ -268,6 +275,11 @@ def sharp_detail(
     mask = filter_mask(sigma, fps)
     e = np.sqrt(np.maximum(correlate1d(a * a, mask, axis=0, mode="nearest"), 0.0))
     g = blend_ramp((e - lo) / (hi - lo))
+    # near the clip's ends the residual is the filter's end condition (the orientation held beyond them) as much
+    # as motion, and the first and last poses never move: the weight fades in over the mask's half-width
+    half = (mask.size - 1) // 2
+    edge = np.minimum(np.arange(q.shape[0]), np.arange(q.shape[0])[::-1])
+    g = g * blend_ramp(edge / half)[:, None]
     return np.where(g[..., None] > 0.0, g[..., None] * n, 0.0)
 
 

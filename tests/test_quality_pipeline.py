@@ -84,7 +84,6 @@ KNOWN_DEFECTS: dict[tuple[str, str, str], str] = {
     ('bvhtoolbox/walk01', 'bend+refine', 'angular_acceleration'): "refinement's foot goals ramp in before contact and the leg IK bends near-straight knees fast (issue 23 item 8): angular_acceleration 59.7 -> 303 rad/s^2 at RightLeg",
     ('bvhtoolbox/walk01', 'refine', 'angular_acceleration'): "refinement's foot goals ramp in before contact and the leg IK bends near-straight knees fast (issue 23 item 8): angular_acceleration 59.7 -> 198 rad/s^2 at RightLeg",
     ('bvhtoolbox/walk01', 'staggered', 'angular_acceleration'): 'the staggered constraint layer / exaggeration adds it (issue 25): angular_acceleration 6.05 -> 34.8 rad/s^2 at LeftHand',
-    ('motionmachine/animation', 'staggered', 'displacement'): 'the staggered constraint layer / exaggeration adds it (issue 25): displacement 339 -> 513 mm/frame at RightHandMiddle2',
     ('motionmachine/animation', 'staggered', 'angular_acceleration'): 'the staggered constraint layer / exaggeration adds it (issue 25): angular_acceleration 101 -> 343 rad/s^2 at RightHand',
     ('motionmachine/animation', 'staggered', 'hinge_flips'): 'the staggered constraint layer / exaggeration adds it (issue 25): hinge_flips 0 -> 2 frames at left_elbow',
     ('optitrack_mda/test_optitrack', 'staggered', 'hinge_flips'): 'the staggered constraint layer / exaggeration adds it (issue 25): hinge_flips 0 -> 11 frames at right_elbow',

@@ -108,6 +108,46 @@ def test_large_succession_warns_and_keeps_knots_ordered(walk_sm) -> None:
     assert out.evaluate().n_frames == sm.n_frames
 
 
+@pytest.mark.parametrize(("trial", "moved", "knee"), [("16_15", 6.64, 29.3), ("49_03", 9.20, 6.56)])
+def test_strong_succession_keeps_a_third_of_every_segment(cmu, trial: str, moved: float, knee: float) -> None:
+    """Issue 25: s = 0.03, l = 2 (within the explorer's sliders) no longer presses the last segments into a frame.
+
+    Pushed knots stop a third of their poses' gap before their neighbour
+    (they stopped one frame short): the worst joint's largest one-frame move
+    and the knees' peak angular acceleration, as ratios to the input's, were
+    ``moved`` and ``knee``.
+    """
+    clip = cmu(trial)
+    sm = extract(clip)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StaggeredTimingWarning)
+        out = succession(sm, 0.03, 2.0)
+    gaps = np.diff(out.knot_times, axis=0)
+    assert np.all(gaps >= np.minimum(np.diff(sm.times)[:, None] / 3.0, np.diff(sm.knot_times, axis=0)) - 1e-9)
+    move = quality.displacement(out.motion) / np.maximum(quality.displacement(clip), 1e-9)
+    knees = [clip.skeleton.index(clip.skeleton.roles[r]) for r in ("left_knee", "right_knee")]
+    acc = quality.angular_acceleration(out.motion)[knees].max() / quality.angular_acceleration(clip)[knees].max()
+    assert move.max() < 2.5 < moved
+    assert acc < 2.0 < knee
+
+
+def test_keep_knot_order_never_separates_knots_the_edit_left_alone(walk_sm) -> None:
+    """A pair of knots already nearer than a third of their poses' gap stays as it is when the edit does not move it."""
+    _, sm = walk_sm
+    r = np.array(sm.refinements)
+    j = 5
+    r[2, j] = 0.45 * (sm.times[3] - sm.times[2])  # pose 2's knot near pose 3's
+    r[3, j] = -0.45 * (sm.times[3] - sm.times[2])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StaggeredTimingWarning)
+        close = sm.with_refinements(r)
+    assert np.array_equal(keep_knot_order(close, r), np.where(close.active, r, 0.0))
+    pushed = np.array(r)
+    pushed[2, j] += 0.2  # now past pose 3's knot: stopped at the pair's former gap, not pushed further
+    T = sm.times + keep_knot_order(close, pushed)[:, j]
+    assert T[3] - T[2] == pytest.approx(0.1 * (sm.times[3] - sm.times[2]))
+
+
 def test_crossing_knots_are_rejected(walk_sm) -> None:
     _, sm = walk_sm
     r = np.array(sm.refinements)

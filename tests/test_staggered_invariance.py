@@ -211,6 +211,26 @@ def test_retiming_keeps_the_travel_below_a_static_root(clips) -> None:
     assert np.array_equal(out.translations[:, 2:], np.broadcast_to(mb.translations[0, 2:], out.translations[:, 2:].shape))
 
 
+def test_translation_channels_varying_by_float_noise_are_constant(cmu) -> None:
+    """Issue 25: channels that move by 1e-12 to 1e-7 m (an exporter's float noise) are no control variables."""
+    m = static_root(cmu("16_15")[:240])
+    tr = np.array(m.translations)
+    rng = np.random.default_rng(3)
+    noise = {5: 1e-12, 9: 1e-9, 14: 1e-7}  # joint: amplitude (m)
+    for j, a in noise.items():
+        tr[:, j] += rng.uniform(-a, a, size=(tr.shape[0], 3))
+    tr[:, 20] += np.linspace(0.0, 0.02, tr.shape[0])[:, None]  # a joint that really slides, 2 cm
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        noisy = m.replace(translations=tr)
+        sm = extract(noisy, max_poses=8, optimize=False)
+    assert sm.translation_joints == (1, 20)  # the pelvis' travel and the slide; the noisy channels are constant
+    assert np.array_equal(sm.rest_translations, tr[0])
+    out = sm.evaluate()
+    assert np.abs(out.translations - tr).max() < 2e-7  # within the noise: each channel at its first frame
+    assert np.abs(out.global_positions() - noisy.global_positions()).max() < 1e-6
+
+
 def test_every_joint_translated(cmu) -> None:
     """A clip whose translation channels all move: every one is a variable, and reproduced."""
     m = static_root(cmu("16_15")[:240])

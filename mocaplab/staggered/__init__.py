@@ -49,6 +49,7 @@ from .noise import jitter, orientation_filter, sharp_detail
 from .representation import (
     ROOT_POSITION,
     TRANSLATION_SUFFIX,
+    TRANSLATION_TOLERANCE,
     StaggeredMotion,
     StaggeredTimingWarning,
     bezier,
@@ -63,6 +64,7 @@ from .representation import (
 __all__ = [
     "ROOT_POSITION",
     "TRANSLATION_SUFFIX",
+    "TRANSLATION_TOLERANCE",
     "translation_joints",
     "constraint_joints",
     "default_joint",

@@ -143,6 +143,7 @@ __all__ = [
     "variable_names",
     "translation_joints",
     "TRANSLATION_SUFFIX",
+    "TRANSLATION_TOLERANCE",
     "locate",
     "next_active",
     "casteljau",
@@ -158,6 +159,10 @@ ROOT_POSITION = "root_position"
 
 TRANSLATION_SUFFIX = ".position"
 """Suffix of the names of the translation variables (``"Hips.position"``)."""
+
+TRANSLATION_TOLERANCE = 1e-6
+"""Metres: a translation channel that never moves farther than this from its first frame is constant
+(:func:`translation_joints`)."""
 
 
 class StaggeredTimingWarning(UserWarning):
@@ -382,10 +387,14 @@ def translation_joints(motion: Motion) -> tuple[int, ...]:
     """Joints whose local translation is a control variable: those animated in ``motion``.
 
     Every joint ``j >= 1`` whose row of :attr:`~mocaplab.motion.Motion.translations`
-    is not the same on every frame (exactly: a constant channel is kept as a
-    rest translation, and reproduced bit for bit).  Joint 0 is placed by the
-    root translation (its row of ``translations`` is ignored by forward
-    kinematics).  Empty when the clip has no translation channels.
+    moves more than :data:`TRANSLATION_TOLERANCE` (a micrometre) from its
+    first frame.  A channel within that is constant (a studio exporter's
+    float noise, 1e-12 to 1e-7 m, made three such channels variables of a
+    24-variable clip): it is kept as a rest translation, its first frame's,
+    and reproduced to within the tolerance (bit for bit when it is exactly
+    constant).  Joint 0 is placed by the root translation (its row of
+    ``translations`` is ignored by forward kinematics).  Empty when the clip
+    has no translation channels.
 
     Parameters
     ----------
@@ -410,7 +419,7 @@ def translation_joints(motion: Motion) -> tuple[int, ...]:
     tr = motion.translations
     if tr is None:
         return ()
-    moving = np.any(tr[1:] != tr[:1], axis=(0, 2))
+    moving = np.abs(tr - tr[:1]).max(axis=(0, 2)) > TRANSLATION_TOLERANCE
     moving[0] = False
     return tuple(int(j) for j in np.flatnonzero(moving))
 

@@ -8,7 +8,10 @@ clock and process CPU time: the machine may be shared) and the ratio to
 each target.  Then the figures of issue 13: interior poses per second and
 the closest two poses on a walk, runs, a dance and jumps (every maximum of
 ``P`` against distinct maxima), contacts on runs, the head's jitter after a
-whole-body succession, and the knees under exaggerated legs.
+whole-body succession, and the knees under exaggerated legs; and those of
+issue 25: a flick retimed whole, a true-pose edit's local acceleration,
+a strong succession's one-frame moves and knee accelerations (ratios to the
+input's, :mod:`mocaplab.quality`), the longest stretch left by culling.
 
 Run: ``python benchmarks/bench_staggered.py`` (needs ``MOCAPLAB_DATA_DIR``).
 """
@@ -24,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocaplab import data, quat
+from mocaplab import data, quality, quat
 from mocaplab.contacts import stillness_contacts
 from mocaplab.ik import hinge_axes, limb_joints
 from mocaplab.motion import Motion, Skeleton
@@ -33,6 +36,7 @@ from mocaplab.staggered import (
     StaggeredTimingWarning,
     UnreachableTargetWarning,
     analyze,
+    edit_pose,
     exaggerate,
     extract,
     fit,
@@ -132,6 +136,7 @@ def main() -> None:
     wall, cpu, _ = timed(lambda: succession(sm_b, 0.01, 2.0).evaluate(), 7)  # type: ignore[union-attr]
     report("succession s=0.01, l=2 on the whole body + evaluate", wall, cpu, EVAL_TARGET)
     figures()
+    issue_25_figures()
 
 
 def with_fit_errors(clip: Motion, errors: list[np.ndarray], **options: object) -> object:
@@ -198,6 +203,54 @@ def figures() -> None:
         flex = knee_flexion(m, legs, hinges)
         acc = np.abs(np.diff(np.radians(flex), 2, axis=0)).max() * walk.fps**2
         print(f"  {label:24s} smallest flexion {flex.min():5.1f} deg, peak knee acceleration {acc:6.0f} rad/s^2")
+
+
+def issue_25_figures() -> None:
+    """What issue 25 asks of the staggered edits, as ratios to the input's (mocaplab.quality)."""
+    print("\nissue 25: a flick retimed whole (16_05, succession 0.1 s below the right knee)")
+    jump = data.cmu("16_05")
+    j = jump.skeleton.index(jump.skeleton.roles["right_ankle"])
+    knee = jump.skeleton.roles["right_knee"]
+
+    def speed(m: Motion) -> np.ndarray:
+        q = m.rotations[:, j]
+        return np.degrees(quat.angle(quat.mul(quat.inv(q[:-1]), q[1:]))) * m.fps
+
+    w0 = speed(jump)
+    f0, n = int(w0.argmax()), int(round(0.1 * jump.fps))
+    w = speed(succession(extract(jump), 0.1, 1.0, joint=knee).evaluate(constraints=False))
+    print(f"  the foot's peak turn {w0[f0]:.0f} deg/s at frame {f0}; after: {w[f0 - 2 : f0 + 3].max():.0f} deg/s there, "
+          f"{w[f0 + n - 3 : f0 + n + 4].max():.0f} deg/s {n} frames later")
+
+    walk = data.cmu("16_15")
+    sm = extract(walk)
+    arm = walk.skeleton.index(walk.skeleton.roles["right_shoulder"])
+    turn = quat.from_axis_angle([0, 0, 1], np.radians(20.0))
+    worst = 0.0
+    for k in range(1, sm.n_poses - 1):
+        _, rot = sm.true_pose(k)
+        target = np.array(rot)
+        target[arm] = quat.mul(rot[arm], turn)
+        out = edit_pose(sm, k, rotations=target, which="true").motion
+        window = slice(int(round(sm.times[k - 1] * walk.fps)), int(round(sm.times[k + 1] * walk.fps)) + 1)
+        ratio = quality.angular_acceleration(out[window])[arm] / quality.angular_acceleration(walk[window])[arm]
+        worst = max(worst, float(ratio))
+    print(f"  20-degree true-pose edit of the right arm, every pose of 16_15: local angular acceleration <= {worst:.2f}x")
+
+    print("  strong succession s=0.03, l=2 (whole body): worst joint's largest one-frame move, peak knee acceleration")
+    for trial in ("16_15", "05_02", "49_03"):
+        m = data.cmu(trial)
+        out = succession(extract(m), 0.03, 2.0).motion
+        move = quality.displacement(out) / np.maximum(quality.displacement(m), 1e-9)
+        knees = [m.skeleton.index(m.skeleton.roles[f"{s}_knee"]) for s in ("left", "right")]
+        acc = quality.angular_acceleration(out)[knees].max() / quality.angular_acceleration(m)[knees].max()
+        print(f"    {trial}: {move.max():.2f}x ({m.skeleton.names[int(move.argmax())]}), knees {acc:.2f}x")
+
+    hops = data.cmu("49_03")
+    a = analyze(hops)
+    stretches = {n: np.diff(a.select(max_poses=n)).max() / hops.fps for n in (4, 6, 8)}
+    print("  culling 49_03 (12.5 s) by count, longest stretch without a pose: "
+          + ", ".join(f"{n} poses {t:.1f} s" for n, t in stretches.items()))
 
 
 def knee_flexion(m: Motion, legs: list[tuple[int, int, int]], hinges: np.ndarray) -> np.ndarray:

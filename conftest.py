@@ -4,11 +4,16 @@
 * pyvista renders off-screen with its static backend in executed lessons.
 * ``MOCAPLAB_DATA_DIR`` defaults to the data folder beside the checkout.
 * Each lesson's run time is reported; a lesson over its budget fails the run.
+* nbval (and the notebook stack it imports, about 3 s) is loaded only when
+  the run collects lessons: the whole run, or a path to a notebook or to
+  ``lessons/``; ``pytest tests/test_quat.py`` starts without it.  The
+  lessons run in nbval's lax mode (``--nbval-lax``, set here).
 """
 
 from __future__ import annotations
 
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -16,6 +21,27 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent
 LESSON_BUDGET_S = 60.0
+LESSONS = ROOT / "lessons"
+
+
+def _collects_lessons(args: list[str]) -> bool:
+    """Whether a pytest command line collects notebooks: no path given (the whole run), or a lesson path."""
+    paths = [Path(a.split("::")[0]) for a in args if a and not a.startswith("-")]
+    paths = [p.resolve() for p in paths if p.exists()]
+    if not paths:
+        return True
+    return any(p.suffix == ".ipynb" or p == LESSONS or p in LESSONS.parents for p in paths)
+
+
+# pyproject's addopts keep nbval's entry point out (-p no:nbval); loaded here by its module name when needed
+if _collects_lessons(sys.argv[1:]):
+    pytest_plugins = ["nbval.plugin"]
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_configure(config: pytest.Config) -> None:
+    if config.pluginmanager.has_plugin("nbval.plugin") and not config.option.nbval:
+        config.option.nbval_lax = True
 
 os.environ.setdefault("MOCAPLAB_FAST", "1")
 os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")

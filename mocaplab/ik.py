@@ -440,9 +440,9 @@ def two_bone_deltas(
             onto, _ = _unit(hn - _dot(hn, u)[..., None] * u / np.maximum(l1**2, _TINY)[..., None])
             straighten = quat.normalize(_axis_angle(axis, flex))  # (axis is not unit where straight: flex is 0)
             about = quat.mul(_axis_angle(onto, -flex_new), straighten)
-            mixed = np.array(middle_delta, copy=True)
-            mixed[lax] = _swivel_between(middle_delta[lax], about[lax], u[lax], v[lax], hn[lax], 1.0 - loose[lax])
-            middle_delta = mixed
+            swung = np.array(middle_delta, copy=True)
+            swung[lax] = _swivel_between(middle_delta[lax], about[lax], u[lax], v[lax], hn[lax], 1.0 - loose[lax])
+            middle_delta = swung
     c1 = b + quat.rotate(middle_delta, v)
 
     # step 2: swing the limb toward the target (shortest arc)

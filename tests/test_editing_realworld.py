@@ -73,3 +73,25 @@ def test_a_standing_clip_keeps_its_heading_smooth(mocap_dir):
     a, b = res.stationary[0][-1]
     middle = res.heading_change[0][a + motion.n_frames // 8 : b - motion.n_frames // 8]
     assert np.ptp(middle) < 1e-9
+
+
+def test_a_hard_pin_built_from_a_static_root_is_named():
+    # a studio layout: a static reference root above a travelling pelvis; a pin taken from root_positions
+    # lands on the reference joint, metres from the walk: the edit says which joint the pins must come from
+    from mocaplab.editing import PinPosition, edit
+    from mocaplab.editing.scene import PinPlacementWarning
+
+    sk = ml.Skeleton(
+        ["Root", "Hips"], [-1, 0], [[0, 0, 0], [0, 1, 0]],
+        channels=(("Xposition", "Yposition", "Zposition"), ("Xposition", "Yposition", "Zposition")),
+    )
+    walk = np.column_stack([np.linspace(0, 3, 60), np.zeros(60), np.zeros(60)])
+    trans = np.zeros((60, 2, 3))
+    trans[:, 1] = walk + [0, 1, 0]
+    m = ml.Motion(sk, np.tile([0, 0, 0, 1.0], (60, 2, 1)), np.zeros((60, 3)), 30, translations=trans)
+    with pytest.warns(PinPlacementWarning, match=r"static root joint 'Root'.*path joint 'Hips'.*pelvis_positions"):
+        edit([m], [PinPosition(0, 59, m.root_positions[59, [0, 2]], hard=True)], stationary="speed")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PinPlacementWarning)
+        # the right pins, and a deliberate 1.5 m drag of the path point, say nothing
+        edit([m], [PinPosition(0, 59, m.pelvis_positions[59, [0, 2]] + [0.0, 1.5], hard=True)], stationary="speed")

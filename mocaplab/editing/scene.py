@@ -117,7 +117,15 @@ from ..goals import EndEffector
 from ..motion import FPS_RANGE, Motion
 from ..undo import Undoable, UndoStack
 from ._threads import single_blas_thread
-from .constraints import SPATIAL, TEMPORAL, ConstraintError, EndEffectorConstraint, Relative, effector_frames
+from .constraints import (
+    SPATIAL,
+    TEMPORAL,
+    ConstraintError,
+    EndEffectorConstraint,
+    PinPosition,
+    Relative,
+    effector_frames,
+)
 from .energy import Energies
 from .flips import flip_step, heading_changes
 from .laplacian import spatial_rows
@@ -133,6 +141,7 @@ __all__ = [
     "EditResult",
     "RefineCache",
     "PathJumpWarning",
+    "PinPlacementWarning",
     "RelativeConflictWarning",
     "MAX_CLOCK_FPS",
     "MAX_CLOCK_FRAMES",
@@ -632,6 +641,25 @@ class SceneEditor(Undoable):
             out.append(cur)
         return out
 
+    def _warn_pin_on_static_root(self, i: int, pin: PinPosition) -> None:
+        """Warn when a hard pin sits on a static root joint, far from the path: built from the wrong joint."""
+        m = self.characters[pin.character]
+        if m.path_joint == 0:
+            return
+        f = int(pin.frame)  # type: ignore[arg-type]
+        target = np.asarray(pin.position, dtype=float)
+        off_path = float(np.linalg.norm(target - self.paths[pin.character].positions[f]))
+        on_root = float(np.linalg.norm(target - m.root_positions[f, [0, 2]]))
+        if off_path > PIN_FAR and on_root < PIN_ON_ROOT:
+            names = m.skeleton.names
+            warn(
+                f"constraint #{i} (hard pin at frame {f} of character {pin.character}) lies on the static root joint "
+                f"{names[0]!r}, {off_path:.2f} m from the path there: pins are ground positions of the path joint "
+                f"{names[m.path_joint]!r}; build them from motion.pelvis_positions (or the result's paths), "
+                "not motion.root_positions",
+                PinPlacementWarning,
+            )
+
     def _validate(self, constraints: Sequence[Any], offset: int = 0) -> None:
         K = len(self.characters)
         for i, c in enumerate(constraints, start=offset):
@@ -656,6 +684,8 @@ class SceneEditor(Undoable):
                     raise ValueError(
                         f"constraint #{i} {c!r}: frame {f} out of range for character {k} ({n} frames: 0..{n - 1})"
                     )
+            if isinstance(c, SPATIAL[0]) and c.hard and c.frame is not None:
+                self._warn_pin_on_static_root(i, c)
             if isinstance(c, TEMPORAL):
                 problem = self._time.target_problem(c)
                 if problem is not None:
@@ -905,6 +935,43 @@ def _check_clock_fps(fps: Any) -> None:
             f"Expected `clock_fps` from {FPS_RANGE[0]:g} to MAX_CLOCK_FPS = {MAX_CLOCK_FPS:g} frames per second, "
             f"got {fps!r}"
         )
+
+
+#: A hard pin further than this (metres) from the path point of its frame, and within :data:`PIN_ON_ROOT` of
+#: a static root joint above the path joint, was built from the wrong joint (:class:`PinPlacementWarning`).
+PIN_FAR = 1.0
+PIN_ON_ROOT = 0.05
+
+
+class PinPlacementWarning(UserWarning):
+    """A hard pin lies on a static root joint, far from the path: it was built from the wrong joint.
+
+    Files with a static reference joint above a travelling pelvis (a common
+    export layout) keep ``motion.root_positions`` at one place; the path is
+    the path joint's (``motion.pelvis_positions``).  A pin taken from the
+    former lands metres from the walk and silently bends it there.
+
+    Parameters
+    ----------
+    *args
+        The message.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> import numpy as np
+    >>> from mocaplab import Motion, Skeleton
+    >>> from mocaplab.editing import PinPosition, edit
+    >>> sk = Skeleton(["Root", "Hips"], [-1, 0], [[0, 0, 0], [0, 1, 0]], channels=(("Xposition", "Yposition", "Zposition"), ("Xposition", "Yposition", "Zposition")))
+    >>> walk = np.column_stack([np.linspace(0, 3, 60), np.zeros(60), np.zeros(60)])
+    >>> trans = np.zeros((60, 2, 3)); trans[:, 1] = walk + [0, 1, 0]
+    >>> m = Motion(sk, np.tile([0, 0, 0, 1.0], (60, 2, 1)), np.zeros((60, 3)), 30, translations=trans)
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     res = edit([m], [PinPosition(0, 59, m.root_positions[59, [0, 2]], hard=True)], stationary="speed")
+    >>> [w.category.__name__ for w in caught if w.category is not UserWarning]  # (the other: the path joint is 'Hips')
+    ['PinPlacementWarning']
+    """
 
 
 class PathJumpWarning(UserWarning):

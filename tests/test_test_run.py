@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -49,15 +50,14 @@ def test_a_lesson_is_collected_and_a_test_file_alone_is_not_slowed_by_nbval():
     assert "01_motion_data.ipynb::Cell 0" in lesson
     plain = _collect("tests/test_quat.py")
     assert ".ipynb" not in plain and "test_quat.py::" in plain
-    # what the interpreter imported (python -X importtime writes one line per module to stderr; -s: uncaptured)
-    probe = subprocess.run(
-        [sys.executable, "-X", "importtime", "-m", "pytest", "-s", "--collect-only", "-q", "tests/test_quat.py"],
-        cwd=ROOT, capture_output=True, text=True, timeout=600,
-    )
-    imported = {line.rsplit("|", 1)[-1].strip() for line in probe.stderr.splitlines() if line.startswith("import time:")}
-    assert "pytest" in imported and not {m for m in imported if m.split(".")[0] in ("nbval", "nbformat")}
-    with_lesson = subprocess.run(
-        [sys.executable, "-X", "importtime", "-m", "pytest", "-s", "--collect-only", "-q", "lessons/01_motion_data.ipynb"],
-        cwd=ROOT, capture_output=True, text=True, timeout=600,
-    )
-    assert "nbval.plugin" in with_lesson.stderr
+    # a probe plugin reports whether nbval was imported by the end of collection
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT / "tests"), os.environ.get("PYTHONPATH")]))}
+    probes = {
+        target: subprocess.run(
+            [sys.executable, "-m", "pytest", "-p", "nbval_probe", "--collect-only", "-q", target],
+            cwd=ROOT, capture_output=True, text=True, timeout=600, env=env,
+        ).stdout
+        for target in ("tests/test_quat.py", "lessons/01_motion_data.ipynb")
+    }
+    assert "nbval imported: False" in probes["tests/test_quat.py"], probes["tests/test_quat.py"][-1000:]
+    assert "nbval imported: True" in probes["lessons/01_motion_data.ipynb"], probes["lessons/01_motion_data.ipynb"][-1000:]

@@ -56,8 +56,9 @@ import numpy as np
 
 from mocaplab import data, quat
 from mocaplab.contacts import foot_contacts
+from mocaplab.editing import PinPosition, edit
 from mocaplab.editing.refinement import refine
-from mocaplab.physics import GROUND_SCHEDULE, Body, start, step, touch_up
+from mocaplab.physics import GROUND_SCHEDULE, Body, flight_stages, start, step, touch_up
 from mocaplab.physics.touchup import STALL_TOLERANCE
 
 PAPER_SECONDS = 0.172  # 111 frames, Shin et al. 2003, section 4.3
@@ -175,6 +176,30 @@ def converged(bent, body, contacts) -> None:
           f"(best pass {history.best // len(GROUND_SCHEDULE)})")
 
 
+def tilted(walk, degrees):
+    """``walk`` turned ``degrees`` about its sideways axis through its first ground point: a walk uphill."""
+    forward = (walk.root_positions[-1] - walk.root_positions[0]) * [1.0, 0.0, 1.0]
+    forward /= np.linalg.norm(forward)
+    q = quat.from_axis_angle(np.cross(forward, [0.0, 1.0, 0.0]), np.radians(degrees))
+    s0 = walk.root_positions[0] * [1.0, 0.0, 1.0]
+    return walk.with_root(root_positions=s0 + quat.rotate(q, walk.root_positions - s0),
+                          root_rotations=quat.mul(q, walk.rotations[:, 0]))
+
+
+def bent_jump():
+    """CMU 16_05 at 30 fps, its flight's middle pushed 15 cm sideways and refined: (jump, contacts, bent)."""
+    jump = data.cmu("16_05").resample(30)
+    c = foot_contacts(jump)
+    a, b = flight_stages(c)[0]
+    p = jump.root_positions[:, [0, 2]]
+    d = p[b] - p[a]
+    side = np.array([-d[1], d[0]]) / np.linalg.norm(d)
+    mid = (a + b) // 2
+    pins = [PinPosition(0, 0, p[0], hard=True), PinPosition(0, len(p) - 1, p[-1], hard=True),
+            PinPosition(0, mid, p[mid] + 0.15 * side, hard=True)]
+    return jump, c, refine(edit([jump], pins).motions[0], contacts=c, reference=jump)
+
+
 def issue_cases() -> None:
     """Issue 24's cases: input and final error, passes used and time, per pass against the paper's 172 ms."""
     import sys
@@ -184,8 +209,6 @@ def issue_cases() -> None:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     import pipeline  # the pipeline's bend (pins) and refine
 
-    from mocaplab.editing import PinPosition, edit
-    from mocaplab.physics import flight_stages
 
     def report(name, motion, **options):
         t, c = time.perf_counter(), time.process_time()
@@ -214,23 +237,9 @@ def issue_cases() -> None:
         if clip == "16_15":
             feet_and_floor(report, walk, pipeline._refine(pipeline._edit(walk, bend=0.25), walk))
     walk = data.cmu("16_15").resample(30)
-    forward = (walk.root_positions[-1] - walk.root_positions[0]) * [1.0, 0.0, 1.0]
-    forward /= np.linalg.norm(forward)
-    q = quat.from_axis_angle(np.cross(forward, [0.0, 1.0, 0.0]), np.radians(20.0))
-    s0 = walk.root_positions[0] * [1.0, 0.0, 1.0]
-    uphill = walk.with_root(root_positions=s0 + quat.rotate(q, walk.root_positions - s0),
-                            root_rotations=quat.mul(q, walk.rotations[:, 0]))
+    uphill = tilted(walk, 20.0)
     report("16_15 at 30 fps, 20 degrees uphill, 20 passes", uphill, contacts=foot_contacts(walk), iterations=20, tol=None)
-    jump = data.cmu("16_05").resample(30)
-    c = foot_contacts(jump)
-    a, b = flight_stages(c)[0]
-    p = jump.root_positions[:, [0, 2]]
-    d = p[b] - p[a]
-    side = np.array([-d[1], d[0]]) / np.linalg.norm(d)
-    mid = (a + b) // 2
-    pins = [PinPosition(0, 0, p[0], hard=True), PinPosition(0, len(p) - 1, p[-1], hard=True),
-            PinPosition(0, mid, p[mid] + 0.15 * side, hard=True)]
-    bent = refine(edit([jump], pins).motions[0], contacts=c, reference=jump)
+    jump, c, bent = bent_jump()
     body = Body.from_skeleton(jump)
     for window in (0.1, 0.5):
         report(f"16_05 jump bent 15 cm, flight_window {window} s", bent, body=body, contacts=c, flight_window=window)
@@ -278,8 +287,7 @@ def paper_results() -> None:
     """Sections 4.2, 4.4 and 4.5 as lessons 09 and 10 set them up: errors, passes, time against the paper's."""
     import warnings
 
-    from mocaplab.editing import PinPosition, edit
-    from mocaplab.physics import FLIGHT_SCHEDULE, fit_masses, flight_stages
+    from mocaplab.physics import FLIGHT_SCHEDULE, fit_masses
 
     print()
     print("the paper's results (lessons 09-10; error: TouchUpState.error, mm; paper: its time for the case)")
@@ -308,26 +316,12 @@ def paper_results() -> None:
     blend = refine(blend, contacts=blend_contacts)
     report("4.2 walk 16_15 blended into jog 16_35, 12 passes", 0.108, blend, body=body, contacts=blend_contacts,
            iterations=12)
-    forward = (walk.root_positions[-1] - walk.root_positions[0]) * [1.0, 0.0, 1.0]
-    forward /= np.linalg.norm(forward)
-    q = quat.from_axis_angle(np.cross(forward, [0.0, 1.0, 0.0]), np.radians(10.0))
-    s0 = walk.root_positions[0] * [1.0, 0.0, 1.0]
-    uphill = walk.with_root(root_positions=s0 + quat.rotate(q, walk.root_positions - s0),
-                            root_rotations=quat.mul(q, walk.rotations[:, 0]))
+    uphill = tilted(walk, 10.0)
     swapped = (GROUND_SCHEDULE[1], GROUND_SCHEDULE[0], GROUND_SCHEDULE[2])
     for label, schedule in (("default order", GROUND_SCHEDULE), ("upper body first", swapped)):
         report(f"4.4 16_15 10 degrees uphill, {label}, 12 passes", 0.211, uphill, body=body, contacts=contacts,
                iterations=12, schedule=schedule)
-    jump = data.cmu("16_05").resample(30)
-    c = foot_contacts(jump)
-    a, b = flight_stages(c)[0]
-    p = jump.root_positions[:, [0, 2]]
-    d = p[b] - p[a]
-    side = np.array([-d[1], d[0]]) / np.linalg.norm(d)
-    mid = (a + b) // 2
-    pins = [PinPosition(0, 0, p[0], hard=True), PinPosition(0, len(p) - 1, p[-1], hard=True),
-            PinPosition(0, mid, p[mid] + 0.15 * side, hard=True)]
-    bent = refine(edit([jump], pins).motions[0], contacts=c, reference=jump)
+    jump, c, bent = bent_jump()
     jump_body = Body.from_skeleton(jump)
     narrow = tuple(adj.replace(sigma=adj.sigma / 4) for adj in GROUND_SCHEDULE)
     for label, schedule in (("default kernels", "default"), ("ground kernels / 4", FLIGHT_SCHEDULE + narrow)):

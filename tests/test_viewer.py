@@ -84,8 +84,8 @@ def test_controls_play_step_and_a_usable_slider(viewer):
     """Play and step buttons beside a slider whose track keeps at least 300 px."""
     box = viewer.widget
     assert box.children[0] is viewer._view
-    legend, controls, label, status = box.children[1:]
-    assert legend is viewer._legend and label is viewer._label and status is viewer._status
+    legend, controls, label, keys, status = box.children[1:]
+    assert legend is viewer._legend and label is viewer._label and status is viewer._status and keys is viewer.keys
     assert list(controls.children) == [viewer.play, viewer.back, viewer.forward, viewer.slider]
     assert viewer.slider.max == viewer.n_frames - 1
     assert int(viewer.slider.layout.min_width.removesuffix("px")) >= 480  # track = width - time (72 px) - readout
@@ -153,7 +153,7 @@ def test_overlays_follow_the_time(walk):
 def test_callback_errors_are_shown_in_the_widget_and_leave_it_consistent(walk):
     v = MotionViewer(walk[:60], backend="none")
     box = v.widget
-    assert v._view is None and len(box.children) == 4  # legend, controls, label, status
+    assert v._view is None and len(box.children) == 5  # legend, controls, label, keys' help line, status
 
     def broken(t):
         if t > 0.1:

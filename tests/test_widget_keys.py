@@ -131,3 +131,32 @@ def test_stepper_keys_step_and_go_back(cmu):
     assert stepper.session.index == 0, "left and ctrl+z go back"
     press(canvas, "left")  # at the input: the disabled back button is not pressed
     assert stepper.session.index == 0
+
+
+def test_viewer_keys_play_pause_and_step(walk):
+    """The standalone 3D viewer: space plays and pauses, the arrows step, as its buttons; the help line says so."""
+    import asyncio
+
+    from mocaplab.widgets import MotionViewer
+
+    async def scenario() -> None:
+        v = MotionViewer(walk, backend="none")
+        box = v.widget
+        assert v.keys in box.children, "the help line is in the viewer's box"
+        assert "space play/pause" in v.keys.help and "\u2192 frame forward" in v.keys.help
+        assert v.keys.scope in box._dom_classes, "the keys are taken from the viewer's own box"
+        v.keys._handle_custom_msg({"key": " "}, [])  # as the browser sends a key
+        assert v.playing and v.play.description == "pause", "space plays"
+        v.keys.press(" ")
+        assert not v.playing and v.play.description == "play", "space again pauses"
+        frame = v.frame
+        for key in ("right", "right", "left"):
+            v.keys.press(key)
+        assert v.frame == frame + 1 and v.slider.value == frame + 1, "the arrows step one frame"
+        assert not v.keys.press("q") and v.frame == frame + 1, "a key with no shortcut does nothing"
+        v.keys.press(" ")
+        v.keys.press("right")
+        assert not v.playing and v.frame == frame + 2, "an arrow while playing pauses and steps"
+        v.close()
+
+    asyncio.run(scenario())

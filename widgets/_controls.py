@@ -18,14 +18,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import anywidget
 import ipywidgets as W
+import traitlets
 
 from mocaplab.io import save_bvh
 from mocaplab.motion import Motion
 
 __all__ = [
     "HistoryButtons", "ExportControl", "export_paths", "error_html", "ERROR_STYLE", "MAX_ERROR_TEXT", "row", "keep_width",
-    "export_name", "free_paths", "history_status", "Shortcut", "bind_keys", "viewer_shortcuts",
+    "export_name", "free_paths", "history_status", "Shortcut", "bind_keys", "viewer_shortcuts", "KeyCapture",
+    "keys_help",
 ]
 
 #: Widgets kept at their own width in a :func:`row`: controls (a squeezed one reads "..."), pictures and boxes.
@@ -230,9 +233,131 @@ def bind_keys(
             run(action)
 
     canvas.mpl_connect("key_press_event", on_key)
+    return keys_help(shortcuts, "click the plot first")
+
+
+def keys_help(shortcuts: Sequence[Shortcut], where: str) -> str:
+    """The help line of ``shortcuts``: ``"keys (<where>): space play/pause · ..."`` (empty without shortcuts).
+
+    >>> keys_help([Shortcut((" ",), "space", "play/pause", print)], "click the plot first")
+    'keys (click the plot first): space play/pause'
+    """
     if not shortcuts:
         return ""
-    return "keys (click the plot first): " + " · ".join(f"{s.shown} {s.label}" for s in shortcuts)
+    return f"keys ({where}): " + " · ".join(f"{s.shown} {s.label}" for s in shortcuts)
+
+
+# The browser half of KeyCapture.  Key names are matplotlib's (as ipympl sends them to bind_keys): " ",
+# "left", "ctrl+z", "ctrl+Z" with shift; only the keys the widget lists are taken (JupyterLab keeps the others).
+_KEYS_ESM = """
+const NAMED = {ArrowLeft: "left", ArrowRight: "right", ArrowUp: "up", ArrowDown: "down", Escape: "escape",
+               Enter: "enter", Home: "home", End: "end", PageUp: "pageup", PageDown: "pagedown"};
+const SLIDER_KEYS = new Set(["left", "right", "up", "down", "home", "end", "pageup", "pagedown"]);
+function keyName(e) {
+  const base = NAMED[e.key] ?? (e.key.length === 1 ? e.key : null);
+  if (base === null) return null;
+  return (e.ctrlKey || e.metaKey ? "ctrl+" : "") + (e.altKey ? "alt+" : "") +
+    (e.shiftKey && e.key.length !== 1 ? "shift+" : "") + base;
+}
+export default {
+  render({ model, el }) {
+    el.classList.add("mocaplab-keys-help");
+    el.style.color = "#555";
+    el.style.fontSize = "0.9em";
+    const show = () => { el.textContent = model.get("help"); };
+    show();
+    model.on("change:help", show);
+    let host = null;
+    const onKey = (e) => {
+      const name = keyName(e);
+      if (name === null || !model.get("key_names").includes(name)) return;
+      const target = e.target instanceof Element ? e.target : null;
+      if (target && target.closest("input, textarea, select, [contenteditable='true']")) return;  // typing
+      if (target && SLIDER_KEYS.has(name) && target.closest(".noUi-target")) return;  // the slider's own keys
+      e.preventDefault();  // a focused button is not clicked by space as well, the page does not scroll
+      e.stopPropagation();  // nor do JupyterLab's shortcuts act on the key
+      model.send({key: name});
+    };
+    let tries = 0;
+    const attach = () => {
+      if (!el.isConnected) {
+        if (++tries < 600) requestAnimationFrame(attach);
+        return;
+      }
+      host = el.closest("." + model.get("scope")) || el.parentElement;
+      if (!host.hasAttribute("tabindex")) host.tabIndex = 0;  // a click on the box (not a control) focuses it
+      host.addEventListener("keydown", onKey);
+    };
+    attach();
+    return () => { if (host) host.removeEventListener("keydown", onKey); model.off("change:help", show); };
+  },
+};
+"""
+
+
+class KeyCapture(anywidget.AnyWidget):  # type: ignore[misc]
+    """Keyboard shortcuts over a box of ipywidgets (a widget without a plot: the 3D viewer); shows the help line.
+
+    Placed inside the box whose CSS class is ``scope``, it listens to the
+    keys pressed while the focus is in that box (after a click on one of
+    its buttons, on the box itself or on this line), runs the matching
+    :class:`Shortcut`'s action in the kernel and leaves every other key to
+    JupyterLab.  Keys typed into a text box, and the arrows over a slider
+    (which moves itself), are left alone.  Tests press keys with
+    :meth:`press`, the browser sends them as ``{"key": name}`` messages.
+
+    Parameters
+    ----------
+    shortcuts : sequence of Shortcut
+    scope : str
+        CSS class of the box that listens (an ancestor of this widget).
+    where : str
+        What the help line says to do first.
+    guard : callable, optional
+        Wraps each action (the widget's error display).
+
+    Examples
+    --------
+    >>> pressed = []
+    >>> keys = KeyCapture([Shortcut((" ",), "space", "play/pause", lambda: pressed.append("play"))], scope="box")
+    >>> keys.help
+    'keys (click a button or this line first): space play/pause'
+    >>> keys.press(" "), keys.press("q"), pressed
+    (True, False, ['play'])
+    """
+
+    _esm = _KEYS_ESM
+    #: the keys taken (matplotlib names); every other key is left to JupyterLab
+    key_names = traitlets.List(traitlets.Unicode()).tag(sync=True)
+    help = traitlets.Unicode("").tag(sync=True)
+    scope = traitlets.Unicode("").tag(sync=True)
+
+    def __init__(
+        self,
+        shortcuts: Sequence[Shortcut],
+        *,
+        scope: str,
+        where: str = "click a button or this line first",
+        guard: Callable[[Callable[[], object]], None] | None = None,
+    ) -> None:
+        super().__init__(
+            key_names=[key for s in shortcuts for key in s.keys], help=keys_help(shortcuts, where), scope=scope
+        )
+        self._table = {key: s.action for s in shortcuts for key in s.keys}
+        self._run = guard or (lambda action: action())
+        self.on_msg(self._on_msg)
+
+    def press(self, key: str) -> bool:
+        """Run the action of ``key`` (a matplotlib key name) as if pressed; whether a shortcut took it."""
+        action = self._table.get(key)
+        if action is None:
+            return False
+        self._run(action)
+        return True
+
+    def _on_msg(self, _widget: Any, content: Any, _buffers: Any) -> None:
+        if isinstance(content, dict) and isinstance(content.get("key"), str):
+            self.press(content["key"])
 
 
 def viewer_shortcuts(viewer: Callable[[], Any]) -> list[Shortcut]:

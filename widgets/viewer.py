@@ -56,7 +56,8 @@ message so that the two always agree; while playing it moves at most
 layout and paint that the 3D pictures need), always on the last frame and
 when paused.  The line under the slider gives the clip's length and, for
 characters of other frame rates, their own frames.  Moving the slider or pressing a step button while playing
-continues from there (a step pauses).  Playing needs the kernel's asyncio loop
+continues from there (a step pauses).  After a click on a button or beside the controls, space
+plays or pauses and the arrows step (:attr:`MotionViewer.keys`, listed on the help line).  Playing needs the kernel's asyncio loop
 (it runs between cells, like the trame server); in a script it raises
 ``RuntimeError``, use :meth:`MotionViewer.set_frame`.
 
@@ -148,7 +149,7 @@ from numpy.typing import NDArray
 from mocaplab.motion import Motion
 
 from . import vtkjs_page
-from ._controls import error_html
+from ._controls import KeyCapture, error_html, viewer_shortcuts
 from .scene import (
     Character,
     Overlay,
@@ -331,6 +332,12 @@ class MotionViewer:
         Starts and pauses real-time playback (:meth:`toggle_playback`).
     back, forward : ipywidgets.Button
         One frame back or forward (pause playback).
+    keys : KeyCapture
+        The keyboard shortcuts and their help line (created with
+        :attr:`widget`): after a click on a button or on the viewer's box
+        (not on the 3D picture, which keeps the keys), space plays or
+        pauses and the left and right arrows step a frame, as the buttons
+        do.  ``viewer.keys.press(" ")`` presses a key from Python.
     play_rate : float
         Most pictures per second while playing.
     play_rest : float
@@ -409,6 +416,7 @@ class MotionViewer:
         self.play: Any = None
         self.back: Any = None
         self.forward: Any = None
+        self.keys: Any = None
         self._label: Any = None
         self._legend: Any = None
         self._status: Any = None
@@ -1156,7 +1164,7 @@ class MotionViewer:
 
     @property
     def widget(self) -> Any:
-        """The ipywidgets box: 3D view, legend, play and step buttons, frame slider, time label, status."""
+        """The ipywidgets box: 3D view, legend, play and step buttons, frame slider, time label, keys, status."""
         if self._widget is None:
             self._widget = self._build_widget()
         return self._widget
@@ -1213,10 +1221,13 @@ class MotionViewer:
             [self.play, self.back, self.forward, self.slider],
             layout=w.Layout(flex_flow="row wrap", align_items="center", width="100%"),
         )
+        # space plays, the arrows step: the buttons' own actions (_controls.viewer_shortcuts), listed on this line
+        self.keys = KeyCapture(viewer_shortcuts(lambda: self), scope="mocaplab-viewer")
         children = ([self._view] if self._view is not None else []) + [
             self._legend,
             controls,
             self._label,
+            self.keys,
             self._status,
         ]
         width = int(self.plotter.window_size[0])

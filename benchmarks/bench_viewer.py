@@ -19,6 +19,14 @@ JPEG pictures, the fallback and the baseline), a JupyterLab serves a copy of
   reported), then a viewer of 16 walkers in that kernel (CMU 16_15 and 02_01,
   eight each, on a 4 x 4 grid 1.2 m apart, 640 x 420), and plays it.
 
+Each scene is played through two routes (``--routes``): ``lab``, a plain
+JupyterLab, and ``hub``, a JupyterHub with its configurable-http-proxy set up
+from ``deploy/`` (the deployment test's :class:`Hub`), where the student logs
+in and the browser reaches the kernel's trame server only through the proxy.
+``--load N`` keeps N CPU-bound processes running beside the browser runs (a
+busy course server; the browser here shares the machine, where a student's
+would not).
+
 Each play lasts ``--seconds`` s with Chromium's screencast counting the
 distinct pictures the 3D view shows (``tests/browser_support.py``,
 :func:`play_viewer`) and psutil reading the kernel process's CPU time from the
@@ -33,7 +41,8 @@ after is printed too: the machine may be shared.  ``--options`` also plays
 server-rendering variants on lesson 05's relay (JPEG quality 100, half-size
 pictures, pyvista's hybrid ``trame`` mode).
 
-Run: ``python benchmarks/bench_viewer.py [--seconds 3] [--repeats 20] [--options] [--no-browser]``.
+Run: ``python benchmarks/bench_viewer.py [--seconds 3] [--repeats 20] [--options] [--no-browser]
+[--routes lab,hub] [--load 2]``.
 Needs the CMU mirror (``MOCAPLAB_DATA_DIR``, default ``../shared/mocap``
 beside the checkout) and psutil (``/proc`` is read without it).
 """
@@ -162,20 +171,56 @@ _OPTIONS = {
 }
 
 
-def browser_figures(seconds: float, options: bool) -> dict[str, dict[str, dict[str, Any]]]:
-    """For each backend (``server``, ``client``): the two scenes played in headless Chromium, and the
-    kernel's memory after lessons 01 and 05."""
-    from browser_support import (
-        CHROMIUM,
-        JupyterLabServer,
-        LessonPage,
-        copy_lessons,
-        kernel_pid,
-        launch_chromium,
-        play_viewer,
-        process_rss_mb,
-        server_env,
-    )
+def _busy_loops(n: int) -> list[Any]:
+    """``n`` CPU-bound processes (``while True: pass``): the load of a busy course server."""
+    import subprocess
+
+    return [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+
+
+def _play_lessons(
+    server: Any, context: Any, shots: Path, *, seconds: float, options: bool, backend: str
+) -> dict[str, dict[str, Any]]:
+    """Lesson 01's viewer and a 16-walker crowd in lesson 05's kernel, played on ``server`` in ``context``."""
+    from browser_support import LessonPage, kernel_pid, play_viewer, process_rss_mb
+
+    out: dict[str, dict[str, Any]] = {}
+    lesson = LessonPage(context, server, "01_motion_data.ipynb", shots)
+    lesson.open()
+    lesson.run_all()
+    pid = kernel_pid(lesson)
+    out["memory"] = {"01": process_rss_mb(pid)}
+    out["1 character"] = play_viewer(lesson, "viewer", seconds=seconds, pid=pid)
+    lesson.close()
+    lesson = LessonPage(context, server, "05_synchronized_characters.ipynb", shots)
+    lesson.open()
+    try:
+        lesson.run_all()
+    except AssertionError as err:  # the crowd below does not need the lesson's results
+        out["lesson 05 error"] = {"error": str(err)}
+    pid = kernel_pid(lesson)
+    out["memory"]["05"] = process_rss_mb(pid)
+    lesson.run_cell(_CROWD)
+    out["16 characters"] = play_viewer(lesson, "crowd16", seconds=seconds, pid=pid)
+    lesson.kernel_eval("crowd16.close()")
+    if options and backend == "server" and "lesson 05 error" not in out:
+        for k, (label, code) in enumerate(_OPTIONS.items()):
+            new = f"_option{k}"
+            lesson.run_cell(code.format(new=new) + f"\n{new}")
+            out[f"8 characters, {label}"] = play_viewer(lesson, new, seconds=seconds, pid=pid)
+            lesson.kernel_eval(f"{new}.close()")
+    for r in out.values():
+        r.pop("box", None)
+    out["console"] = {"errors": list(lesson.console)}
+    lesson.close()
+    return out
+
+
+def browser_figures(seconds: float, options: bool, routes: list[str]) -> dict[str, dict[str, dict[str, Any]]]:
+    """For each route (``lab``: JupyterLab; ``hub``: a JupyterHub with its proxy, from ``deploy/``) and backend
+    (``server``, ``client``): the two scenes played in headless Chromium, and the kernel's memory after lessons
+    01 and 05.  Keys of the result: ``"<route> <backend>"``."""
+    from browser_support import CHROMIUM, CHROMIUM_ARGS, JupyterLabServer, copy_lessons, server_env
 
     try:
         from playwright.sync_api import sync_playwright
@@ -186,52 +231,45 @@ def browser_figures(seconds: float, options: bool) -> dict[str, dict[str, dict[s
         print(f"browser figures skipped: no Chromium at {CHROMIUM}")
         return {}
     results: dict[str, dict[str, dict[str, Any]]] = {}
-    for backend in ("server", "client"):
-        out = results.setdefault(backend, {})
-        with tempfile.TemporaryDirectory() as tmp:
-            base = Path(tmp)
-            root = copy_lessons(ROOT / "lessons", base / "lessons")
-            env = server_env(_mirror())
-            env["MOCAPLAB_JUPYTER_BACKEND"] = backend
-            server = JupyterLabServer(root, env=env, state_dir=base / "state")
-            server.start()
-            try:
-                with sync_playwright() as p:
-                    browser = launch_chromium(p)
-                    try:
-                        context = browser.new_context(viewport={"width": 1800, "height": 1100})
-                        lesson = LessonPage(context, server, "01_motion_data.ipynb", base / "shots")
-                        lesson.open()
-                        lesson.run_all()
-                        pid = kernel_pid(lesson)
-                        out["memory"] = {"01": process_rss_mb(pid)}
-                        out["1 character"] = play_viewer(lesson, "viewer", seconds=seconds, pid=pid)
-                        lesson.close()
-                        lesson = LessonPage(context, server, "05_synchronized_characters.ipynb", base / "shots")
-                        lesson.open()
+    for route in routes:
+        for backend in ("server", "client"):
+            with tempfile.TemporaryDirectory() as tmp:
+                base = Path(tmp)
+                root = copy_lessons(ROOT / "lessons", base / "lessons")
+                env = server_env(_mirror())
+                env["MOCAPLAB_JUPYTER_BACKEND"] = backend
+                args = list(CHROMIUM_ARGS)
+                if route == "hub":
+                    from test_deploy_browser import CHP, Hub  # the deployment test's hub: one home
+
+                    if CHP is None:
+                        print("hub figures skipped: configurable-http-proxy not found")
+                        break
+                    server: Any = Hub(root, env=env, state_dir=base / "state")
+                    # a browser on another machine: the kernel's trame server only through the hub's proxy
+                    args.append("--host-resolver-rules=MAP localhost ~NOTFOUND")
+                else:
+                    server = JupyterLabServer(root, env=env, state_dir=base / "state")
+                server.start()
+                try:
+                    with sync_playwright() as p:
+                        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=args)
                         try:
-                            lesson.run_all()
-                        except AssertionError as err:  # the crowd below does not need the lesson's results
-                            out["lesson 05 error"] = {"error": str(err)}
-                        pid = kernel_pid(lesson)
-                        out["memory"]["05"] = process_rss_mb(pid)
-                        lesson.run_cell(_CROWD)
-                        out["16 characters"] = play_viewer(lesson, "crowd16", seconds=seconds, pid=pid)
-                        lesson.kernel_eval("crowd16.close()")
-                        if options and backend == "server" and "lesson 05 error" not in out:
-                            for k, (label, code) in enumerate(_OPTIONS.items()):
-                                new = f"_option{k}"
-                                lesson.run_cell(code.format(new=new) + f"\n{new}")
-                                out[f"8 characters, {label}"] = play_viewer(lesson, new, seconds=seconds, pid=pid)
-                                lesson.kernel_eval(f"{new}.close()")
-                        for r in out.values():
-                            r.pop("box", None)
-                        out["console"] = {"errors": list(lesson.console)}
-                        lesson.close()
-                    finally:
-                        browser.close()
-            finally:
-                server.stop()
+                            context = browser.new_context(viewport={"width": 1800, "height": 1100})
+                            if route == "hub":
+                                server.login(context)
+                            results[f"{route} {backend}"] = _play_lessons(
+                                server,
+                                context,
+                                base / "shots",
+                                seconds=seconds,
+                                options=options and route == "lab",
+                                backend=backend,
+                            )
+                        finally:
+                            browser.close()
+                finally:
+                    server.stop()
     return results
 
 
@@ -251,6 +289,12 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=20, help="frames timed per kernel figure")
     parser.add_argument("--options", action="store_true", help="also measure server-rendering options (8 characters)")
     parser.add_argument("--no-browser", action="store_true", help="kernel figures only")
+    parser.add_argument(
+        "--routes", default="lab,hub", help="comma-separated: lab (JupyterLab), hub (JupyterHub and its proxy)"
+    )
+    parser.add_argument(
+        "--load", type=int, default=0, help="CPU-bound processes kept running during the browser runs (a busy server)"
+    )
     args = parser.parse_args()
     os.environ["MOCAPLAB_DATA_DIR"] = _mirror()
 
@@ -262,14 +306,24 @@ def main() -> None:
         )
     if args.no_browser:
         return
-    print(f"\nbefore the browser runs: {_load()}")
-    results = browser_figures(args.seconds, args.options)
+    loops = _busy_loops(args.load)
+    try:
+        time.sleep(2.0 if loops else 0.0)
+        print(f"\nbefore the browser runs ({args.load} busy processes beside them): {_load()}")
+        results = browser_figures(args.seconds, args.options, [r.strip() for r in args.routes.split(",") if r.strip()])
+        print(f"after them: {_load()}")
+    finally:
+        for proc in loops:
+            proc.kill()
+            proc.wait()
     if not results:
         return
-    print(f"after them: {_load()}")
-    print(f"\nbrowser, headless Chromium with software GL, {args.seconds:g} s of play (kernel CPU over the play):")
-    for backend, out in results.items():
-        print(f"  backend {backend!r}:")
+    print(
+        f"\nbrowser, headless Chromium with software WebGL (no GPU), {args.seconds:g} s of play"
+        f" (kernel CPU over the play), {args.load} busy processes beside it on {os.cpu_count()} cores:"
+    )
+    for name, out in results.items():
+        print(f"  {name}:")
         for key, r in out.items():
             if key in ("memory", "console"):
                 continue
@@ -291,24 +345,29 @@ def main() -> None:
         )
         if out.get("console", {}).get("errors"):
             print(f"    console errors: {out['console']['errors']}")
-    if "client" in results and "server" in results:
-        print("\nbrowser drawing ('client') against the targets and against server rendering ('server'):")
+    for route in dict.fromkeys(name.split()[0] for name in results):
+        client, server = results.get(f"{route} client"), results.get(f"{route} server")
+        if client is None or server is None:
+            continue
+        print(f"\n{route}: browser drawing ('client') against the targets and against server rendering ('server'):")
         for key, (rate_target, cpu_target) in TARGETS.items():
-            c, s = results["client"].get(key), results["server"].get(key)
-            if c is None or s is None:
+            c, sv = client.get(key), server.get(key)
+            if c is None or sv is None or "error" in c or "error" in sv:
                 continue
             print(
                 f"  {key:14s} pictures/s {c['pictures_per_s']:5.1f} (target {rate_target:g}: "
-                f"x{c['pictures_per_s'] / rate_target:.2f}; server {s['pictures_per_s']:.1f}: "
-                f"x{c['pictures_per_s'] / max(s['pictures_per_s'], 1e-9):.2f})   "
+                f"x{c['pictures_per_s'] / rate_target:.2f}; server {sv['pictures_per_s']:.1f}: "
+                f"x{c['pictures_per_s'] / max(sv['pictures_per_s'], 1e-9):.2f})   "
                 f"kernel CPU {c['kernel_cpu_percent']:.1f} % (target < {cpu_target:g} %: "
-                f"x{c['kernel_cpu_percent'] / cpu_target:.2f}; server {s['kernel_cpu_percent']:.1f} %: "
-                f"x{c['kernel_cpu_percent'] / max(s['kernel_cpu_percent'], 1e-9):.2f})"
+                f"x{c['kernel_cpu_percent'] / cpu_target:.2f}; server {sv['kernel_cpu_percent']:.1f} %: "
+                f"x{c['kernel_cpu_percent'] / max(sv['kernel_cpu_percent'], 1e-9):.2f})"
             )
         for lesson in ("01", "05"):
-            c, s = results["client"]["memory"].get(lesson), results["server"]["memory"].get(lesson)
-            if c is not None and s is not None:
-                print(f"  kernel memory after lesson {lesson}: {c:.0f} MB (server {s:.0f} MB: x{c / s:.2f})")
+            c_mb, s_mb = client["memory"].get(lesson), server["memory"].get(lesson)
+            if c_mb is not None and s_mb is not None:
+                print(
+                    f"  kernel memory after lesson {lesson}: {c_mb:.0f} MB (server {s_mb:.0f} MB: x{c_mb / s_mb:.2f})"
+                )
 
 
 if __name__ == "__main__":

@@ -4,7 +4,8 @@ The default test run executes the lessons with nbval under ``MOCAPLAB_FAST=1``
 (set by ``conftest.py``), which shrinks clips and iteration counts.  Students
 run them without it, so each lesson is executed here once more, in a fresh
 kernel with ``MOCAPLAB_FAST=0``: every cell must run and every assert must
-hold on the full-size data too.
+hold on the full-size data too, and no cell may show a warning its lesson does
+not teach (``lesson_warnings.py``).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from pathlib import Path
 
 import nbformat
 import pytest
+from lesson_warnings import check_cell
 from nbclient import NotebookClient
 
 LESSONS = sorted((Path(__file__).resolve().parent.parent / "lessons").glob("*.ipynb"))
@@ -28,3 +30,5 @@ def test_lesson_runs_in_full_mode(path: Path) -> None:
     client.execute(env=dict(os.environ, MOCAPLAB_FAST="0"))
     shown = "".join(o.get("text", "") for o in nb.cells[-1].outputs)
     assert shown.strip() == "FAST = False", shown
+    for k, cell in enumerate(nb.cells):
+        check_cell(path.name, f"cell {k}", cell.get("outputs", []))

@@ -6,7 +6,7 @@ status line, and the staggered explorer pushed its controls past the right
 edge, its toggle and Undo/Redo/Reset squeezed to "...".  This test opens a
 notebook (written here, building each widget the way its lesson does:
 03's path editor with a 3D view, 04's time tracks, 10's touch-up stepper,
-13's staggered explorer) in the real JupyterLab of ``test_browser.py``,
+13's staggered explorer, 01's 3D viewer) in the real JupyterLab of ``test_browser.py``,
 opens the file browser, and measures in the DOM at both window sizes:
 
 * overflow: how far (CSS px) any visible element of a widget reaches past
@@ -15,7 +15,9 @@ opens the file browser, and measures in the DOM at both window sizes:
   cut (``scrollWidth > clientWidth``, the "..." a person sees), and any
   control narrower than :data:`MIN_CONTROL_PX`;
 * overlap: the area shared by the plot, the 3D view and every control,
-  status line or legend outside them (a 3D view drawn over the plot).
+  status line or legend outside them (a 3D view drawn over the plot);
+* the touch-up stepper's schedule: one line per adjustment under the
+  column headings (its rows wrapped onto two lines each at 1366 px).
 
 Everything must be 0.  The figures are printed (``-s`` shows them).
 
@@ -80,6 +82,13 @@ stepper = TouchUpStepper(jump, body=Body.from_skeleton(jump), contacts=foot_cont
                          viewer_options={"window_size": (640, 400)})
 stepper.widget.add_class("layout-stepper")
 stepper.widget
+""",
+    "viewer": """
+from mocaplab.widgets import MotionViewer
+
+viewer = MotionViewer(walk, window_size=(480, 300))
+viewer.widget.add_class("layout-viewer")
+viewer
 """,
     "explorer": """
 explorer = StaggeredExplorer(data.cmu("16_15")[3:], max_poses=12, curve_joint="LeftForeArm", joint="LeftArm")
@@ -159,6 +168,19 @@ _MEASURE_JS = """
 }
 """
 
+# The touch-up stepper's schedule: how many lines its controls take, and how many adjustments (a stage each).
+_SCHEDULE_LINES_JS = """
+() => {
+  const schedule = document.querySelector('.layout-stepper .mocaplab-touchup-schedule');
+  if (!schedule) return {rows: -1, lines: -1, found: false};
+  const controls = Array.from(schedule.querySelectorAll('.widget-text, .widget-slider, .widget-dropdown'));
+  const middles = controls.map((el) => { const r = el.getBoundingClientRect(); return (r.top + r.bottom) / 2; });
+  middles.sort((a, b) => a - b);
+  const lines = middles.filter((y, i) => i === 0 || y - middles[i - 1] > 8).length;  // a new line 8 px lower
+  return {rows: schedule.querySelectorAll('.widget-dropdown').length, lines, found: true};
+}
+"""
+
 
 def _notebook(path: Path) -> Path:
     cells = [
@@ -216,7 +238,7 @@ def test_editors_fit_a_laptop_with_the_file_browser_open(layout_page: LessonPage
         lesson.page.set_viewport_size({"width": width, "height": height})
         browser_px = _open_file_browser(lesson)
         lesson.page.wait_for_timeout(2000)  # JupyterLab lays the panels out again
-        for name in ("path", "time", "stepper", "explorer"):
+        for name in ("path", "time", "stepper", "explorer", "viewer"):
             cls = f"layout-{name}"
             root = lesson.page.locator(f".{cls}").first
             root.wait_for(timeout=60000)
@@ -230,6 +252,11 @@ def test_editors_fit_a_laptop_with_the_file_browser_open(layout_page: LessonPage
                 f"overflow {m['overflow']} px ({m['past']} elements past the edge), "
                 f"squeezed {len(m['squeezed'])}, overlap {m['overlap_px2']} px2"
             )
+            if name == "stepper":
+                lines = lesson.page.evaluate(_SCHEDULE_LINES_JS)
+                print(f"  schedule: {lines['rows']} adjustments on {lines['lines']} lines")
+                if lines["lines"] != lines["rows"] or not lines["found"]:  # one line per adjustment
+                    failures.append(f"{width}x{height} stepper: the schedule's {lines['rows']} rows wrap: {lines}")
             if m["overflow"] or m["squeezed"] or m["overlap_px2"]:
                 failures.append(
                     f"{width}x{height} {name}: overflow {m['overflow']} px over {m['past']} elements "
@@ -279,3 +306,33 @@ def test_keys_reach_the_editor_from_the_plot(layout_page: LessonPage) -> None:
     )
     status = root.locator(".mocaplab-path-status").first.text_content() or ""
     assert status.startswith("undid: moved hard pin at frame"), status
+
+
+def test_keys_reach_the_viewer_from_its_controls(layout_page: LessonPage) -> None:
+    """After a click on the 3D viewer's step button, the arrows step and space plays and pauses (issue #28)."""
+    lesson = layout_page
+    page = lesson.page
+    root = page.locator(".layout-viewer").first
+    root.scroll_into_view_if_needed()
+    assert "space play/pause" in (root.locator(".mocaplab-keys-help").first.text_content() or ""), "the help line"
+    lesson.kernel_eval("viewer.set_frame(0)")
+    forward = root.locator(".widget-button").nth(2)
+    forward.click()  # steps one frame, and the focus is now in the viewer
+    wait_until(lambda: _kernel_value(lesson, "viewer.frame") == 1, timeout=20, what="the step button")
+    page.keyboard.press("ArrowRight")
+    page.keyboard.press("ArrowRight")
+    page.keyboard.press("ArrowLeft")
+    wait_until(lambda: _kernel_value(lesson, "viewer.frame") == 2, timeout=20, what="the arrows to step")
+    lesson.wait_idle(settle=0.5)
+    assert _kernel_value(lesson, "viewer.frame") == 2, "each arrow stepped one frame, once"
+    page.keyboard.press(" ")  # on the focused step button: plays, and does not click the button as well
+    wait_until(lambda: _kernel_value(lesson, "viewer.playing"), timeout=20, what="space to play")
+    wait_until(lambda: _kernel_value(lesson, "viewer.frame") > 10, timeout=20, what="the frames to move")
+    page.keyboard.press(" ")
+    wait_until(lambda: not _kernel_value(lesson, "viewer.playing"), timeout=20, what="space to pause")
+    frame = _kernel_value(lesson, "viewer.frame")
+    lesson.wait_idle(settle=0.5)
+    assert _kernel_value(lesson, "viewer.frame") == frame, "paused"
+    slider = root.locator(".mocaplab-viewer-slider").first
+    text = slider.locator(".widget-label").first.text_content() or ""
+    assert text.strip() == f"{frame / 30:.3f} s", f"the slider shows the frame: {text!r} for frame {frame}"

@@ -108,53 +108,62 @@ def _names(text: str) -> tuple[str, ...]:
     return tuple(t.strip() for t in text.replace(";", ",").split(",") if t.strip())
 
 
+#: The schedule's columns: heading, what its tooltip says, CSS grid track.  The headings are written once
+#: above the rows (not as a description on every control), so a row fits on one line of a laptop's notebook.
+SCHEDULE_COLUMNS = (
+    ("", "", "max-content"),
+    ("S2 (rotated)", "the links rotated: joint names (each with its descendants) or presets", "minmax(120px, 2fr)"),
+    ("S3 (kept global)", "links carried by S2 keeping their global orientation (none in flight)", "minmax(100px, 2fr)"),
+    ("sigma (s)", "width of the smoothing kernel of the displacement map, in seconds", "86px"),
+    ("rho", "damping: the share of the computed adjustment applied", "minmax(150px, 1.5fr)"),
+    ("stage", "which frames the adjustment corrects: ground (ZMP, s3.3) or flight (s3.4)", "92px"),
+)
+
+
 class _Row:
-    """Controls of one adjustment of the schedule."""
+    """Controls of one adjustment of the schedule: one line of the schedule's grid (:data:`SCHEDULE_COLUMNS`)."""
 
     def __init__(self, k: int, adj: Adjustment) -> None:
         self.k = k
+        fill = {"width": "auto", "min_width": "0"}  # each control fills its column of the grid
         # sent on Enter or leaving the box, not per keystroke (a half-typed name is no joint)
         self.s2 = W.Text(
             value=", ".join(adj.s2),
-            description="S2",
             tooltip="S2, the links rotated: joint names (each with its descendants) or presets such as lower_body, "
             "comma-separated; Enter applies",
             continuous_update=False,
-            layout=W.Layout(width="230px"),
+            layout=W.Layout(**fill),
         )
         self.s3 = W.Text(
             value=", ".join(adj.s3),
-            description="S3",
             tooltip="S3, links carried by S2 that keep their global orientation (empty in flight); Enter applies",
             continuous_update=False,
-            layout=W.Layout(width="200px"),
+            layout=W.Layout(**fill),
         )
         self.sigma = W.BoundedFloatText(
             value=round(adj.sigma, 4),
             min=0.0,
             max=10.0,
             step=1 / 30,
-            description="sigma (s)",
-            tooltip="width of the smoothing kernel of this adjustment's displacement map, in seconds",
-            layout=W.Layout(width="170px"),
+            tooltip="sigma, the width of the smoothing kernel of this adjustment's displacement map, in seconds",
+            layout=W.Layout(**fill),
         )
         self.rho = W.FloatSlider(
             value=adj.rho,
             min=0.05,
             max=1.0,
             step=0.05,
-            description="rho",
-            tooltip="damping: the share of the computed adjustment applied (1: all of it)",
+            tooltip="rho, the damping: the share of the computed adjustment applied (1: all of it)",
             continuous_update=False,
-            layout=W.Layout(width="250px"),
+            layout=W.Layout(**fill),
         )
         self.stage = W.Dropdown(
             options=["ground", "flight"],
             value=adj.stage,
             tooltip="which frames this adjustment corrects: ground (ZMP balance, s3.3) or flight (s3.4)",
-            layout=W.Layout(width="90px"),
+            layout=W.Layout(**fill),
         )
-        self.box = row([W.Label(f"{k + 1}."), self.s2, self.s3, self.sigma, self.rho, self.stage])
+        self.cells: list[W.Widget] = [W.Label(f"{k + 1}."), self.s2, self.s3, self.sigma, self.rho, self.stage]
 
     def set(self, adj: Adjustment) -> None:
         self.s2.value = ", ".join(adj.s2)
@@ -177,6 +186,25 @@ class _Row:
         if self.stage.value != adj.stage:
             out["stage"] = self.stage.value
         return out
+
+
+def _schedule_grid(rows: Sequence[_Row]) -> W.GridBox:
+    """The schedule as a grid: the column headings (with tooltips) over one line per adjustment."""
+    headings = [
+        W.HTML(f"<span title='{html.escape(tip, quote=True)}'>{html.escape(name)}</span>")
+        for name, tip, _ in SCHEDULE_COLUMNS
+    ]
+    grid = W.GridBox(
+        headings + [cell for r in rows for cell in r.cells],
+        layout=W.Layout(
+            grid_template_columns=" ".join(track for _, _, track in SCHEDULE_COLUMNS),
+            grid_gap="2px 8px",
+            align_items="center",
+            max_width="860px",
+            overflow="auto",  # narrower than the columns' minimum (about 620 px): scrolls, never overlaps
+        ),
+    )
+    return grid
 
 
 # --------------------------------------------------------------------------- static figures
@@ -377,9 +405,12 @@ class TouchUpStepper:
         self._viewer_box = W.Box([self.viewer.widget] if self.viewer is not None else [])
         controls = row([self.back_button, self.step_button, self.iteration_button, self.reset_button, self.mean_label])
         schedule = W.VBox(
-            [W.HTML("<b>schedule</b> (S1 = the other joints; an edit applies from the current step on)")]
-            + [r.box for r in self.rows]
+            [
+                W.HTML("<b>schedule</b> (S1 = the other joints; an edit applies from the current step on)"),
+                _schedule_grid(self.rows),
+            ]
         )
+        schedule.add_class("mocaplab-touchup-schedule")
         plots = row([self._plot8.widget, self._plot9.widget], align="flex-start")
         shortcuts = [
             Shortcut(("right",), "\u2192", "step", self._press(self.step_button)),

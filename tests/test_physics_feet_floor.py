@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from mocaplab import quat
-from mocaplab.contacts import foot_contacts
+from mocaplab.contacts import foot_contacts, intervals_from_mask
 from mocaplab.motion import Motion, Skeleton
 from mocaplab.physics import balance, touch_up
 
@@ -101,15 +101,69 @@ def test_a_toeless_support_polygon_leaves_out_the_lifted_heel(walk):
     assert toe_active > 0.9 and heel_active < 0.5, (toe_active, heel_active)
 
 
-def test_heel_strike_is_labelled_at_30_fps(walk):
-    """At 30 fps the landing frame counts as slow: contacts start within a frame of those at 120 fps."""
-    fast = foot_contacts(walk)
-    slow = foot_contacts(walk.resample(30))
-    for joint in ("LeftFoot", "RightFoot"):
-        starts_fast = np.array([a for a, _ in fast.intervals(joint) if a > 0]) / 120.0
-        starts_slow = np.array([a for a, _ in slow.intervals(joint) if a > 0]) / 30.0
-        lag = [starts_slow[np.argmin(np.abs(starts_slow - t))] - t for t in starts_fast]
-        assert np.max(np.abs(lag)) <= 1.5 / 30.0, (joint, lag)
+def _foot_events(motion: Motion) -> dict[str, np.ndarray]:
+    """Heel strikes and toe-offs of each foot (ankle or toe planted), in seconds: (n, 2) per side.
+
+    A label is the state at a frame's instant, so a contact labelled on
+    frames ``a .. b - 1`` started between frames ``a - 1`` and ``a`` and
+    ended between ``b - 1`` and ``b``: its events are timed midway.  Only
+    contacts that start and end inside the clip.
+    """
+    c = foot_contacts(motion)
+    out = {}
+    for side in ("Left", "Right"):
+        planted = np.any([c.of(j) for j in c.joints if j.startswith(side)], axis=0)
+        events = [(a, b) for a, b in intervals_from_mask(planted) if a > 0 and b < motion.n_frames]
+        out[side] = (np.array(events, dtype=float).reshape(-1, 2) - 0.5) / motion.fps
+    return out
+
+
+@pytest.mark.parametrize("clip", ["16_15", "02_01"])
+def test_contacts_are_timed_alike_at_any_frame_rate(cmu, clip):
+    """Heel strikes and toe-offs at 60 and 30 fps within half a 30 fps frame of those at 120 fps.
+
+    Each rate times an event to within half its own frame, so the bound is
+    half a frame at 30 fps plus half a frame at 120 fps (20.8 ms).  With
+    speeds by central differences and rules in whole frames, 02_01 was 29 ms
+    late at 30 fps, and both walks lost 1.3-1.5 % of their planted frames
+    at 24 fps (now at most 0.7 %).
+    """
+    walk = cmu(clip)
+    reference = _foot_events(walk)
+    share = foot_contacts(walk).mask.mean()
+    for fps in (60, 30):
+        found = _foot_events(walk.resample(fps))
+        for side, events in reference.items():
+            assert found[side].shape == events.shape, (fps, side, found[side], events)
+            late = 1000 * (found[side] - events)
+            assert np.abs(late).max() <= 1000 * (1 / 60 + 1 / 240) + 1e-6, (fps, side, late.round(1))
+    for fps in (60, 30, 24):
+        assert abs(foot_contacts(walk.resample(fps)).mask.mean() - share) < 0.01, (fps, share)
+
+
+@pytest.mark.parametrize(
+    "clip",
+    [
+        "16_15",
+        pytest.param("02_01", marks=pytest.mark.xfail(strict=True, reason=(
+            "the whole-clip mean at 30 fps is 1.32x 120 fps's (4.10 vs 3.10 mm): the first and last 0.1 s, which no "
+            "adjustment corrects, hold 52 and 44 mm at 30 fps against 28 and 29 at 120 (the ZMP's accelerations at "
+            "the clip's ends depend on the rate); the interior is 0.82 vs 1.27 mm"))),
+    ],
+)
+def test_a_walk_at_30_fps_is_balanced_and_touched_up_as_at_120(cmu, clip):
+    """The mean ZMP distance of the input (24 and 30 fps) and of the touch-up (30 fps) as at 120 fps."""
+    walk = cmu(clip)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fast, slow = touch_up(walk), touch_up(walk.resample(30))
+    for fps in (30, 24):
+        ratio = balance(walk.resample(fps)).mean_distance / balance(walk).mean_distance
+        assert 1 / 1.1 <= ratio <= 1.1, (fps, ratio)
+    interior = slow.mean_zmp_distance_interior[slow.best] / fast.mean_zmp_distance_interior[fast.best]
+    assert interior <= 1.15, interior
+    whole = slow.mean_zmp_distance[slow.best] / fast.mean_zmp_distance[fast.best]
+    assert whole <= 1.15, whole
 
 
 def test_a_lifted_walk_balances_and_touches_up_as_on_the_floor(walk):

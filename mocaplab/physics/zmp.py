@@ -543,7 +543,7 @@ def balance(
 
     >>> import mocaplab as ml
     >>> round(1000 * ml.physics.balance(ml.cmu("16_15")).mean_distance)
-    13
+    12
     """
     known = resolve_roles(motion, roles) if body is None or isinstance(contacts, str) else None
     body = Body.from_skeleton(motion, roles=known) if body is None else body

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from mocaplab import Motion, quat, save_bvh
+from mocaplab import Motion, Skeleton, quat, save_bvh
 from mocaplab.io.asfamc import CMU_BVH_NAMES
 
 #: Metres per unit of the CMU BVH files (the Acclaim unit, 1/0.45 inch).
@@ -165,6 +165,56 @@ def game_studio(motion: Motion, folder: str | Path) -> tuple[Path, dict[str, str
     )
     out = Motion(skeleton, rotations, np.zeros((frames, 3)), motion.fps, translations=translations, name=motion.name)
     return _save(out, folder, "game_studio"), name_map
+
+
+def static_root(m: Motion) -> Motion:
+    """``m`` below a static ``joint_Root`` at the origin, in memory: the CMU names, the pelvis travel in ``translations``.
+
+    The one change of a studio file's root layout (a static reference joint
+    above the travelling pelvis, 6 channels on every joint), without the
+    renaming of :func:`game_studio`: lesson code that names CMU joints runs
+    on it unchanged (``tests/test_browser_laptop.py``).  Saved with
+    ``save_bvh`` and read back with ``mocaplab.load``, it is a studio file.
+    """
+    sk = m.skeleton
+    J, F = sk.n_joints, m.n_frames
+    new = Skeleton(
+        ("joint_Root",) + sk.names,
+        np.r_[-1, np.asarray(sk.parents) + 1],
+        np.vstack([np.zeros(3), sk.offsets]),
+        channels=(sk.channels[0],) * (J + 1),
+        end_site_parents=np.asarray(sk.end_site_parents) + 1,
+        end_site_offsets=sk.end_site_offsets,
+    )
+    rot = np.concatenate([np.tile([0.0, 0.0, 0.0, 1.0], (F, 1, 1)), m.rotations], axis=1)
+    tr = np.array(np.broadcast_to(new.offsets, (F, J + 1, 3)))
+    tr[:, 1] = m.root_positions
+    return Motion(new, rot, np.zeros((F, 3)), m.fps, translations=tr, name=m.name)
+
+
+def read_clips_as_studio_files(folder: str | Path) -> None:
+    """From now on, ``mocaplab.cmu`` (and ``mocaplab.data.cmu``) give each clip as a studio file: run a lesson on one.
+
+    Each clip is written to ``folder`` below a static root (:func:`static_root`,
+    in the CMU unit) and read back with ``mocaplab.load(path, scale=CMU_UNIT_M)``
+    as a student reads their own file; its name stays the trial's.  For a
+    kernel that runs lessons in a test (the browser tests), never for the
+    test process itself: it replaces the functions in the modules.
+    """
+    import mocaplab
+    import mocaplab.data
+    from mocaplab import load
+
+    original = mocaplab.data.cmu
+
+    def studio_clip(trial: str, *args: Any, **kwargs: Any) -> Motion:
+        clip = original(trial, *args, **kwargs)
+        path = Path(folder) / f"{clip.name or trial}_static_root.bvh"
+        save_bvh(static_root(clip), path, scale=CMU_UNIT_M)
+        return load(path, scale=CMU_UNIT_M, name=clip.name)
+
+    mocaplab.data.cmu = studio_clip
+    mocaplab.cmu = studio_clip  # type: ignore[attr-defined]
 
 
 def asf_names(motion: Motion, folder: str | Path) -> tuple[Path, dict[str, str]]:

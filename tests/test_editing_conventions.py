@@ -21,13 +21,14 @@ import warnings
 
 import numpy as np
 import pytest
+from conventions import static_root
 
 from mocaplab import quat
 from mocaplab.displacement import blend_ramp
 from mocaplab.editing import AbsoluteTime, MotionPath, PinPosition, SceneEditor, edit, stationary_segments
 from mocaplab.editing import discrete as D
 from mocaplab.editing.graph import build_graph, frame_features
-from mocaplab.motion import Motion, Skeleton
+from mocaplab.motion import Motion
 
 FPS = 30.0
 MM = 1e-3
@@ -57,24 +58,6 @@ for _s, _S in (("Left", "L"), ("Right", "R")):
 def renamed(m: Motion) -> Motion:
     """``m`` with game-studio ``_L``/``_R`` joint names."""
     return m.replace(skeleton=dataclasses.replace(m.skeleton, names=tuple(GAME[n] for n in m.skeleton.names)))
-
-
-def static_root(m: Motion) -> Motion:
-    """``m`` below a static joint 0 at the origin; the pelvis travel in ``translations``."""
-    sk = m.skeleton
-    J, F = sk.n_joints, m.n_frames
-    new = Skeleton(
-        ("joint_Root",) + sk.names,
-        np.r_[-1, np.asarray(sk.parents) + 1],
-        np.vstack([np.zeros(3), sk.offsets]),
-        channels=(sk.channels[0],) * (J + 1),
-        end_site_parents=np.asarray(sk.end_site_parents) + 1,
-        end_site_offsets=sk.end_site_offsets,
-    )
-    rot = np.concatenate([np.tile([0.0, 0.0, 0.0, 1.0], (F, 1, 1)), m.rotations], axis=1)
-    tr = np.array(np.broadcast_to(new.offsets, (F, J + 1, 3)))
-    tr[:, 1] = m.root_positions
-    return Motion(new, rot, np.zeros((F, 3)), m.fps, translations=tr, name=m.name)
 
 
 CONVENTIONS = {"renamed": renamed, "static_root": static_root}

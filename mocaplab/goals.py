@@ -68,8 +68,10 @@ from typing import Any, Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import sparse
 from scipy.linalg import solveh_banded
 from scipy.ndimage import minimum_filter1d
+from scipy.sparse.linalg import spsolve
 
 from . import kinematics, quat
 from ._api import reject_keywords
@@ -740,17 +742,28 @@ _ACROSS_FADE = (0.02, 0.1)
 _CARRY_SECONDS = 0.05
 
 
-def _whittaker(values: Array, weights: Array, frames: float) -> Array:
+def _whittaker(values: Array, weights: Array, frames: float, pinned: NDArray[np.bool_] | None = None) -> Array:
     """``values`` (F, k) refitted by a weighted second-difference (Whittaker) smoother, shape (F, k).
 
     Minimises ``sum_i W_i |x_i - v_i|^2 + lam sum_i |x_{i-1} - 2 x_i + x_{i+1}|^2`` with
     ``lam = frames^4 / 16``: with ``W = 1`` a smoother over about ``frames`` frames (it halves a
     sine of period ``pi * frames`` frames), much less where ``W`` is large.  One banded solve.
+    Frames marked ``pinned`` (F,) keep their values exactly (the others are solved with them fixed).
     """
     n = len(values)
     if n < 4 or frames <= 0.0:
         return np.array(values, copy=True)
     lam = frames**4 / 16.0
+    if pinned is not None and pinned.any():
+        # the same normal equations, the pinned unknowns moved to the right-hand side
+        free = ~pinned
+        out = np.array(values, copy=True)
+        if free.any():
+            d2 = sparse.diags([1.0, -2.0, 1.0], [0, 1, 2], shape=(n - 2, n))
+            a = (sparse.diags(weights) + lam * (d2.T @ d2)).tocsr()
+            rhs = weights[free, None] * values[free] - a[free][:, pinned] @ values[pinned]
+            out[free] = np.asarray(spsolve(a[free][:, free].tocsc(), rhs)).reshape(rhs.shape)
+        return out
     # lam D2^T D2 in banded upper form (second differences over frames)
     ab = np.zeros((3, n))
     ab[0, 2:] = lam
@@ -1215,7 +1228,7 @@ _HELD_POWER = 50
 _TOE_SLACK = (0.002, 0.008)
 
 
-def _smooth_kinks(motion: Motion, out: Motion, goals: Sequence[Goal]) -> Motion:
+def _smooth_kinks(motion: Motion, out: Motion, goals: Sequence[Goal], *, pin: bool = False) -> Motion:
     """The correction ``out - motion`` of each joint above a goal, smoothed where no goal holds fully.
 
     The exact pass meets every goal on every frame, and where a goal starts
@@ -1240,6 +1253,10 @@ def _smooth_kinks(motion: Motion, out: Motion, goals: Sequence[Goal]) -> Motion:
     the root's translation (its lowering is smooth already).  Last, where
     the smoother moved a fully held toe by more than 2 to 8 mm, the foot
     turns about its ankle back toward where the exact pass put the toe.
+    With ``pin`` the frames a goal holds fully (weight 1) keep ``out``'s
+    rotations exactly and the smoother works around them (the staggered
+    constraint layer: its plants hold to a hundredth of a millimetre, where
+    the soft weight above leaves a millimetre or two).
     """
     n = motion.n_frames
     if n < 4 or not goals:
@@ -1260,7 +1277,8 @@ def _smooth_kinks(motion: Motion, out: Motion, goals: Sequence[Goal]) -> Motion:
     rot = np.array(out.rotations, copy=True)
     for j in np.flatnonzero(moved & ~exact & (held.max(axis=1) > 0.0)).tolist():
         w = 1.0 + ((_KINK_SECONDS / _HELD_SECONDS) ** 4 - 1.0) * held[j] ** _HELD_POWER
-        rot[:, j] = displace(motion.rotations[:, j], _whittaker(d[:, j], w, _KINK_SECONDS * motion.fps))
+        pinned = held[j] >= 1.0 if pin else None
+        rot[:, j] = displace(motion.rotations[:, j], _whittaker(d[:, j], w, _KINK_SECONDS * motion.fps, pinned))
     # a planted toe goes back where the exact pass put it: the foot turns about its ankle by the shortest arc,
     # on the frames its goal holds fully (w^50).  The smoother moves a held ankle by a millimetre or so, but
     # the foot's own correction is as jittery as the captured foot it steadies (a toe that jumps 40 mm a frame

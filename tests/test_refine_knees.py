@@ -148,3 +148,24 @@ def test_a_nearly_straight_knee_bends_about_its_hinge():
     bend /= np.linalg.norm(bend, axis=1, keepdims=True)
     assert np.degrees(np.arccos(np.clip(bend @ hinge, -1, 1))).max() < 10.0
     assert np.linalg.norm(np.diff(new_knee, axis=0), axis=1).max() < 2e-3
+
+
+def test_pinned_frames_keep_their_values_and_the_rest_is_smoothed_around_them():
+    # the staggered constraint layer pins the frames a goal holds fully: the smoother solves the others with those
+    # fixed (the same normal equations, the pinned unknowns moved to the right-hand side)
+    rng = np.random.default_rng(3)
+    n, frames = 40, 6.0
+    values = np.cumsum(rng.normal(size=(n, 3)), axis=0)
+    weights = 1.0 + 50.0 * rng.random(n)
+    pinned = np.zeros(n, dtype=bool)
+    pinned[10:18] = pinned[30] = True
+    got = goals._whittaker(values, weights, frames, pinned)
+    np.testing.assert_array_equal(got[pinned], values[pinned])
+    # by hand: minimise sum W |x - v|^2 + lam |D2 x|^2 over the free frames, the pinned ones fixed
+    d2 = np.diff(np.eye(n), 2, axis=0)
+    a = np.diag(weights) + frames**4 / 16.0 * d2.T @ d2
+    free = ~pinned
+    want = np.linalg.solve(a[np.ix_(free, free)], weights[free, None] * values[free] - a[np.ix_(free, pinned)] @ values[pinned])
+    np.testing.assert_allclose(got[free], want, rtol=1e-9, atol=1e-9)
+    # without pins, the banded smoother moves every frame
+    assert np.abs(goals._whittaker(values, weights, frames)[pinned] - values[pinned]).max() > 0.01

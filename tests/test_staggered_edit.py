@@ -131,6 +131,28 @@ def test_strong_succession_keeps_a_third_of_every_segment(cmu, trial: str, moved
     assert acc < 2.0 < knee
 
 
+@pytest.mark.parametrize("s", [0.03, -0.03])
+def test_succession_tapers_toward_the_end_it_moves_knots_to(walk_sm, s: float) -> None:
+    """Issue 25: the last pose anchors the end a delay moves knots toward (the first, a lead): within
+    SUCCESSION_TAPER offsets of it a knot moves by a third of the time left, so every segment keeps two thirds
+    of its length there (pushed against the anchor and stopped by keep_knot_order, the arm's kept 0.22 and 0.26)."""
+    from mocaplab.staggered.edit import SUCCESSION_TAPER
+
+    _, sm = walk_sm
+    out = succession(sm, s, 2.0, joint="LeftShoulder")
+    ratio = np.diff(out.knot_times, axis=0) / np.diff(sm.knot_times, axis=0)
+    assert ratio.min() > 2.0 / 3.0 - 1e-9
+    d = succession_depths(sm.skeleton, "LeftShoulder")
+    offset = np.where(np.isfinite(d), s * np.nan_to_num(d) ** 2, 0.0)
+    anchor = sm.knot_times[-1] if s > 0 else sm.knot_times[0]
+    # the arm down to the hand (offsets up to 0.27 s, less than any pose gap): full offsets away from the anchor
+    far = (np.abs(anchor - sm.knot_times) >= SUCCESSION_TAPER * np.abs(offset)) & (np.nan_to_num(d) <= 3)
+    far[[0, -1]] = False
+    moved = out.refinements - sm.refinements
+    assert np.allclose(moved[far], np.broadcast_to(offset, moved.shape)[far])
+    assert (far & (offset != 0)).sum() >= 0.6 * ((d >= 1) & (d <= 3)).sum() * (sm.n_poses - 2)
+
+
 def test_keep_knot_order_never_separates_knots_the_edit_left_alone(walk_sm) -> None:
     """A pair of knots already nearer than a third of their poses' gap stays as it is when the edit does not move it."""
     _, sm = walk_sm

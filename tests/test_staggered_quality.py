@@ -53,7 +53,9 @@ _CASES = [
     ("60_10", "exaggerate", 0.3, None),  # held since b836ba8 (goals: the toe's carry smoothed): lShin 247 vs 147
     ("test_freebvh.bvh", "succession", 0.02, None),  # held since b836ba8
     ("test_mocapbank.bvh", "succession", 0.02, None),
-    ("walk01.bvh", "succession", 0.02, _OPEN + "LeftHand 35 rad/s^2 against 6 (limit 32)"),
+    # held since a succession tapers toward the clip's end (edit.SUCCESSION_TAPER): the 24 fps walk's left hand
+    # ended on a one-frame segment, LeftHand 34.9 -> 9.6 rad/s^2 (input 6.1; not the layer: the edit alone)
+    ("walk01.bvh", "succession", 0.02, None),
     ("animation.bvh", "succession", 0.02, _OPEN + "LeftToeBase 221.5 mm/frame against 87.5; RightForeArm 427 rad/s^2 "
      "against 86"),
     ("test_optitrack.bvh", "succession", 0.02, _OPEN + "LeftLeg 68.4 mm/frame against 14.7, 4,974 rad/s^2 against 879, "

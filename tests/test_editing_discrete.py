@@ -492,3 +492,172 @@ def test_far_parts_keep_their_energies_within_a_small_fraction_of_min_gain(relay
     sc = D.SubsampledScene(tracks, ed.paths, cons, ed.segments, [0.0] * len(tracks), far=0.0, **kw)
     one = [sc.energy(t) for t in cands[:: max(1, len(cands) // 6)]]
     np.testing.assert_allclose(one, exact["total"][1:][:: max(1, len(cands) // 6)], rtol=1e-9, atol=1e-12)
+
+
+# ------------------------------------------------- sparse per-candidate updates
+def dense_reference(sc, cands):
+    """Equation 10 of every variant, straightforwardly: one variant at a time, every part of it solved.
+
+    Each variant's coupled system ``(I + sum U Z) w = c - sum U y`` is assembled densely over every
+    part and solved on its own (no Woodbury update of the base scene, no bound, no first-order
+    term); every part's move is computed, the coupled residuals are ``U x - c``, and the length
+    and duration terms are evaluated exactly for every part.  What the evaluation may leave out
+    it leaves out here too: a part moved (translation aside, for parts whose own rows ignore it)
+    by no more than ``far`` keeps its base energies, and phase 2 starts from phase 1's solution
+    of the parts that moved.  The per-part terms are the evaluation's own (``PartTerms``).
+    """
+    from mocaplab.editing.discrete.evaluation import PartTerms
+
+    p = sc.parts(cands)
+    S = sc.systems(p)
+    T = PartTerms(S)
+    K, C = sc.K, len(cands)
+
+    def invariant(loc, dim):  # parts whose own rows all ignore a translation
+        sums = [np.sum(np.where(loc.cols[:K] % dim == c, loc.vals[:K], 0.0), axis=2) for c in range(dim)]
+        scale = np.abs(loc.vals[:K]).sum(axis=2) + 1e-300
+        return np.all([np.all(np.abs(s) <= 1e-12 * scale, axis=1) for s in sums], axis=0)
+
+    def solve(cp, members, y, Z):
+        g = cp.g
+        N, r, held = np.eye(g + 1), np.zeros(g + 1), np.zeros(g + 1, bool)
+        for q, yq in zip(members, y, strict=True):
+            rows = cp.of_char[p.char[q]]
+            np.add.at(N, (rows[:, None], rows[None, :]), cp.U[q] @ Z[q])
+            np.add.at(r, rows, -cp.U[q] @ yq)
+            held[rows[cp.held[q]]] = True
+        c = np.where(held[:g], cp.rhs, 0.0)
+        r[:g] += c
+        N[g, :], N[:, g], N[g, g], r[g] = 0.0, 0.0, 1.0, 0.0
+        w = np.linalg.solve(N, r)
+        x = np.array([yq + Z[q] @ w[cp.of_char[p.char[q]]] for q, yq in zip(members, y, strict=True)])
+        Ux = np.zeros(g + 1)
+        for q, xq in zip(members, x, strict=True):
+            np.add.at(Ux, cp.of_char[p.char[q]], cp.U[q] @ xq)
+        return x, np.sum(np.where(cp.soft, Ux[:g] - c, 0.0) ** 2)
+
+    def moved(dx, k, dim, inv):
+        d = dx.reshape(-1, dim)
+        if inv[k]:
+            v = S.valid[k]
+            d = np.where(v[:, None], d - d[v].mean(axis=0), 0.0)
+        return np.abs(d).max() > sc.far
+
+    inv_s, inv_t = invariant(S.s_loc, 2), invariant(S.t_loc, 1)
+    out = {key: np.zeros(1 + C) for key in ("shape", "scale", "time", "length", "duration")}
+    base = {}
+    for v in range(1 + C):
+        members = np.arange(K)
+        if v:
+            members[p.char[K + v - 1]] = K + v - 1
+        one = [np.array([q]) for q in members]
+        own = members >= K  # the candidate's part
+        x1, e1 = solve(S.space, members, S.shape.y[members], S.shape.Z)
+        xt, et = solve(S.time, members, S.time_blocks.y[members], S.time_blocks.Z)
+        if v == 0:
+            base = {"x1": x1, "xt": xt}
+        m1 = own | [moved(x1[k] - base["x1"][k], k, 2, inv_s) for k in range(K)]
+        x1_used = np.where(m1[:, None], x1, base["x1"])
+        targets = [T.scale_targets(q, x[None]) for q, x in zip(one, x1_used, strict=True)]
+        y2 = np.array([T.solve_scale(q, rhs)[0] for q, (rhs, _) in zip(one, targets, strict=True)])
+        x2, e2 = solve(S.space, members, y2, S.scale.Z)
+        if v == 0:
+            base["x2"] = x2
+        m2 = m1 | [moved(x2[k] - base["x2"][k], k, 2, inv_s) for k in range(K)]
+        mt = own | [moved(xt[k] - base["xt"][k], k, 1, inv_t) for k in range(K)]
+        for k, q in enumerate(one):
+            a1 = x1[k] if m1[k] else base["x1"][k]
+            a2 = x2[k] if m2[k] else base["x2"][k]
+            at = xt[k] if mt[k] else base["xt"][k]
+            out["shape"][v] += T.shape(q, a1[None])[0]
+            out["scale"][v] += T.scale(q, a2[None], targets[k][1])[0]
+            out["time"][v] += T.time(q, at[None])[0]
+            out["length"][v] += abs(T.length_change(q, x2[k][None])[0])
+            out["duration"][v] += abs(T.duration_change(q, xt[k][None])[0])
+        out["shape"][v] += e1
+        out["scale"][v] += e2
+        out["time"][v] += et
+    out["total"] = out["shape"] + out["scale"] + out["time"] + sc.cs * out["length"] + sc.ct * out["duration"]
+    return out
+
+
+@pytest.fixture(scope="module")
+def long_relay(mocap_dir):
+    """Three groups of the relay with its clips resampled at 80 fps (314 and 229 frames), the end pin pulled."""
+    from mocaplab import data
+
+    a, b = data.cmu("16_15").resample(80.0), data.cmu("02_01").resample(80.0)
+    chars, cons = relay(a, b, 3)
+    ed = SceneEditor(chars, cons)
+    tracks = [D.Track.from_motion(m, build_graph([m])) for m in chars]
+    cands = [t for k in range(len(chars)) for t in D.prune(D.enumerate_transformations(tracks[k], character=k), constraints=cons)]
+    return ed, tracks, cons, cands
+
+
+@pytest.fixture(scope="module")
+def soft_ties(relays):
+    """The three-group relay with soft ties between the groups too (soft coupled rows: their residuals are energy)."""
+    _, tracks, cons, _ = relays[3]
+    chars = [t.motion for t in tracks]
+    paths = [MotionPath.from_motion(m) for m in chars]
+    f = chars[1].n_frames // 2
+    ties = [
+        Relative(3, f, 1, f, np.add(paths[1].local_offset(f, paths[3].positions[f]), [0.1, 0.0]), weight=2.0),
+        Sync(5, f, 3, f, offset=0.2),
+    ]
+    cons = cons + ties
+    cands = [t for k in range(len(chars)) for t in D.prune(D.enumerate_transformations(tracks[k], character=k), constraints=cons)]
+    return SceneEditor(chars, cons), tracks, cons, cands
+
+
+@pytest.mark.parametrize(("scene", "far"), [(3, None), (6, None), (6, 0.0), ("long", None), ("soft", None)])
+def test_sparse_variants_equal_a_dense_evaluation_of_each_variant(relays, long_relay, soft_ties, monkeypatch, scene, far):
+    from mocaplab.editing.discrete import evaluation as E
+
+    ed, tracks, cons, cands = {"long": long_relay, "soft": soft_ties}.get(scene) or relays[scene]
+    kw = {} if far is None else {"far": far}
+    sc = D.SubsampledScene(tracks, ed.paths, cons, ed.segments, [0.0] * len(tracks), deformed=ed.result.paths, **kw)
+    # count the part-variant pairs whose moves the length and duration terms expand
+    summed, expanded, inside = [], [], []
+    moves, over_parts = E.PhaseSolution.moves, E._sum_over_parts
+
+    def counting_sum(sol, *args):
+        inside.append(1)
+        summed.append(sol.dw.shape[0] * sol.dw.shape[1])
+        try:
+            return over_parts(sol, *args)
+        finally:
+            inside.pop()
+
+    monkeypatch.setattr(E.PhaseSolution, "moves", lambda self, k, c: (inside and expanded.append(len(k))) or moves(self, k, c))
+    monkeypatch.setattr(E, "_sum_over_parts", counting_sum)
+    fast = sc.terms(cands)
+    monkeypatch.undo()
+    ref = dense_reference(sc, cands)
+    for key in ref:
+        np.testing.assert_allclose(fast[key], ref[key], rtol=1e-9, atol=1e-9, err_msg=key)
+    # the same choice: the same order of the best candidates, the same set that beats the scene by min_gain
+    best = np.argsort(ref["total"][1:], kind="stable")[:5]
+    np.testing.assert_array_equal(np.argsort(fast["total"][1:], kind="stable")[:5], best)
+    gain = D.DiscreteOptions().min_gain
+    assert set(np.flatnonzero(fast["total"][1:] < fast["total"][0] - gain)) == set(
+        np.flatnonzero(ref["total"][1:] < ref["total"][0] - gain)
+    )
+    print(f"{len(tracks)} characters, {len(cands)} candidates: {sum(expanded)} of {sum(summed)} moves expanded")
+    assert len(summed) == 2 and sum(expanded) < 0.8 * sum(summed), "the first-order shortcut is taken (and checked)"
+
+
+@pytest.mark.parametrize("n", [5, 400])  # below and above the size where the products are written out dense
+def test_the_sparse_products_equal_their_dense_forms(n):
+    from mocaplab.editing.discrete import evaluation as E
+
+    rng = np.random.default_rng(n)
+    g = n // 2 + 3
+    X = rng.normal(size=(g, g))
+    rows = np.concatenate([np.repeat(np.arange(n), 4), rng.integers(0, n, 3 * n)])  # two runs, repeated entries
+    cols, vals = rng.integers(0, g, len(rows)), rng.normal(size=len(rows))
+    M = np.zeros((n, g))
+    np.add.at(M, (rows, cols), vals)
+    np.testing.assert_allclose(E._sparse_times(rows, cols, vals, n, X), M @ X, rtol=1e-12, atol=1e-12)
+    A, k, w = rng.normal(size=(7, 30, 12)), rng.integers(0, 7, n), rng.normal(size=(n, 12))
+    np.testing.assert_allclose(E._products(A, k, w), np.einsum("nmr,nr->nm", A[k], w), rtol=1e-12, atol=1e-12)

@@ -21,7 +21,7 @@ continuous modules of :mod:`mocaplab.editing`, none back):
     :class:`Disk` regions).
 :mod:`~mocaplab.editing.discrete.evaluation`
     Equation 10 for every candidate on subsampled paths, in one batch whose
-    cost grows linearly with the characters
+    cost grows linearly with the characters and with the clip length
     (:class:`~mocaplab.editing.discrete.evaluation.SubsampledScene`).
 :mod:`~mocaplab.editing.discrete.editor`
     Algorithm 1 (:class:`DiscreteEditor`, :class:`DiscreteOptions`): a

@@ -40,8 +40,8 @@ with ``y = N^-1 b`` and ``Z = N^-1 U^T`` per part, the scene's solution is
 ``x = y + Z w`` where ``S w = c - U y`` and ``S = I + U Z`` (one row and
 column per coupled row).
 
-Cost linear in the number of characters
----------------------------------------
+Cost linear in the characters and in the clip length
+----------------------------------------------------
 A *variant* is the scene with one candidate applied (variant 0: none).  A
 candidate of character ``k`` changes only ``k``'s block, and only the
 coupled rows touching ``k`` (``J``, a handful) see it.  So per update:
@@ -49,26 +49,38 @@ coupled rows touching ``k`` (``J``, a handful) see it.  So per update:
 1. the base scene's coupling is assembled and factorised once
    (``S``, ``X = S^-1``, ``w0``), the blocks of all parts solved once;
 2. per candidate, ``S`` changes by ``D = U_c Z_c - U_k Z_k`` on ``J``
-   only, and the right-hand side by a vector on ``J`` (plus, in phase 2,
-   on the rows of the characters whose phase-1 solution moved): the
-   variant's multipliers are ``w0 + X dr - X_J (I + D X_JJ)^-1 D (w0 +
-   X dr)_J`` (Woodbury again, a ``|J| x |J|`` solve);
+   only, and the right-hand side by a vector ``dr`` on ``J`` (plus, in
+   phase 2, on the rows of the characters whose phase-1 solution moved):
+   the variant's multipliers are ``w0 + X dr - X_J (I + D X_JJ)^-1 D (w0 +
+   X dr)_J`` (Woodbury again, a ``|J| x |J|`` solve; ``X dr`` and ``X_J
+   beta`` are sparse-times-dense products over the few non-zero entries).
+   The coupled rows' residuals are the multipliers themselves (``U x - c =
+   -w``), so their energy needs no part's move;
 3. the candidate's own part is solved from them, and every other part
-   ``k'`` moves by ``Z_k' dw``: this is computed (and its energies
-   re-evaluated) only where it can exceed ``FAR`` (1e-3 m or s: a bound
-   ``|Z_k'| |dw|`` decides); elsewhere the base scene's values stand.  A
-   change propagates through each link of constraints with a factor of
-   about 0.1 in the relay scenes (each character has its own pins), so only
-   the few characters around the candidate are re-solved.
+   ``k'`` moves by ``dx = Z_k' dw``, kept in that factored form
+   (:class:`PhaseSolution`): ``dx`` is expanded, and the part's energies
+   re-evaluated, only where it can exceed ``FAR`` (1e-3 m or s: a bound
+   ``|Z_k'| |dw|`` picks the pairs, their moves decide); elsewhere the base
+   scene's values stand.  The length and duration terms are summed over
+   every part of every variant (:func:`_sum_over_parts`), by their
+   gradient through ``Z_k'`` (``|J|`` numbers per pair, whatever the clip
+   length) wherever a bound on the first-order error is below ``EXACT``
+   (1e-12 m or s per part), exactly elsewhere.  A change propagates
+   through each link of constraints with a factor of about 0.1 in the
+   relay scenes (each character has its own pins), so only the few
+   characters around the candidate are expanded.
 
-Memory is ``O(parts x frames x |J|)`` plus the ``g x g`` coupling matrix
-(``g`` coupled rows; 0.8 MB for the 78-character relay); time is linear in
-the characters except the dense ``O(variants x g)`` multiplier updates,
-small at these sizes (the benchmark prints the curve and a linear fit).
-A candidate's energy does not depend on which others are evaluated with
-it; with ``far=0`` the evaluation is exact (every part re-solved), which
-the tests compare with.  Phase 2's right-hand side (equation 7) is
-recomputed exactly for every part that moved.
+No array is (variants x characters x unknowns): memory is ``O(parts x
+frames x |J|)`` plus ``O(variants x characters x |J|)`` and the ``g x g``
+coupling matrix (``g`` coupled rows; 0.8 MB for the 78-character relay);
+time is linear in the characters and the frames except the inverse ``X``
+(``O(g^3)``, about 9 ms for the relay's 308 rows) and the dense ``O(variants
+x g)`` multiplier updates, small at these sizes (``benchmarks/
+bench_discrete.py`` prints the curves and their slopes).  A candidate's energy does not depend
+on which others are evaluated with it; with ``far=0`` the evaluation is
+exact (every part re-solved), which the tests compare with.  Phase 2's
+right-hand side (equation 7) is recomputed exactly for every part that
+moved.
 
 Longer than 800 lines because the evaluation of every candidate transformation is one vectorised pipeline over shared per-candidate arrays (spliced paths, sparse rows, the linearised solve, the cost terms); its stages read each other's intermediate arrays.
 """
@@ -94,7 +106,10 @@ from ..paths import MotionPath
 from ..timewarp import temporal_rows
 from .transformations import GraphArrays, Track, Transformation, _rot2
 
-__all__ = ["SubsampledScene", "Parts", "Coupling", "PhaseBlocks", "LocalRows", "PENALTY", "EPS", "FAR"]
+__all__ = [
+    "SubsampledScene", "Parts", "Coupling", "PhaseBlocks", "LocalRows", "Systems", "PhaseSolution", "PartTerms",
+    "PENALTY", "EPS", "FAR", "EXACT",
+]  # fmt: skip
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -102,7 +117,10 @@ IntArray = NDArray[np.int64]
 PENALTY = 1e4  # weight of hard constraints and rigid rows in the evaluation (times the largest soft weight)
 EPS = 1e-8  # regulariser of the free modes
 FAR = 1e-3  # metres or seconds: a part that a candidate moves less than this keeps its base energies
+EXACT = 1e-12  # metres or seconds: a length or duration term's largest first-order error in one part
 _BAND = MappingProxyType({2: 5, 1: 1})  # bandwidth (in unknowns) of the path rows for 2D (space) and 1D (time)
+_CHUNK = 2048  # part-variant pairs whose moves are expanded at a time
+_DENSE = 20_000  # entries below which a sparse product is written out dense (_sparse_times, _products)
 _SEAM = np.array([-2, -1, 0, 1], dtype=np.int64)  # frames kept around each seam
 _SEAM.flags.writeable = False
 
@@ -504,6 +522,10 @@ class Systems:
 class PhaseSolution:
     """One phase's solutions for the base scene and every variant.
 
+    The other parts' moves are kept in factored form, ``dx = Zr dw`` per part
+    and variant, and expanded (:meth:`moves`) only for the pairs that need
+    them: a (K, C, m) array of every move is never built.
+
     Attributes
     ----------
     base : ndarray, shape (K, m)
@@ -517,11 +539,21 @@ class PhaseSolution:
         Their solutions.
     residual : ndarray, shape (1 + C, g)
         Coupled rows' residuals ``U x - c`` per variant.
-    dx : ndarray, shape (K, C, m)
-        How far each variant moves every other part (0 for the candidate's
-        own character), however small, less the translation for parts whose
-        own energies ignore it: the length and duration terms (first order in
-        it, and translation-invariant) are summed from it over every part.
+    dw : ndarray, shape (K, C, gk)
+        How each variant changes the multipliers of each base part's coupled
+        rows (0 for the candidate's own character).
+    Zr : ndarray, shape (K, m, gk)
+        The base parts' ``Z``, less the translation for parts whose own
+        energies ignore it (the length and duration terms ignore it too).
+    bound : ndarray, shape (K, C)
+        An upper bound of ``max |dx|`` per unknown (the smaller of the
+        largest row norm of ``Zr`` times ``|dw|`` and the sum of each
+        column's largest entry times ``|dw_j|``; plus the shift, if any;
+        0 for the candidate's own character).
+    shift_v, shift_k, shift : ndarray
+        Moves not of the form ``Zr dw`` (phase 2: the parts whose phase-1
+        solution moved, ``y`` changed): variant (1 .. C), character and the
+        move (S, m), added by :meth:`moves`.
     """
 
     base: Array
@@ -530,7 +562,58 @@ class PhaseSolution:
     moved_k: IntArray
     moved: Array
     residual: Array
-    dx: Array
+    dw: Array
+    Zr: Array
+    bound: Array
+    shift_v: IntArray
+    shift_k: IntArray
+    shift: Array
+
+    def moves(self, k: IntArray, c: IntArray) -> Array:
+        """``dx`` of base parts ``k`` in variants ``c + 1`` (0-based candidates), shape (N, m): how far each moves."""
+        dx = _products(self.Zr, k, self.dw[k, c])
+        if len(self.shift_v) and len(k):
+            K = self.Zr.shape[0]
+            keys = (self.shift_v - 1) * K + self.shift_k
+            by = np.argsort(keys)
+            want = c * K + k
+            j = np.clip(np.searchsorted(keys[by], want), 0, len(keys) - 1)
+            hit = keys[by][j] == want
+            dx[hit] += self.shift[by[j[hit]]]
+        return dx
+
+
+def _sparse_times(rows: IntArray, cols: IntArray, vals: Array, n: int, X: Array) -> Array:
+    """``M @ X`` for the sparse ``M`` (n, len(X)) with entries ``vals`` at ``(rows, cols)`` (duplicates add up).
+
+    ``M`` is written out when it is small (below :data:`_DENSE` entries, where a sparse matrix's
+    set-up costs more than the product), kept sparse otherwise (its rows hold a few entries each).
+    """
+    g = X.shape[0]
+    if n * g <= _DENSE:
+        return np.bincount(rows * g + cols, vals, minlength=n * g).reshape(n, g) @ X
+    order = np.argsort(rows, kind="stable")  # the rows come in a few sorted runs
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
+    return np.asarray(sp.csr_matrix((vals[order], cols[order], indptr), shape=(n, X.shape[0])) @ X)
+
+
+def _products(A: Array, k: IntArray, w: Array) -> Array:
+    """``A[k[i]] @ w[i]`` for every ``i``: A (K, m, r), w (N, r) -> (N, m).
+
+    One matrix product per distinct ``k``: ``A[k]`` would copy an (m, r)
+    matrix per row, the memory of a dense (N, m, r) array (that copy is
+    taken only when it is small, below :data:`_DENSE` entries).
+    """
+    if len(k) * A.shape[1] * A.shape[2] <= _DENSE:
+        return _mv(A[k], w)
+    out = np.zeros((len(k), A.shape[1]))
+    order = np.argsort(k, kind="stable")
+    edges = np.searchsorted(k[order], np.arange(A.shape[0] + 1))
+    for q in np.flatnonzero(np.diff(edges)):
+        i = order[edges[q] : edges[q + 1]]
+        out[i] = w[i] @ A[q].T
+    return out
 
 
 def _translation_invariant(loc: LocalRows, K: int, dim: int) -> NDArray[np.bool_]:
@@ -582,12 +665,17 @@ def _couple(
     P, m = y.shape
     C = P - K
     g = cp.g
+    ci = np.arange(C)
     ev, ek, ey = extra if extra is not None else (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, m)))
+    shift = ey - y[ek]
     if g == 0:
-        dx0 = np.zeros((K, C, m))
+        bound = np.zeros((K, C))
         if len(ev):
-            dx0[ek, ev - 1] = ey - y[ek]
-        return PhaseSolution(y[:K].copy(), y[K:].copy(), ev, ek, ey.copy(), np.zeros((1 + C, 0)), dx0)
+            bound[ek, ev - 1] = np.abs(shift).max(axis=1, initial=0.0)
+        return PhaseSolution(
+            y[:K].copy(), y[K:].copy(), ev, ek, ey.copy(), np.zeros((1 + C, 0)),
+            np.zeros((K, C, 0)), np.zeros((K, m, 0)), bound, ev, ek, shift,
+        )  # fmt: skip
     G = cp.of_char  # (K, gk), padded with g
     U, held = cp.U, cp.held
     gk = G.shape[1]
@@ -610,35 +698,37 @@ def _couple(
     X = sla.cho_solve(sla.cho_factor(S), np.eye(g + 1))
     w0 = X @ r0
     xb = y[:K] + _mv(Z[:K], w0[G])
-    res0 = -c0
-    _add_at(res0, G, _mv(U[:K], xb))
-    res0[g] = 0.0
+    # the coupled rows' residuals are the multipliers: S w = c - U y gives U x - c = (S - I) w - (c - U y) = -w
     if C == 0:
-        return PhaseSolution(xb, np.zeros((0, m)), ev, ek, np.zeros((0, m)), res0[None, :g], np.zeros((K, 0, m)))
-    # 2. per candidate: S + D on J = G[kc], right-hand side changes dR
-    ci = np.arange(C)
+        return PhaseSolution(
+            xb, np.zeros((0, m)), ev, ek, np.zeros((0, m)), -w0[None, :g],
+            np.zeros((K, 0, gk)), Z[:K], np.zeros((K, 0)), ev, ek, shift,
+        )  # fmt: skip
+    # 2. per candidate: S + D on J = G[kc], right-hand side changes dR (|J| entries, and the
+    # rows of the parts whose y changed): u = X dR is a sparse-times-dense product
     J = G[kc]  # (C, gk)
     D = UZ[K:] - UZ[kc]
     heldv = held[K:] | ((cnt[J] - held[kc]) > 0)
     dc = np.where(heldv, crhs[J], 0.0) - c0[J]
-    dR = np.zeros((C, g + 1))
-    _add_at(dR, (ci[:, None], J), dc - (Uy[K:] - Uy[kc]))
-    if len(ev):
-        _add_at(dR, (ev[:, None] - 1, G[ek]), -_mv(U[ek], ey - y[ek]))
-    dR[:, g] = 0.0
-    u = dR @ X  # X is symmetric
-    XJ = X[J]  # (C, gk, g + 1): X[:, J] transposed
-    XJJ = np.take_along_axis(XJ, J[:, None, :], axis=2)  # (C, gk, gk)
+    rows = np.concatenate([np.repeat(ci, gk), np.repeat(ev - 1, gk)])
+    cols = np.concatenate([J.ravel(), G[ek].ravel()])
+    vals = np.concatenate([(dc - (Uy[K:] - Uy[kc])).ravel(), -_products(U[:K], ek, shift).ravel()])
+    u = _sparse_times(rows, cols, vals, C, X)  # X is symmetric: u = dR X
+    u[:, g] = 0.0
+    XJJ = X[J[:, :, None], J[:, None, :]]  # (C, gk, gk)
     A = np.eye(gk)[None] + D @ XJJ
     beta = np.linalg.solve(A, (D @ (w0[J] + u[ci[:, None], J])[..., None]))[..., 0]
-    dw = u - _mv(np.swapaxes(XJ, 1, 2), beta)
+    # dw = u - X[:, J] beta: the |J| columns of X, weighted (sparse times dense again)
+    dw = u - _sparse_times(np.repeat(ci, gk), J.ravel(), beta.ravel(), C, X)
     dw[:, g] = 0.0
     wv = w0[None] + dw
     xc = y[K:] + _mv(Z[K:], wv[ci[:, None], J])
+    residual = -np.concatenate([w0[None], wv])[:, :g]
     # 3. the other parts.  A part's own energies and the length/duration terms ignore a translation
     # when its own rows do (no absolute pin or time; `invariant`), so its move is measured with the
     # translation taken out of Z (Zr: each column less its mean over the part's frames, per coordinate)
     dwG = np.swapaxes(dw[:, G], 0, 1)  # (K, C, gk)
+    dwG[kc, ci] = 0.0  # the candidate's character: its part is replaced, not moved
     Zr = Z[:K]
     if invariant is not None and valid is not None and invariant.any():
         Zr = Zr.copy()
@@ -647,31 +737,185 @@ def _couple(
         w = valid[ii][:, :, None, None]
         mean = np.sum(z * w, axis=1, keepdims=True) / np.maximum(np.sum(w, axis=1, keepdims=True), 1.0)
         Zr[ii] = np.where(w, z - mean, 0.0).reshape(len(ii), -1, gk)
-    dxk = dwG @ np.swapaxes(Zr, 1, 2)  # (K, C, m): K products (C, gk) x (gk, m)
+    # |Zr dw| per unknown, bounded twice: by the largest row norm times |dw| (Cauchy-Schwarz), and by
+    # each column's largest entry times |dw_j| (tighter when the columns' scales differ: hard rows)
+    zrow = np.sqrt(np.max(np.sum(Zr * Zr, axis=2), axis=1, initial=0.0))  # (K,)
+    zcol = np.max(np.abs(Zr), axis=1, initial=0.0)  # (K, gk)
+    bound = np.minimum(zrow[:, None] * np.linalg.norm(dwG, axis=2), np.einsum("kcg,kg->kc", np.abs(dwG), zcol))
+    bound *= 1.0 + 1e-9
     if len(ev):
-        dxk[ek, ev - 1] += ey - y[ek]
-    dxk[kc, ci] = 0.0  # the candidate's character: its part is replaced, not moved
-    # the coupled rows see every move (exact): U dx = (U Z) dw
-    du = dwG @ np.swapaxes(UZ[:K], 1, 2)  # (K, C, gk)
+        bound[ek, ev - 1] += np.abs(shift).max(axis=1, initial=0.0)
+    # the parts' own energies are re-evaluated only where a part moves by more than `far`: the bound
+    # picks the pairs that can, their moves decide (padding frames do not move: their Z rows are 0)
+    near = bound.T > far  # (C, K)
     if len(ev):
-        du[ek, ev - 1] += _mv(U[ek], ey - y[ek])
-    du[kc, ci] = 0.0
-    resv = np.tile(res0, (C, 1))
-    _add_at(resv, (ci[:, None], J), _mv(U[K:], xc) - _mv(U[kc], xb[kc]) - dc)
-    _add_at(resv, (ci[None, :, None], G[:, None, :]), du)
-    residual = np.concatenate([res0[None], resv])[:, :g]
-    # the parts' own energies are re-evaluated only where a part moves by more than `far`
-    sig = np.abs(dxk).max(axis=2).T > far  # padding frames do not move (their Z rows are 0)
-    sig[ci, kc] = False
+        near[ev - 1, ek] = True
+    vi, ki = np.nonzero(near)
+    sol = PhaseSolution(xb, xc, ev, ek, ey, residual, dwG, Zr, bound, ev, ek, shift)
+    sig = np.abs(sol.moves(ki, vi)).max(axis=1, initial=0.0) > far
     if len(ev):
-        sig[ev - 1, ek] = True
-    vi, ki = np.nonzero(sig)
-    xch = xb[ki] + _mv(Z[ki], dw[vi[:, None], G[ki]])
+        forced = np.zeros((C, K), bool)
+        forced[ev - 1, ek] = True
+        sig |= forced[vi, ki]
+    vi, ki = vi[sig], ki[sig]
+    xch = xb[ki] + _products(Z[:K], ki, dw[vi[:, None], G[ki]])
     if len(ev):
         pos = np.full((C, K), -1, dtype=np.int64)
         pos[vi, ki] = np.arange(len(vi))
-        xch[pos[ev - 1, ek]] += ey - y[ek]
-    return PhaseSolution(xb, xc, (vi + 1).astype(np.int64), ki.astype(np.int64), xch, residual, dxk)
+        xch[pos[ev - 1, ek]] += shift
+    return dataclasses.replace(sol, moved_v=(vi + 1).astype(np.int64), moved_k=ki.astype(np.int64), moved=xch)
+
+
+class PartTerms:
+    """Each part's own terms of equation 10 on its subsampled path, for parts ``q`` of a :class:`Systems`.
+
+    Every method takes part indices ``q`` (N,) and those parts' solutions
+    (N, m) (or (N, n) in time) and returns one number per part, or per-part
+    arrays.  ``shape``, ``scale`` and ``time`` are the energies of the three
+    phases (their own Laplacian, equation-7 or time-step rows and their soft
+    constraint rows); ``length_change`` and ``duration_change`` are signed:
+    the terms ``c_s |...|`` and ``c_t |...|`` take their absolute values.
+    """
+
+    def __init__(self, S: Systems) -> None:
+        self.S = S
+        self.n = S.n
+        self.m = 2 * S.n
+
+    @staticmethod
+    def _soft(loc: LocalRows, q: IntArray, x: Array) -> Array:
+        if not loc.cols.shape[1]:
+            return np.zeros(len(q))
+        r = _res(loc.cols[q], loc.vals[q], loc.rhs[q], x)
+        return np.sum(np.where(loc.soft[q], r, 0.0) ** 2, axis=1)
+
+    def shape(self, q: IntArray, x: Array) -> Array:
+        """Phase 1: equation-3 residuals (rigid rows excluded) and soft constraint rows, squared."""
+        S = self.S
+        lr = np.sum(S.lap_vals[q] * _gather(x, S.lap_cols), axis=-1)
+        return np.sum(np.where(S.lap_energy[q], lr, 0.0) ** 2, axis=1) + self._soft(S.s_loc, q, x)
+
+    def scale_targets(self, q: IntArray, x1: Array) -> tuple[Array, Array]:
+        """Phase 2's right-hand sides (N, m) from phase-1 solutions, and the equation-7 targets (N, 2 (n - 2))."""
+        S, n, m = self.S, self.n, self.m
+        N = len(q)
+        P2 = x1.reshape(N, n, 2)
+        seg = P2[:, 1:] - P2[:, :-1]
+        ln = np.linalg.norm(seg, axis=-1)
+        L0 = S.L0[q]
+        vb = seg * np.divide(L0, ln, out=np.ones_like(ln), where=ln > 1e-12)[..., None]
+        ub = vb / S.span[q][..., None]
+        rhs = S.bs[q] + EPS * x1
+        r_sec = np.zeros((N, 0))
+        if n >= 3:
+            r_sec = ((ub[:, 1:] - ub[:, :-1]) * S.sec_w[q][..., None]).reshape(N, 2 * (n - 2))
+            rhs += _rhs(m, S.sec_cols, S.sec_vals[q], r_sec)
+        rhs += _rhs(m, S.rig_cols, S.rig_vals[q], vb.reshape(N, 2 * (n - 1)) * S.rig_w[q])
+        rhs = np.where(np.repeat(~S.valid[q], 2, axis=1), 0.0, rhs)
+        return rhs, r_sec
+
+    def solve_scale(self, q: IntArray, rhs: Array) -> Array:
+        """Phase 2's block solutions ``N2^-1 rhs`` (without the coupled rows)."""
+        return _spd_solve(self.S.scale.normal[q], rhs[..., None])[..., 0] if len(q) else np.zeros((0, self.m))
+
+    def scale(self, q: IntArray, x2: Array, r_sec: Array) -> Array:
+        """Phase 2: equation-7 residuals against the targets ``r_sec`` and soft constraint rows, squared."""
+        S = self.S
+        e = self._soft(S.s_loc, q, x2)
+        if self.n >= 3:
+            e = e + np.sum(_res(S.sec_cols, S.sec_vals[q], r_sec, x2) ** 2, axis=1)
+        return e
+
+    def time(self, q: IntArray, xt: Array) -> Array:
+        """Time: time-step residuals and soft constraint rows, squared."""
+        S = self.S
+        return np.sum(_res(S.tim_cols, S.tim_vals[q], S.tim_rhs[q], xt) ** 2, axis=1) + self._soft(S.t_loc, q, xt)
+
+    def _ratio(self, q: IntArray) -> Array:
+        """Full-path arc length per undeformed kept chord (0 on padding steps)."""
+        S = self.S
+        L0 = S.L0[q]
+        return np.where(S.vstep[q], np.divide(S.arc[q], L0, out=np.ones_like(L0), where=L0 > 1e-6), 0.0)
+
+    def length_change(self, q: IntArray, x2: Array) -> Array:
+        """Signed change of the full path's length: each kept chord's change scales the arc it spans."""
+        c1 = np.linalg.norm(np.diff(x2.reshape(len(q), self.n, 2), axis=1), axis=-1)
+        return np.sum(self._ratio(q) * (c1 - self.S.L0[q]), axis=1)
+
+    def length_linear(self, q: IntArray, x2: Array) -> tuple[Array, Array, Array]:
+        """Gradient of :meth:`length_change` at ``x2`` and its error bound (see :func:`_sum_over_parts`).
+
+        A move of at most ``e`` per unknown changes a chord ``c`` by ``|d| <= 2 sqrt(2) e``; while
+        ``|d| <= |c| / 2`` the chord's length is its first-order value within ``|d|^2 / |c|``.
+        """
+        N, n = len(q), self.n
+        d = np.diff(x2.reshape(N, n, 2), axis=1)
+        c = np.hypot(d[..., 0], d[..., 1])
+        r = self._ratio(q)
+        on = r != 0
+        unit = d / np.where(c > 0, c, 1.0)[..., None]
+        grad = np.zeros((N, n, 2))
+        grad[:, 1:] += r[..., None] * unit
+        grad[:, :-1] -= r[..., None] * unit
+        flat = np.any(on & (c == 0), axis=1)  # a zero chord: no first-order bound, evaluated exactly
+        curv = np.where(flat, 0.0, 8.0 * np.sum(np.abs(r) / np.where(on & (c > 0), c, np.inf), axis=1))
+        reach = np.where(flat, 0.0, np.min(np.where(on, c, np.inf), axis=1, initial=np.inf) / (4 * math.sqrt(2)))
+        return grad.reshape(N, self.m), curv, reach
+
+    def duration_change(self, q: IntArray, xt: Array) -> Array:
+        """Signed change of the duration (first to last kept frame)."""
+        S = self.S
+        return xt[np.arange(len(q)), S.last[q]] - xt[:, 0] - (S.nfr[q] - 1) * S.dt[q]
+
+    def duration_linear(self, q: IntArray, xt: Array) -> tuple[Array, Array, Array]:
+        """Gradient of :meth:`duration_change` (it is linear: no error)."""
+        grad = np.zeros((len(q), self.n))
+        grad[:, 0] = -1.0
+        grad[np.arange(len(q)), self.S.last[q]] += 1.0
+        return grad, np.zeros(len(q)), np.full(len(q), np.inf)
+
+
+def _sum_over_parts(
+    sol: PhaseSolution,
+    kc: IntArray,
+    signed: Any,
+    linear: Any,
+    base_term: Array,
+    cand_term: Array,
+) -> Array:
+    """A term ``|s(x)|`` summed over every part of every variant, shape (1 + C,) (no part left out).
+
+    ``linear(q, x)`` gives, for the base parts' solutions ``x`` (K, m), the
+    gradient of ``s`` (K, m) and two numbers per part that bound the
+    first-order error: a move of at most ``e`` (per unknown) changes ``s``
+    by its gradient times the move within ``e**2 * curv``, if ``e <= reach``
+    (``curv = 0`` and ``reach = inf`` for a linear ``s``).  Parts whose
+    bound on the error exceeds :data:`EXACT` (and the moves that are not
+    ``Zr dw``) are evaluated exactly with ``signed(k, x)``; the others, most
+    of a large scene, by the gradient through ``Zr``: ``(K, C, gk)``
+    products, never a (K, C, m) array.
+    """
+    K, C = sol.dw.shape[:2]
+    tot = np.full(1 + C, float(base_term.sum()))
+    if C == 0:
+        return tot
+    ci = np.arange(C)
+    allK = np.arange(K, dtype=np.int64)
+    grad, curv, reach = linear(allK, sol.base)
+    s0 = signed(allK, sol.base)
+    h = np.einsum("km,kmg->kg", grad, sol.Zr)
+    each = np.abs(s0[:, None] + np.einsum("kcg,kg->kc", sol.dw, h))
+    e = sol.bound
+    exact = (e > reach[:, None]) | (e * e * curv[:, None] > EXACT)
+    exact[sol.shift_k, sol.shift_v - 1] = True
+    exact[kc, ci] = False
+    ke, ce = np.nonzero(exact)
+    for i in range(0, len(ke), _CHUNK):  # in chunks: memory O(_CHUNK m)
+        k, c = ke[i : i + _CHUNK], ce[i : i + _CHUNK]
+        each[k, c] = np.abs(signed(k, sol.base[k] + sol.moves(k, c)))
+    each[kc, ci] = cand_term
+    tot[1:] = each.sum(axis=0)
+    return tot
 
 
 class SubsampledScene:
@@ -1072,60 +1316,10 @@ class SubsampledScene:
     def _evaluate(self, S: Systems, p: Parts, C: int) -> dict[str, Array]:
         """Equation 10 for every variant: the scene (0) and the scene with candidate ``i`` (``i + 1``)."""
         K = self.K
-        n = S.n
-        m = 2 * n
+        T = PartTerms(S)
         kc = p.char[K:]
         allK = np.arange(K, dtype=np.int64)
         allC = K + np.arange(C, dtype=np.int64)
-
-        def soft(loc: LocalRows, q: IntArray, x: Array) -> Array:
-            if not loc.cols.shape[1]:
-                return np.zeros(len(q))
-            r = _res(loc.cols[q], loc.vals[q], loc.rhs[q], x)
-            return np.sum(np.where(loc.soft[q], r, 0.0) ** 2, axis=1)
-
-        def e_shape(q: IntArray, x: Array) -> Array:
-            lr = np.sum(S.lap_vals[q] * _gather(x, S.lap_cols), axis=-1)
-            return np.sum(np.where(S.lap_energy[q], lr, 0.0) ** 2, axis=1) + soft(S.s_loc, q, x)
-
-        def rhs2(q: IntArray, x1: Array) -> tuple[Array, Array]:
-            N = len(q)
-            P2 = x1.reshape(N, n, 2)
-            seg = P2[:, 1:] - P2[:, :-1]
-            ln = np.linalg.norm(seg, axis=-1)
-            L0 = S.L0[q]
-            vb = seg * np.divide(L0, ln, out=np.ones_like(ln), where=ln > 1e-12)[..., None]
-            ub = vb / S.span[q][..., None]
-            rhs = S.bs[q] + EPS * x1
-            r_sec = np.zeros((N, 0))
-            if n >= 3:
-                r_sec = ((ub[:, 1:] - ub[:, :-1]) * S.sec_w[q][..., None]).reshape(N, 2 * (n - 2))
-                rhs += _rhs(m, S.sec_cols, S.sec_vals[q], r_sec)
-            rhs += _rhs(m, S.rig_cols, S.rig_vals[q], vb.reshape(N, 2 * (n - 1)) * S.rig_w[q])
-            rhs = np.where(np.repeat(~S.valid[q], 2, axis=1), 0.0, rhs)
-            return rhs, r_sec
-
-        def solve2(q: IntArray, rhs: Array) -> Array:
-            return _spd_solve(S.scale.normal[q], rhs[..., None])[..., 0] if len(q) else np.zeros((0, m))
-
-        def e_scale(q: IntArray, x2: Array, r_sec: Array) -> Array:
-            e = soft(S.s_loc, q, x2)
-            if n >= 3:
-                e = e + np.sum(_res(S.sec_cols, S.sec_vals[q], r_sec, x2) ** 2, axis=1)
-            return e
-
-        def d_len(q: IntArray, x2: Array) -> Array:
-            L0 = S.L0[q]
-            c1 = np.linalg.norm(np.diff(x2.reshape(len(q), n, 2), axis=1), axis=-1)
-            ratio = np.divide(S.arc[q], L0, out=np.ones_like(L0), where=L0 > 1e-6)
-            return np.abs(np.sum(np.where(S.vstep[q], ratio * (c1 - L0), 0.0), axis=1))
-
-        def e_time(q: IntArray, xt: Array) -> Array:
-            return np.sum(_res(S.tim_cols, S.tim_vals[q], S.tim_rhs[q], xt) ** 2, axis=1) + soft(S.t_loc, q, xt)
-
-        def d_dur(q: IntArray, xt: Array) -> Array:
-            last = xt[np.arange(len(q)), S.last[q]]
-            return np.abs(last - xt[:, 0] - (S.nfr[q] - 1) * S.dt[q])
 
         def per_variant(base: Array, cand: Array, mv: IntArray, mk: IntArray, moved: Array) -> Array:
             tot = np.full(1 + C, float(base.sum()))
@@ -1133,50 +1327,30 @@ class SubsampledScene:
             _add_at(tot, mv, moved - base[mk])
             return tot
 
-        def d_len_all(x: Array) -> Array:
-            """``d_len`` of every base part in every variant: x (K, C, m) -> (K, C)."""
-            P2 = x.reshape(K, -1, n, 2)
-            d = P2[:, :, 1:] - P2[:, :, :-1]
-            c1 = np.hypot(d[..., 0], d[..., 1])
-            L0 = S.L0[:K, None]
-            ratio = np.divide(S.arc[:K], S.L0[:K], out=np.ones_like(S.L0[:K]), where=S.L0[:K] > 1e-6)[:, None]
-            return np.abs(np.sum(np.where(S.vstep[:K, None], ratio * (c1 - L0), 0.0), axis=2))
-
-        def d_dur_all(x: Array) -> Array:
-            """``d_dur`` of every base part in every variant: x (K, C, n) -> (K, C)."""
-            last = np.take_along_axis(x, S.last[:K, None, None], axis=2)[..., 0]
-            return np.abs(last - x[:, :, 0] - ((S.nfr[:K] - 1) * S.dt[:K])[:, None])
-
-        def every_part(term: Any, term_all: Any, sol: PhaseSolution) -> Array:
-            """A term summed over every part of every variant (first-order terms: no part left out)."""
-            base = term(allK, sol.base)
-            tot = np.full(1 + C, float(base.sum()))
-            if C:
-                each = term_all(sol.base[:, None] + sol.dx)  # (K, C)
-                each[kc, np.arange(C)] = term(allC, sol.cand)
-                tot[1:] = each.sum(axis=0)
-            return tot
-
         def coupled(sol: PhaseSolution, cp: Coupling) -> Array:
             return np.sum(np.where(cp.soft[None, :], sol.residual, 0.0) ** 2, axis=1)
+
+        def every_part(sol: PhaseSolution, signed: Any, linear: Any) -> Array:
+            base, cand = np.abs(signed(allK, sol.base)), np.abs(signed(allC, sol.cand))
+            return _sum_over_parts(sol, kc, signed, linear, base, cand)
 
         far = self.far
         # phase 1 (shape)
         vK = S.valid[:K]
         inv_s, inv_t = _translation_invariant(S.s_loc, K, 2), _translation_invariant(S.t_loc, K, 1)
         s1 = _couple(S.space, cast(Array, S.shape.y), S.shape.Z, K, kc, far=far, dim=2, valid=vK, invariant=inv_s)
+        e_shape = T.shape
         E_shape = per_variant(
             e_shape(allK, s1.base), e_shape(allC, s1.cand), s1.moved_v, s1.moved_k, e_shape(s1.moved_k, s1.moved)
         ) + coupled(s1, S.space)
         # phase 2 (scale): right-hand sides from phase 1, exact for every part that moved
-        rb, secb = rhs2(allK, s1.base)
-        rc_, secc = rhs2(allC, s1.cand)
-        rm, secm = rhs2(s1.moved_k, s1.moved)
-        y2 = np.concatenate([solve2(allK, rb), solve2(allC, rc_)])
-        y2m = solve2(s1.moved_k, rm)
-        s2 = _couple(
-            S.space, y2, S.scale.Z, K, kc, far=far, extra=(s1.moved_v, s1.moved_k, y2m), dim=2, valid=vK, invariant=inv_s
-        )
+        rb, secb = T.scale_targets(allK, s1.base)
+        rc_, secc = T.scale_targets(allC, s1.cand)
+        rm, secm = T.scale_targets(s1.moved_k, s1.moved)
+        y2 = np.concatenate([T.solve_scale(allK, rb), T.solve_scale(allC, rc_)])
+        y2m = T.solve_scale(s1.moved_k, rm)
+        extra = (s1.moved_v, s1.moved_k, y2m)
+        s2 = _couple(S.space, y2, S.scale.Z, K, kc, far=far, extra=extra, dim=2, valid=vK, invariant=inv_s)
         sec2 = secb[s2.moved_k].copy()
         if len(s1.moved_v):  # the parts whose phase-1 solution moved have their own equation-7 targets
             pos = np.full((C + 1, K), -1, dtype=np.int64)
@@ -1184,20 +1358,21 @@ class SubsampledScene:
             i = pos[s2.moved_v, s2.moved_k]
             sec2[i >= 0] = secm[i[i >= 0]]
         E_scale = per_variant(
-            e_scale(allK, s2.base, secb),
-            e_scale(allC, s2.cand, secc),
+            T.scale(allK, s2.base, secb),
+            T.scale(allC, s2.cand, secc),
             s2.moved_v,
             s2.moved_k,
-            e_scale(s2.moved_k, s2.moved, sec2),
+            T.scale(s2.moved_k, s2.moved, sec2),
         ) + coupled(s2, S.space)
-        dL = every_part(d_len, d_len_all, s2)
+        dL = every_part(s2, T.length_change, T.length_linear)
         # time
         st_ = _couple(
             S.time, cast(Array, S.time_blocks.y), S.time_blocks.Z, K, kc, far=far, dim=1, valid=vK, invariant=inv_t
         )
+        e_time = T.time
         E_time = per_variant(
             e_time(allK, st_.base), e_time(allC, st_.cand), st_.moved_v, st_.moved_k, e_time(st_.moved_k, st_.moved)
         ) + coupled(st_, S.time)
-        dT = every_part(d_dur, d_dur_all, st_)
+        dT = every_part(st_, T.duration_change, T.duration_linear)
         total = E_shape + E_scale + E_time + self.cs * dL + self.ct * dT
         return {"shape": E_shape, "scale": E_scale, "time": E_time, "length": dL, "duration": dT, "total": total}

@@ -54,6 +54,7 @@ from browser_support import (
     play_viewer,
     png_to_grey,
     server_env,
+    wait_until,
 )
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(300)]
@@ -450,8 +451,35 @@ def test_lesson_01_viewer_with_each_backend(open_lesson: Any, backend: str) -> N
     assert len(pairs) >= 3 and all(a == b for a, b in pairs), f"slider time and frame during play: {pairs}"
     assert len({b for _, b in pairs}) >= 3, f"the slider did not follow the play: {pairs}"
     assert played["max_lag_s"] < 0.6, f"the time shown lagged the wall clock by {played['max_lag_s']:.2f} s"
+    if backend == "client":  # joints as spheres for a few characters, bones only for a crowd (MAX_JOINT_SPHERES)
+        page_frame = iframe.element_handle().content_frame()
+        assert _glyph_sets(page_frame) == ["mocaplab-bones", "mocaplab-joints"], _glyph_sets(page_frame)
+        lesson.kernel_eval("client_viewer.set_motions([walk] * 9)")
+        wait_until(
+            lambda: _glyph_sets(page_frame) == ["mocaplab-bones"], timeout=30, what="nine walkers drawn as bones only"
+        )
     assert_no_console_errors(lesson)
     lesson.kernel_eval("client_viewer.close()")
+
+
+def _glyph_sets(frame: Any) -> list[str]:
+    """The ids of the crowd's glyph sets the browser-drawn view has (bones, joints), sorted."""
+    return sorted(
+        frame.evaluate(
+            """() => {
+                 const out = [];
+                 for (const ref of Object.values(window.trame.refs)) {
+                   const view = ref && ref.$ && ref.$.provides && ref.$.provides.view;
+                   if (!view) continue;
+                   for (const actor of view.renderer.getActors()) {
+                     const id = String(actor.get("representationId").representationId || "");
+                     if (id === "mocaplab-bones" || id === "mocaplab-joints") out.push(id);
+                   }
+                 }
+                 return out;
+               }"""
+        )
+    )
 
 
 # Distinct pictures per second of play aimed at in headless Chromium with software GL: a second try is

@@ -252,6 +252,10 @@ CLIENT_JS = r"""
 })();
 """
 _COUNTER = iter(range(1, 1 << 62))
+#: Joints drawn as spheres while the scene has at most this many drawn points (about eight characters);
+#: a larger crowd is drawn with its bones only: in software WebGL (a browser without a GPU) each glyph set
+#: costs about as much as the other per picture, and at a crowd's size the spheres are a pixel or two wide.
+MAX_JOINT_SPHERES = 320
 # The state values of one viewer's page (each ``<key>_<part>``).
 PARTS = ("chars", "overlays", "ground", "camera", "ctl", "start")
 
@@ -344,9 +348,7 @@ def build_page(server: Any, names: Mapping[str, Any], *, joint_radius: float) ->
                 ):
                     with vtkw.VtkPolyData("bones", points=(f"{crowd}.centres",)):
                         with vtkw.VtkPointData():
-                            vtkw.VtkDataArray(
-                                name="frame", values=(f"{crowd}.frames",), number_of_components=("9",)
-                            )
+                            vtkw.VtkDataArray(name="frame", values=(f"{crowd}.frames",), number_of_components=("9",))
                             vtkw.VtkDataArray(
                                 name="colors",
                                 registration="setScalars",
@@ -360,7 +362,9 @@ def build_page(server: Any, names: Mapping[str, Any], *, joint_radius: float) ->
                         port=1,
                     )
                 with vtkw.VtkGlyphRepresentation(
-                    id="mocaplab-joints", mapper=("{colorMode: 0, scalarVisibility: true, scaling: false}",)
+                    v_if=f"{chars}.chars.reduce(function (n, c) {{ return n + c.n_points; }}, 0) <= {MAX_JOINT_SPHERES}",
+                    id="mocaplab-joints",
+                    mapper=("{colorMode: 0, scalarVisibility: true, scaling: false}",),
                 ):
                     with vtkw.VtkPolyData("joints", points=(f"{crowd}.joints",)):
                         with vtkw.VtkPointData():

@@ -894,7 +894,8 @@ def solve_goals(
         Fraction of the leg's full length the root adjustment aims for: a
         little short of straight, where the knee angle is very sensitive to
         the ankle's position.  A leg already straighter than that may stay
-        as straight as it is, up to ``max_reach``.  In (0, 1].
+        as straight as it is, up to ``max_reach``, less by however far its
+        target lies beyond its current reach.  In (0, 1].
     max_drop : float
         Largest root lowering, metres (>= 0).
     drop_window : float
@@ -1031,10 +1032,14 @@ def _solve_goals(
             u, m, e = limb_joints(sk, ankle)
             target = _foot_targets(gpos, ankle, foot_of.get(ankle), toes.get(ankle), motion.fps, u)
             full = np.linalg.norm(gpos[:, m] - gpos[:, u], axis=-1) + np.linalg.norm(gpos[:, e] - gpos[:, m], axis=-1)
-            # a leg may stay as straight as it already is (up to `max_reach`), else up to `reach`
+            # a leg may stay as straight as it already is (up to `max_reach`), else up to `reach`; less by however
+            # far its target lies beyond that, so a target past a straight leg's reach does not press it to
+            # exactly its current straightness (there a near-straight knee turns the peak of the leg's reach into
+            # a kink: pymo's walk AV_8Walk under a staggered succession, 686 -> 453 rad/s^2, input 344)
             current = np.minimum(np.linalg.norm(gpos[:, e] - gpos[:, u], axis=-1), max_reach * full)
-            allowed = np.maximum(reach * full, current)
             r = target - gpos[:, u]
+            current = current - np.maximum(np.linalg.norm(r, axis=-1) - current, 0.0)
+            allowed = np.maximum(reach * full, current)
             s2 = allowed**2 - r[:, 0] ** 2 - r[:, 2] ** 2
             need = np.where(s2 > 0, r[:, 1] + np.sqrt(np.maximum(s2, 0.0)), r[:, 1])
             drop = np.minimum(drop, need)

@@ -64,7 +64,8 @@ _CASES = [
     # input 261 (the captured knee straightens through 11 degrees in two frames while the lowered root bends it)
     ("A_test.bvh", "succession", 0.02, None),
     ("bvh_test1.bvh", "succession", 0.02, _OPEN + "LeftHand 208.1 mm/frame against 105.2"),
-    # held since the same smoothing: LeftLeg 1,207 -> 686 rad/s^2 (input 344, limit 708), RightLeg 955 -> 493 (304)
+    # held since the same smoothing: LeftLeg 1,207 -> 686 rad/s^2 (input 344, limit 708), RightLeg 955 -> 493 (304);
+    # 453 and 288 since a target past a straight leg's reach takes its excess off the root lowering's allowance
     ("AV_8Walk_Meredith_HVHA_Rep1.bvh", "succession", 0.02, None),
 ]
 
@@ -200,6 +201,26 @@ def test_zero_weight_legs_are_left_exactly_as_they_were():
     free = w == 0
     np.testing.assert_array_equal(out.rotations[free], m.rotations[free])
     assert not np.allclose(out.rotations[3], m.rotations[3])  # held with weight 1: carried to the hinge side
+
+
+def test_a_target_past_a_straight_legs_reach_is_not_met_at_its_current_straightness():
+    # a leg bent 2 degrees whose held ankle goes 1 cm past its full length: the root comes down by the excess
+    # twice over, so the leg ends 1 cm shorter than it was instead of exactly as straight (where a knee near
+    # straight turns the peak of a held leg's reach into a kink)
+    sk = _leg()
+    n = 10
+    rot = np.tile([0.0, 0.0, 0.0, 1.0], (n, 3, 1))
+    bend = np.radians(2.0)
+    rot[:, 1] = [np.sin(bend / 2), 0.0, 0.0, np.cos(bend / 2)]
+    m = Motion(sk, rot, np.tile([0.0, 1.0, 0.0], (n, 1)), 30)
+    pos = m.global_positions()
+    ankle = pos[:, 2] + [0.0, -0.01, 0.0]
+    out = solve_goals(m, [Goal("ankle", ankle, np.ones(n), kind="foot")], reach=0.96)
+    now = out.global_positions()
+    np.testing.assert_allclose(now[:, 2], ankle, atol=1e-6)
+    before = np.linalg.norm(pos[:, 2] - pos[:, 0], axis=-1)
+    after = np.linalg.norm(now[:, 2] - now[:, 0], axis=-1)
+    assert np.all(after < before - 0.009)
 
 
 def test_max_reach_lowers_the_root_under_a_leg_held_nearly_straight():

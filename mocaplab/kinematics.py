@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from . import quat
 
-__all__ = ["fk", "fk_below", "joint_depths", "subtree_levels", "velocities"]
+__all__ = ["angular_velocities", "fk", "fk_below", "joint_depths", "subtree_levels", "velocities"]
 
 
 def fk(
@@ -223,3 +223,40 @@ def velocities(positions: NDArray[np.float64], fps: float) -> NDArray[np.float64
     if positions.shape[0] < 2:
         return np.zeros_like(positions)
     return np.gradient(positions, 1.0 / fps, axis=0)
+
+
+def angular_velocities(rotations: NDArray[np.float64], fps: float) -> NDArray[np.float64]:
+    """Per-frame angular velocities (radians per second, world axes) of global rotations, by central differences.
+
+    The rotation vector of ``q[i + 1] q[i - 1]^-1`` over two frame
+    intervals, one-sided at the ends (as :func:`velocities`); a single frame
+    has zero angular velocity.
+
+    Parameters
+    ----------
+    rotations : ndarray, shape (F, ..., 4)
+        Global (world) rotations, unit quaternions ``(x, y, z, w)``.
+    fps : float
+
+    Returns
+    -------
+    ndarray, shape (F, ..., 3)
+
+    Examples
+    --------
+    A turn about y at 2 rad/s, sampled at 10 fps:
+
+    >>> from mocaplab import quat
+    >>> q = quat.from_axis_angle([0.0, 1.0, 0.0], 0.2 * np.arange(4))
+    >>> angular_velocities(q, 10.0).round(6).tolist()[1]
+    [0.0, 2.0, 0.0]
+    """
+    q = np.asarray(rotations, dtype=float)
+    n = q.shape[0]
+    if n < 2:
+        return np.zeros(q.shape[:-1] + (3,))
+    ahead = np.concatenate([q[1:2], q[2:], q[-1:]])
+    behind = np.concatenate([q[:1], q[:-2], q[-2:-1]])
+    steps = np.full((n,) + (1,) * (q.ndim - 1), 2.0)
+    steps[[0, -1]] = 1.0
+    return quat.log(quat.mul(ahead, quat.inv(behind))) * (fps / steps)

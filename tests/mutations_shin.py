@@ -78,6 +78,29 @@ def no_ground_adjustment_with_flights(monkeypatch: pytest.MonkeyPatch) -> None:
     _ground_adjustment_off_where(monkeypatch, lambda bal: not bool(np.all(bal.ground)))
 
 
+def no_segment_spin(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Rigid segments without their own spin: ``inertia="segments"`` counts the point masses only."""
+    from mocaplab.physics import body, flight
+
+    def none(motion, *args, **kwargs):
+        return np.zeros((motion.n_frames, 3))
+
+    monkeypatch.setattr(body, "_segment_spin", none)
+    monkeypatch.setattr(flight, "_segment_spin", none)
+
+
+def flight_steps_on_point_masses(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The flight adjustments keep the point masses' angular momentum whatever ``inertia=`` says."""
+    from mocaplab.physics import state
+
+    real = state._flight_step
+
+    def points(*args, **kwargs):
+        return real(*args[:7], "points")
+
+    monkeypatch.setattr(state, "_flight_step", points)
+
+
 CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
     (L08, no_horizontal_acceleration, "carry the ZMP away from the COM"),
     (L09, no_ground_adjustment, "one adjustment already helps"),
@@ -85,4 +108,6 @@ CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
     (L09, no_ground_adjustment_with_flights, "leans forward while it speeds up"),
     (L10, no_flight_adjustment, "little swerve left in the air"),
     (L10, no_ground_adjustment, "the landing gets a balancing action"),
+    (L10, no_segment_spin, "far above the paper's 2 %"),
+    (L10, flight_steps_on_point_masses, "the segments make it more constant"),
 ]

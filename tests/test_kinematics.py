@@ -197,3 +197,20 @@ def test_euler_channels_component_major_matches_to_quat(order, rng):
     euler.to_quat_channels(order, channels, out)
     angles = np.stack(channels, axis=-1)  # (7, 50, k)
     assert np.allclose(out.transpose(1, 2, 0), euler.to_quat(order, angles), atol=1e-15)
+
+
+def test_angular_velocities_of_a_steady_turn_about_any_axis(rng):
+    """A turn at a constant rate about a fixed tilted axis: that rate on every frame, the ends included."""
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    start = quat.normalize(rng.normal(size=4))
+    fps, rate = 30.0, 2.5  # rad/s
+    q = quat.mul(quat.from_axis_angle(np.tile(axis, (10, 1)), rate * np.arange(10) / fps), start)
+    w = kinematics.angular_velocities(q, fps)
+    np.testing.assert_allclose(w, np.tile(rate * axis, (10, 1)), atol=1e-9)
+    # world axes: a turn of each frame seen from the joint's own frame would differ
+    assert not np.allclose(quat.rotate(quat.inv(q[3]), w[3]), w[3])
+    # batched over joints, and a sign flip of a quaternion changes nothing
+    both = np.stack([q, -q], axis=1)
+    np.testing.assert_allclose(kinematics.angular_velocities(both, fps)[:, 1], w, atol=1e-9)
+    assert kinematics.angular_velocities(q[:1], fps).shape == (1, 3) and not kinematics.angular_velocities(q[:1], fps).any()

@@ -117,6 +117,9 @@ CORE = [
      r"`flight_window` .*got -1"),
     ("touch_up flight_window=1e308", lambda m, g: ml.touch_up(m, flight_window=1e308), ValueError,
      r"`flight_window` .*got 1e\+308"),
+    ("touch_up inertia='rigid'", lambda m, g: ml.touch_up(m, inertia="rigid"), ValueError,
+     r'`inertia` to be "points" \(the paper\'s point masses\) or "segments" .*got \'rigid\''),
+    ("touch_up inertia=None", lambda m, g: ml.touch_up(m, inertia=None), ValueError, r"`inertia` .*got None"),
 ]
 
 PIN = [PinPosition(0, 0, (0.0, 0.0), hard=True)]

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from ..anatomy import RestPoseWarning, standing_pose
 from .body import (
+    DE_LEVA_GYRATION_MALE,
     DE_LEVA_MALE,
     GRAVITY,
     Body,
@@ -48,6 +49,7 @@ from .touchup import TouchUpHistory, TouchUpSession, touch_up
 from .zmp import Balance, balance, polygon_distance, signed_distance, support_polygon, zmp_distance, zmp_from_links
 
 __all__ = [
+    "DE_LEVA_GYRATION_MALE",
     "DE_LEVA_MALE",
     "GRAVITY",
     "Body",

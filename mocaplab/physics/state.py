@@ -43,7 +43,7 @@ from ..goals import MAX_WINDOW
 from ..motion import Motion, Skeleton, readonly
 from ..roles import Roles, resolve_roles
 from .adjust import _Posed, _posed
-from .body import Body
+from .body import Body, Inertia, check_inertia
 from .flight import FLIGHT_WINDOW, FlightMeasure, _ballistic, _flight_step, flight_measures
 from .footplants import Footplants, _footplant_fn
 from .ground import _edge_frames, _edge_width, _ground_step
@@ -125,6 +125,10 @@ class TouchUpState:
         Share in (0, 1] of each adjustment's ``rho`` that :func:`step` uses
         from this state on (the step size of :func:`mocaplab.physics.touch_up`'s line search;
         1 applies the schedule as written).
+    inertia : "points" or "segments"
+        The angular momentum the flight adjustments keep constant and
+        :attr:`flights` measures: the paper's point masses or rigid segments
+        (see :func:`mocaplab.physics.touch_up`).
 
     Examples
     --------
@@ -150,6 +154,7 @@ class TouchUpState:
     roles: Roles | None = None
     path_joint: int = 0
     step_scale: float = 1.0
+    inertia: Inertia = "points"
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.step_scale) and 0 < self.step_scale <= 1):
@@ -273,7 +278,7 @@ class TouchUpState:
         frames have no ZMP): a flight step can raise it, since the ground
         frames next to a flight take the flight's change of velocity.
         """
-        return flight_measures(self.motion, self.body, self.contacts, com=self.balance.com)
+        return flight_measures(self.motion, self.body, self.contacts, com=self.balance.com, inertia=self.inertia)
 
     def with_schedule(self, schedule: Sequence[Adjustment]) -> TouchUpState:
         """The same state with another schedule (applied from the next step on; link sets checked)."""
@@ -292,6 +297,7 @@ def start(
     flight_window: float = FLIGHT_WINDOW,
     footplants: Footplants = "auto",
     roles: Mapping[str, Any] | None = None,
+    inertia: Inertia = "points",
 ) -> TouchUpState:
     """The initial state of a touch-up (no step done).  See :func:`mocaplab.physics.touch_up`.
 
@@ -312,6 +318,9 @@ def start(
         How footplants are re-enforced after each step (see :func:`mocaplab.physics.touch_up`).
     roles : mapping, optional
         Joint-role overrides (:func:`mocaplab.roles.resolve_roles`).
+    inertia : "points" or "segments"
+        Point masses (the paper's, default) or rigid segments in flight
+        (see :func:`mocaplab.physics.touch_up`).
 
     Returns
     -------
@@ -348,6 +357,7 @@ def start(
     # the options first, before any role, body or contact is worked out
     check_schedule(schedule)
     flight_window = real(flight_window, "flight_window", low=0.0, high=MAX_WINDOW, unit="seconds")
+    inertia = check_inertia(inertia)
     edge = _edge_width(motion.fps)
     if motion.n_frames < 2 * edge + 1:
         raise ValueError(
@@ -361,6 +371,7 @@ def start(
     if not isinstance(body, Body):
         raise TypeError(f"Expected `body` to be a Body, got {type(body).__name__}")
     body.check(motion)
+    check_inertia(inertia, body)
     contacts = ground_contacts(contacts, motion, roles=known)
     _check_contacts(contacts, motion)
     _check_stages(motion, contacts)
@@ -374,7 +385,7 @@ def start(
     path = known.index("pelvis") if "pelvis" in known else motion.path_joint
     return TouchUpState(
         motion, motion, body, contacts, sched, 0, bal, "input", float(flight_window), footplants, fix, posed[1:],
-        known, int(path),
+        known, int(path), inertia=inertia,
     )
 
 
@@ -476,7 +487,7 @@ def step(state: TouchUpState) -> TouchUpState:
         new = _ground_step(posed, body, adj, sets, state.balance, state.path_joint)
     elif stages := flight_stages(contacts):
         window = int(round(state.flight_window * motion.fps))
-        new = _flight_step(posed, body, adj, sets, stages, window, state.path_joint)
+        new = _flight_step(posed, body, adj, sets, stages, window, state.path_joint, state.inertia)
     else:
         new = posed
     # a flight adjustment translates the whole body (section 3.4.2 here), so

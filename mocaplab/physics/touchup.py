@@ -92,7 +92,7 @@ from .._warnings import warn
 from ..contacts import intervals_from_mask
 from ..motion import Motion, readonly
 from .adjust import MAX_ANGLE
-from .body import Body
+from .body import Body, Inertia
 from .flight import FLIGHT_WINDOW
 from .footplants import Footplants
 from .ground import _ground_rotation
@@ -255,6 +255,7 @@ def touch_up(
     flight_window: float = FLIGHT_WINDOW,
     footplants: Footplants = "auto",
     roles: Mapping[str, Any] | None = None,
+    inertia: Inertia = "points",
 ) -> TouchUpHistory:
     """Physically touch up a motion (Shin et al. 2003).
 
@@ -305,6 +306,14 @@ def touch_up(
         Overrides of the inferred joint roles
         (:func:`mocaplab.roles.resolve_roles`), used for the default body,
         the default contacts, the presets and the travelling joint.
+    inertia : "points" or "segments"
+        What the flight adjustments keep the angular momentum of (equations
+        8-9): ``"points"`` (default), the paper's point masses at the link
+        centres; ``"segments"``, each link a rigid segment with de Leva's
+        radii of gyration (:attr:`Body.inertia`), whose own spin is 7-42 %
+        of the angular momentum on the CMU flights (the paper reckons it
+        under 2 %) and which the point masses leave out.  The body must have
+        segment inertia (the default body has).
 
     Returns
     -------
@@ -339,7 +348,7 @@ def touch_up(
         tol = real(tol, "tol", low=0.0, unit="(a share of the error) or None")
     state = start(
         motion, body=body, schedule=schedule, contacts=contacts, flight_window=flight_window, footplants=footplants,
-        roles=roles,
+        roles=roles, inertia=inertia,
     )
     states = [state]
     current = state.error
@@ -469,7 +478,7 @@ class TouchUpSession:
     motion : Motion
     **options
         As for :func:`start` (``body``, ``schedule``, ``contacts``,
-        ``flight_window``, ``footplants``, ``roles``).
+        ``flight_window``, ``footplants``, ``roles``, ``inertia``).
 
     Examples
     --------

@@ -347,3 +347,24 @@ def test_a_clip_without_contacts_warns(cmu) -> None:
         analyze(walk)
         analyze(walk, contacts=None)
 
+
+
+def test_a_skeleton_without_feet_is_told_about_contacts_none() -> None:
+    """Issue 25: the feetless RolesError names ``contacts=None``, which extracts poses from the motion alone."""
+    from mocaplab import Motion, Skeleton
+    from mocaplab.roles import RolesError
+
+    names = ["hips", "spine", "neck", "head", "lshoulder", "lelbow", "lwrist", "rshoulder", "relbow", "rwrist"]
+    offsets = [[0, 0, 0], [0, 0.2, 0], [0, 0.3, 0], [0, 0.1, 0], [0.1, 0, 0], [0.25, 0, 0], [0.25, 0, 0],
+               [-0.1, 0, 0], [-0.25, 0, 0], [-0.25, 0, 0]]
+    sk = Skeleton(names, [-1, 0, 1, 2, 2, 4, 5, 2, 7, 8], offsets)
+    n = 60
+    half = 0.25 * np.sin(np.linspace(0.0, 4.0 * np.pi, n))  # the elbows wave
+    rot = np.tile([0.0, 0.0, 0.0, 1.0], (n, len(names), 1))
+    rot[:, 5, 2], rot[:, 5, 3] = np.sin(half), np.cos(half)
+    rot[:, 8, 2], rot[:, 8, 3] = -np.sin(half), np.cos(half)
+    m = Motion(sk, rot, np.tile([0.0, 1.0, 0.0], (n, 1)), 30)
+    with pytest.raises(RolesError, match=r"left_ankle.*pass contacts=None"):
+        extract(m)
+    sm = extract(m, contacts=None)
+    assert sm.constraints is None and sm.n_poses >= 2

@@ -105,6 +105,7 @@ from .._checks import integer, real
 from .._warnings import warn
 from ..contacts import stillness_contacts
 from ..motion import Motion
+from ..roles import RolesError
 from .representation import translation_joints, variable_names
 
 __all__ = [
@@ -924,7 +925,14 @@ def analyze(
     if isinstance(contacts, str):
         if contacts != "auto":
             raise ValueError(f"Expected `contacts` to be a Contacts, 'auto' or None, got {contacts!r}")
-        contacts = stillness_contacts(motion, joints=contact_joints, roles=roles, min_duration="gait")
+        try:
+            contacts = stillness_contacts(motion, joints=contact_joints, roles=roles, min_duration="gait")
+        except RolesError as err:
+            raise RolesError(
+                f"{err}. Without feet there are no foot contacts to find: pass contacts=None (poses from the "
+                "motion alone, no constraint layer) or name the joints that touch the environment "
+                "(contact_joints=[...])"
+            ) from err
         if not contacts.mask.any():
             label = f" {motion.name!r}" if motion.name else ""
             warn(

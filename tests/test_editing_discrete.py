@@ -444,6 +444,11 @@ def relay(a, b, groups):
     return chars, cons
 
 
+def candidates(tracks, cons):
+    """Every pruned candidate transformation of every character."""
+    return [t for k, tr in enumerate(tracks) for t in D.prune(D.enumerate_transformations(tr, character=k), constraints=cons)]
+
+
 @pytest.fixture(scope="module")
 def relays(walk, mocap_dir):
     from mocaplab import data
@@ -454,7 +459,7 @@ def relays(walk, mocap_dir):
         chars, cons = relay(walk, b, groups)
         ed = SceneEditor(chars, cons)
         tracks = [D.Track.from_motion(m, build_graph([m])) for m in chars]
-        cands = [t for k in range(len(chars)) for t in D.prune(D.enumerate_transformations(tracks[k], character=k), constraints=cons)]
+        cands = candidates(tracks, cons)
         out[groups] = (ed, tracks, cons, cands)
     return out
 
@@ -590,8 +595,7 @@ def long_relay(mocap_dir):
     chars, cons = relay(a, b, 3)
     ed = SceneEditor(chars, cons)
     tracks = [D.Track.from_motion(m, build_graph([m])) for m in chars]
-    cands = [t for k in range(len(chars)) for t in D.prune(D.enumerate_transformations(tracks[k], character=k), constraints=cons)]
-    return ed, tracks, cons, cands
+    return ed, tracks, cons, candidates(tracks, cons)
 
 
 @pytest.fixture(scope="module")
@@ -606,12 +610,13 @@ def soft_ties(relays):
         Sync(5, f, 3, f, offset=0.2),
     ]
     cons = cons + ties
-    cands = [t for k in range(len(chars)) for t in D.prune(D.enumerate_transformations(tracks[k], character=k), constraints=cons)]
-    return SceneEditor(chars, cons), tracks, cons, cands
+    return SceneEditor(chars, cons), tracks, cons, candidates(tracks, cons)
 
 
 @pytest.mark.parametrize(("scene", "far"), [(3, None), (6, None), (6, 0.0), ("long", None), ("soft", None)])
-def test_sparse_variants_equal_a_dense_evaluation_of_each_variant(relays, long_relay, soft_ties, monkeypatch, scene, far):
+def test_sparse_variants_equal_a_dense_evaluation_of_each_variant(
+    relays, long_relay, soft_ties, monkeypatch, scene, far
+):
     from mocaplab.editing.discrete import evaluation as E
 
     ed, tracks, cons, cands = {"long": long_relay, "soft": soft_ties}.get(scene) or relays[scene]
@@ -629,7 +634,9 @@ def test_sparse_variants_equal_a_dense_evaluation_of_each_variant(relays, long_r
         finally:
             inside.pop()
 
-    monkeypatch.setattr(E.PhaseSolution, "moves", lambda self, k, c: (inside and expanded.append(len(k))) or moves(self, k, c))
+    monkeypatch.setattr(
+        E.PhaseSolution, "moves", lambda self, k, c: (inside and expanded.append(len(k))) or moves(self, k, c)
+    )
     monkeypatch.setattr(E, "_sum_over_parts", counting_sum)
     fast = sc.terms(cands)
     monkeypatch.undo()

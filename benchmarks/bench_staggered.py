@@ -11,7 +11,9 @@ the closest two poses on a walk, runs, a dance and jumps (every maximum of
 whole-body succession, and the knees under exaggerated legs; and those of
 issue 25: a flick retimed whole, a true-pose edit's local acceleration,
 a strong succession's one-frame moves and knee accelerations (ratios to the
-input's, :mod:`mocaplab.quality`), the longest stretch left by culling.
+input's, :mod:`mocaplab.quality`), the constraint layer's on CMU clips and
+the shared files from other tools (with and without it), the longest
+stretch left by culling.
 
 Run: ``python benchmarks/bench_staggered.py`` (needs ``MOCAPLAB_DATA_DIR``).
 """
@@ -246,11 +248,52 @@ def issue_25_figures() -> None:
         acc = quality.angular_acceleration(out)[knees].max() / quality.angular_acceleration(m)[knees].max()
         print(f"    {trial}: {move.max():.2f}x ({m.skeleton.names[int(move.argmax())]}), knees {acc:.2f}x")
 
+    constraint_layer_figures()
+
     hops = data.cmu("49_03")
     a = analyze(hops)
     stretches = {n: np.diff(a.select(max_poses=n)).max() / hops.fps for n in (4, 6, 8)}
     print("  culling 49_03 (12.5 s) by count, longest stretch without a pose: "
           + ", ".join(f"{n} poses {t:.1f} s" for n, t in stretches.items()))
+
+
+#: The edits of issue 25's constraint-layer cases (tests/test_staggered_quality.py): CMU clips and the shared
+#: files from other tools (under realworld/ of the mirror), each with the layer on and off.
+LAYER_CASES = (
+    ("16_05", "succession", 0.02), ("49_03", "succession", 0.02), ("05_02", "succession", 0.01),
+    ("60_10", "exaggerate", 0.3), ("walk01.bvh", "succession", 0.02), ("animation.bvh", "succession", 0.02),
+    ("test_optitrack.bvh", "succession", 0.02), ("A_test.bvh", "succession", 0.02),
+    ("bvh_test1.bvh", "succession", 0.02), ("AV_8Walk_Meredith_HVHA_Rep1.bvh", "succession", 0.02),
+    ("test_freebvh.bvh", "succession", 0.02), ("test_mocapbank.bvh", "succession", 0.02),
+)
+
+
+def constraint_layer_figures() -> None:
+    """Each case's worst one-frame move and peak knee acceleration as ratios to the input's, layer on (off)."""
+    from mocaplab import load
+
+    print("  the constraint layer: worst joint's largest one-frame move and peak knee acceleration, ratios to the")
+    print("  input's (quality's limits 1.5x + 2 mm, 2x + 20 rad/s^2), with the layer (without); held plants, mm")
+    root = Path(os.environ["MOCAPLAB_DATA_DIR"])
+    for clip, kind, amount in LAYER_CASES:
+        m = load(sorted(root.glob(f"realworld/*/{clip}"))[0]) if clip.endswith(".bvh") else data.cmu(clip)
+        sm = extract(m, constraints=True)
+        edited = succession(sm, amount) if kind == "succession" else exaggerate(sm, amount)
+        on, off = edited.evaluate(), edited.evaluate(constraints=False)
+        knees = [m.skeleton.index(m.skeleton.roles[f"{s}_knee"]) for s in ("left", "right")]
+        d0, a0 = quality.displacement(m), quality.angular_acceleration(m)
+        cells = []
+        for out in (on, off):
+            move = quality.displacement(out) / np.maximum(d0, 1e-9)
+            acc = (quality.angular_acceleration(out)[knees] / np.maximum(a0[knees], 1e-9)).max()
+            cells.append((float(move.max()), m.skeleton.names[int(move.argmax())], float(acc)))
+        layer = edited.constraints
+        w, targets = layer.weights_and_targets(edited, on.times)
+        feet = [m.skeleton.index(n) for n in layer.joints]
+        held = np.linalg.norm(on.global_positions()[:, feet] - targets, axis=-1)[w == 1.0]
+        (mv, jn, acc), (mv0, _, acc0) = cells
+        print(f"    {clip[:22]:22s} {kind} {amount:g}: move {mv:.2f}x ({jn}) ({mv0:.2f}x), knees {acc:.2f}x "
+              f"({acc0:.2f}x), plants {1000 * held.max():.2f} mm")
 
 
 def knee_flexion(m: Motion, legs: list[tuple[int, int, int]], hinges: np.ndarray) -> np.ndarray:

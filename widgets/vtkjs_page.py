@@ -19,7 +19,8 @@ What the page does
 ------------------
 :data:`CLIENT_JS` (registered as ``trame.utils.mocaplab``) draws the whole
 crowd as two glyph sets (bones as 6-sided cylinders placed by one 3x3 matrix
-each, joints as low-poly spheres, a colour per glyph), overlays as their own
+each, joints as low-poly spheres, a colour per glyph; a crowd of more than
+:data:`MAX_JOINT_SPHERES` points is drawn with its bones only), overlays as their own
 meshes, and plays on its own clock (``requestAnimationFrame``), writing each
 frame's few arrays straight into vtk.js.  The kernel only sends where to
 start and whether to play (:func:`control_payload`).  The mouse rotates and

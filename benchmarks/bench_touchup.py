@@ -23,9 +23,15 @@ Xeon).  Here:
    walk tilted 20 degrees uphill (20 passes) and lesson 10's bent jump with
    the default and the paper's flight window: input and final error (and the
    final error without the uncorrected end frames), passes, passes where the
-   error rose, time, and CPU time per pass against 172 ms;
+   error rose, the largest joint move, time, and CPU time per pass against
+   172 ms;
 7. with them, the feet and floor cases of issue 24 (:func:`feet_and_floor`):
-   CMU 16_15 captured and bent without toe joints, and lifted 0.5 m;
+   CMU 16_15 captured and bent without toe joints, and lifted 0.5 m; the
+   captured walks at 30 fps (contacts timed in seconds); 16_15 below a static
+   ``joint_Root`` (a studio's layout); the shared toe-less MocapBank file; and
+   the jog 16_35 with the flight's angular momentum of point masses (the
+   default) and of rigid segments (``inertia="segments"``), with the rigid
+   body's angular-momentum spread over the flights before and after;
 8. the paper's results as lessons 09 and 10 set them up (:func:`paper_results`):
    section 4.2, CMU 16_15's walk blended into 16_35's jog (the lesson's own
    ``walk_to_jog``, read from the notebook); section 4.4, the walk tilted 10
@@ -219,21 +225,25 @@ def issue_cases() -> None:
         n = max(h.passes, 1)
         ends = h.errors[:: len(h.states[0].schedule)]
         rises = int(np.sum(np.diff(ends) > 0))
+        moved = 100 * np.linalg.norm(h.motion.global_positions() - motion.global_positions(), axis=-1).max()
         print(f"{name:48s} {1000 * h.errors[0]:7.1f} {1000 * h.errors[h.best]:7.1f} {1000 * h.interior_errors[h.best]:8.1f}"
-              f"  x{h.errors[h.best] / h.errors[0]:4.2f} {h.passes:3d} {h.stopped:>10s} {rises:5d} {1000 * wall:8.0f} "
+              f"  x{h.errors[h.best] / h.errors[0]:4.2f} {h.passes:3d} {h.stopped:>10s} {rises:5d} {moved:5.1f} "
+              f"{1000 * wall:8.0f} "
               f"{1000 * cpu:8.0f}  {PAPER_SECONDS * n / cpu:5.1f}x faster than 172 ms a pass (CPU)")
+        return h
 
     print()
     print("issue 24 cases (error: mean ZMP distance on walks, TouchUpState.error with flights; mm; interior: the same "
           "without the 0.1 s at each end that no adjustment corrects)")
     print(f"{'case':48s} {'input':>7s} {'final':>7s} {'interior':>8s}  ratio passes {'stopped':>10s} rises "
-          f"{'wall ms':>8s} {'CPU ms':>8s}")
+          f"{'moved':>5s} {'wall ms':>8s} {'CPU ms':>8s}   (moved: largest joint move, cm)")
     for clip in ("16_15", "02_01"):
         walk = pipeline.trimmed(data.cmu(clip))
         for share in (0.25, 0.40):
             edited = pipeline._refine(pipeline._edit(walk, bend=share), walk)
             report(f"{clip} bent {share:.2f} of the chord + refine", edited)
         report(f"{clip} captured, unedited", walk)
+        report(f"{clip} captured at 30 fps", walk.resample(30))
         if clip == "16_15":
             feet_and_floor(report, walk, pipeline._refine(pipeline._edit(walk, bend=0.25), walk))
     walk = data.cmu("16_15").resample(30)
@@ -261,6 +271,38 @@ def feet_and_floor(report, walk, bent) -> None:
     up = np.array([0.0, 0.5, 0.0])
     report("16_15 captured, lifted 0.5 m", walk.with_root(root_positions=walk.root_positions + up))
     report("16_15 bent 0.25 + refine, lifted 0.5 m", bent.with_root(root_positions=bent.root_positions + up))
+    studio_and_files(report, walk)
+
+
+def studio_and_files(report, walk) -> None:
+    """A static root above the pelvis, the shared toe-less MocapBank file, and a jog's flights as rigid segments."""
+    import os
+    import warnings
+    from pathlib import Path
+
+    from test_physics_body import static_root  # the test's studio layout (a joint_Root that never moves)
+
+    import mocaplab as ml
+    from mocaplab.physics import flight_measures
+
+    studio = static_root(walk)
+    report("16_15 captured, static joint_Root above the pelvis", studio)
+    mocap = Path(os.environ.get("MOCAPLAB_DATA_DIR", "")) / "realworld" / "bvhtoolbox" / "test_mocapbank.bvh"
+    if mocap.is_file():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            report("realworld MocapBank (no toe joints, 30 fps)", ml.load(mocap))
+    else:
+        print(f"{'realworld MocapBank (no toe joints, 30 fps)':48s} skipped: {mocap} not found")
+    jog = data.cmu("16_35").resample(30)
+    c = foot_contacts(jog)
+    body = Body.from_skeleton(jog)
+    spread = [f.momentum_spread for f in flight_measures(jog, body, c, inertia="segments")]
+    for inertia in ("points", "segments"):
+        h = report(f"16_35 jog at 30 fps, inertia={inertia!r}", jog, body=body, contacts=c, inertia=inertia)
+        after = [f.momentum_spread for f in flight_measures(h.motion, body, c, inertia="segments")]
+        print(f"{'':48s} rigid body's h_CM spread per flight {', '.join(f'{x:.2f}' for x in spread)} -> "
+              f"{', '.join(f'{x:.2f}' for x in after)} kg m^2/s (x{np.mean(after) / np.mean(spread):.2f})")
 
 
 def _lesson_functions(lesson: str, names: tuple[str, ...], namespace: dict) -> dict:

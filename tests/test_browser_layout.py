@@ -202,8 +202,7 @@ def _open_file_browser(lesson: LessonPage) -> float:
     lesson.page.evaluate("() => window.jupyterapp.commands.execute('filebrowser:activate')")
     lesson.page.wait_for_timeout(800)
     width = lesson.page.evaluate(
-        "() => { const b = document.querySelector('.jp-FileBrowser');"
-        " return b ? b.getBoundingClientRect().width : 0; }"
+        "() => { const b = document.querySelector('.jp-FileBrowser'); return b ? b.getBoundingClientRect().width : 0; }"
     )
     assert width > 150, f"the file browser did not open (width {width} px)"
     return float(width)
@@ -301,11 +300,33 @@ def test_keys_reach_the_editor_from_the_plot(layout_page: LessonPage) -> None:
         " path_editor.editor.checkpoint(); path_editor.refresh(); path_editor.history_buttons.sync()"
     )
     page.keyboard.press("Control+z")
-    wait_until(
-        lambda: _kernel_value(lesson, "path_editor.editor.can_undo") is False, timeout=20, what="ctrl+z to undo"
-    )
+    wait_until(lambda: _kernel_value(lesson, "path_editor.editor.can_undo") is False, timeout=20, what="ctrl+z to undo")
     status = root.locator(".mocaplab-path-status").first.text_content() or ""
     assert status.startswith("undid: moved hard pin at frame"), status
+
+
+def test_keys_reach_the_viewer_from_its_picture(layout_page: LessonPage) -> None:
+    """After a click on the 3D picture the browser draws (a page of the kernel's trame server in an iframe), the
+    arrows step and space plays and pauses: the picture's page posts its keys to the viewer's KeyCapture."""
+    lesson = layout_page
+    page = lesson.page
+    root = page.locator(".layout-viewer").first
+    root.scroll_into_view_if_needed()
+    assert "click the picture" in (root.locator(".mocaplab-keys-help").first.text_content() or ""), "the help line"
+    lesson.kernel_eval("viewer.stop_playback(); viewer.set_frame(0)")
+    frame = root.locator("iframe").first
+    box = frame.bounding_box()
+    assert box is not None
+    page.mouse.click(box["x"] + 0.5 * box["width"], box["y"] + 0.6 * box["height"])
+    focused = page.evaluate("() => document.activeElement ? document.activeElement.tagName : ''")
+    assert focused == "IFRAME", f"the click gave the focus to {focused!r}, not the picture's page"
+    page.keyboard.press("ArrowRight")
+    page.keyboard.press("ArrowRight")
+    wait_until(lambda: _kernel_value(lesson, "viewer.frame") == 2, timeout=20, what="the arrows pressed on the picture")
+    page.keyboard.press(" ")
+    wait_until(lambda: _kernel_value(lesson, "viewer.playing"), timeout=20, what="space on the picture to play")
+    page.keyboard.press(" ")
+    wait_until(lambda: not _kernel_value(lesson, "viewer.playing"), timeout=20, what="space on the picture to pause")
 
 
 def test_keys_reach_the_viewer_from_its_controls(layout_page: LessonPage) -> None:

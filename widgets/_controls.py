@@ -278,6 +278,15 @@ export default {
       e.stopPropagation();  // nor do JupyterLab's shortcuts act on the key
       model.send({key: name});
     };
+    // keys pressed in a 3D view drawn by the browser: its page (an iframe of another origin) posts them
+    // here as {mocaplabKey: {key, ctrlKey, metaKey, altKey, shiftKey}}; only this box's own frames count
+    const onFrameKey = (e) => {
+      const data = e.data && typeof e.data === "object" ? e.data.mocaplabKey : null;
+      if (!host || !data || typeof data !== "object" || typeof data.key !== "string") return;
+      if (![...host.querySelectorAll("iframe")].some((f) => f.contentWindow === e.source)) return;
+      const name = keyName(data);
+      if (name !== null && model.get("key_names").includes(name)) model.send({key: name});
+    };
     let tries = 0;
     const attach = () => {
       if (!el.isConnected) {
@@ -287,9 +296,14 @@ export default {
       host = el.closest("." + model.get("scope")) || el.parentElement;
       if (!host.hasAttribute("tabindex")) host.tabIndex = 0;  // a click on the box (not a control) focuses it
       host.addEventListener("keydown", onKey);
+      window.addEventListener("message", onFrameKey);
     };
     attach();
-    return () => { if (host) host.removeEventListener("keydown", onKey); model.off("change:help", show); };
+    return () => {
+      if (host) host.removeEventListener("keydown", onKey);
+      window.removeEventListener("message", onFrameKey);
+      model.off("change:help", show);
+    };
   },
 };
 """
@@ -300,7 +314,8 @@ class KeyCapture(anywidget.AnyWidget):  # type: ignore[misc]
 
     Placed inside the box whose CSS class is ``scope``, it listens to the
     keys pressed while the focus is in that box (after a click on one of
-    its buttons, on the box itself or on this line), runs the matching
+    its buttons, on the box itself or on this line) or in a browser-drawn
+    3D view inside it (its page posts them here), runs the matching
     :class:`Shortcut`'s action in the kernel and leaves every other key to
     JupyterLab.  Keys typed into a text box, and the arrows over a slider
     (which moves itself), are left alone.  Tests press keys with

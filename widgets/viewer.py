@@ -334,10 +334,11 @@ class MotionViewer:
         One frame back or forward (pause playback).
     keys : KeyCapture
         The keyboard shortcuts and their help line (created with
-        :attr:`widget`): after a click on a button or on the viewer's box
-        (not on the 3D picture, which keeps the keys), space plays or
-        pauses and the left and right arrows step a frame, as the buttons
-        do.  ``viewer.keys.press(" ")`` presses a key from Python.
+        :attr:`widget`): after a click on a button, on the viewer's box or
+        on a 3D picture the browser draws (``client``; a picture drawn by
+        the kernel keeps the keys for its own page), space plays or pauses
+        and the left and right arrows step a frame, as the buttons do.
+        ``viewer.keys.press(" ")`` presses a key from Python.
     play_rate : float
         Most pictures per second while playing.
     play_rest : float
@@ -1222,7 +1223,10 @@ class MotionViewer:
             layout=w.Layout(flex_flow="row wrap", align_items="center", width="100%"),
         )
         # space plays, the arrows step: the buttons' own actions (_controls.viewer_shortcuts), listed on this line
-        self.keys = KeyCapture(viewer_shortcuts(lambda: self), scope="mocaplab-viewer")
+        where = "click the picture, a button or this line first" if self.backend == "client" else None
+        self.keys = KeyCapture(
+            viewer_shortcuts(lambda: self), scope="mocaplab-viewer", **({"where": where} if where else {})
+        )
         children = ([self._view] if self._view is not None else []) + [
             self._legend,
             controls,

@@ -247,6 +247,14 @@ CLIENT_JS = r"""
     view.getCamera();  // makes the camera the active one, which setCamera changes
     view.setCamera(cam);
   };
+  // Keys pressed over the view go to the notebook page, whose viewer takes the ones it knows (space, the
+  // arrows: _controls.KeyCapture); this page is an iframe of another origin, its key events stay here.
+  window.addEventListener("keydown", function (e) {
+    if (window.parent === window) { return; }
+    window.parent.postMessage({ mocaplabKey: { key: e.key, ctrlKey: e.ctrlKey, metaKey: e.metaKey,
+                                               altKey: e.altKey, shiftKey: e.shiftKey } }, "*");
+    if (e.key === " " || e.key === "ArrowLeft" || e.key === "ArrowRight") { e.preventDefault(); }
+  });
   trame.utils.mocaplab = M;
   // set once the template that loaded this script has rendered (a change during its own render is lost)
   setTimeout(function () { trame.state.set("mocaplab_ready", true); }, 0);

@@ -83,8 +83,6 @@ KNOWN_DEFECTS: dict[tuple[str, str, str], str] = {
     ('bvhtoolbox/test_mocapbank', 'squeeze', 'displacement'): 'the raw path edit moves a rigid stationary segment or turns the body in one frame (issue 23): displacement 3.56 -> 9.24 mm/frame at LeftAnkle',
     ('bvhtoolbox/walk01', 'bend+refine', 'angular_acceleration'): "refinement's foot goals ramp in before contact and the leg IK bends near-straight knees fast (issue 23 item 8): angular_acceleration 59.7 -> 303 rad/s^2 at RightLeg",
     ('bvhtoolbox/walk01', 'refine', 'angular_acceleration'): "refinement's foot goals ramp in before contact and the leg IK bends near-straight knees fast (issue 23 item 8): angular_acceleration 59.7 -> 198 rad/s^2 at RightLeg",
-    ('bvhtoolbox/walk01', 'staggered', 'angular_acceleration'): 'the staggered constraint layer / exaggeration adds it (issue 25): angular_acceleration 6.05 -> 34.8 rad/s^2 at LeftHand',
-    ('motionmachine/animation', 'staggered', 'angular_acceleration'): 'the staggered constraint layer / exaggeration adds it (issue 25): angular_acceleration 101 -> 343 rad/s^2 at RightHand',
     ('motionmachine/animation', 'staggered', 'hinge_flips'): 'the staggered constraint layer / exaggeration adds it (issue 25): hinge_flips 0 -> 2 frames at left_elbow',
     ('optitrack_mda/test_optitrack', 'staggered', 'hinge_flips'): 'the staggered constraint layer / exaggeration adds it (issue 25): hinge_flips 0 -> 11 frames at right_elbow',
     ('perfume/A_test', 'bend', 'displacement'): 'the raw path edit moves a rigid stationary segment or turns the body in one frame (issue 23): displacement 41 -> 122 mm/frame at Hips',

@@ -217,6 +217,16 @@ def read_clips_as_studio_files(folder: str | Path) -> None:
     mocaplab.cmu = studio_clip  # type: ignore[attr-defined]
 
 
+#: The first cell of a lesson run on studio files: in that kernel, every CMU clip is read as one
+#: (:func:`read_clips_as_studio_files`, in a fresh temporary folder).
+STUDIO_CELL = f"""\
+import sys as _sys, tempfile as _tempfile
+_sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})
+from conventions import read_clips_as_studio_files
+read_clips_as_studio_files(_tempfile.mkdtemp(prefix="studio_files_"))  # every clip as a file with a static root
+"""
+
+
 def asf_names(motion: Motion, folder: str | Path) -> tuple[Path, dict[str, str]]:
     """The CMU Acclaim bone names (``root``, ``lhipjoint``, ``lfemur``, ...) written as BVH."""
     to_asf = {bvh: asf for asf, bvh in CMU_BVH_NAMES.items()}

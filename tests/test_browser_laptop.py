@@ -36,6 +36,7 @@ from typing import Any
 
 import pytest
 from browser_support import LessonPage, wait_until
+from conventions import STUDIO_CELL
 from test_browser import (  # noqa: F401 - fixtures are used by name
     _assert_handle_under_mouse,
     _drag_handle,
@@ -48,8 +49,6 @@ from test_browser import (  # noqa: F401 - fixtures are used by name
 from test_browser_layout import _kernel_value, _open_file_browser, measure
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(420)]
-
-TESTS = Path(__file__).resolve().parent
 
 #: The laptop: CSS px of the browser window.
 LAPTOP = (1366, 768)
@@ -64,13 +63,6 @@ LESSONS = {
     "15": ("MotionViewer", "pipeline"),
 }
 
-#: The first cell of a lesson's studio variant (see the module docstring).
-STUDIO_CELL = """\
-import sys as _sys, tempfile as _tempfile
-_sys.path.insert(0, {tests!r})
-from conventions import read_clips_as_studio_files
-read_clips_as_studio_files(_tempfile.mkdtemp(prefix="studio_files_"))  # every clip as a file with a static root
-"""
 
 # Tag each widget output of the notebook (its first element) so measure() finds it by class.
 _TAG_OUTPUTS_JS = """
@@ -88,7 +80,7 @@ def _studio_copy(server: Any, notebook: Path) -> str:
     """The lesson with the studio cell first, written beside it in the server's folder; returns its name."""
     nb = json.loads(notebook.read_text())
     cell = {"cell_type": "code", "execution_count": None, "metadata": {}, "outputs": [], "source": ""}
-    cell["source"] = STUDIO_CELL.format(tests=str(TESTS))
+    cell["source"] = STUDIO_CELL
     nb["cells"].insert(0, cell)
     name = f"{notebook.stem}_studio.ipynb"
     (server.root_dir / name).write_text(json.dumps(nb))

@@ -10,6 +10,9 @@
 :func:`fit_masses`             mass estimation from reference clips (s3.2)
 :func:`touch_up`               the touch-up (s3.3, s3.4) -> TouchUpHistory
 :func:`start`, :func:`step`    the same, one adjustment at a time
+:func:`ground_reach`           which frames out of balance an adjustment
+                               balances exactly, which take the closest
+                               approach (:class:`GroundReach`)
 :class:`TouchUpSession`        stateful stepper behind the widget
 :class:`TouchUpWarning`        suspicious input (long flights, sliding feet)
 :func:`flight_measures`        per flight: fitted gravity, angular-momentum
@@ -45,7 +48,7 @@ from .schedule import (
     preset_mask,
 )
 from .state import TouchUpState, TouchUpWarning, start, step
-from .touchup import TouchUpHistory, TouchUpSession, touch_up
+from .touchup import GroundReach, TouchUpHistory, TouchUpSession, ground_reach, touch_up
 from .zmp import Balance, balance, polygon_distance, signed_distance, support_polygon, zmp_distance, zmp_from_links
 
 __all__ = [
@@ -67,6 +70,7 @@ __all__ = [
     "FlightMeasure",
     "FLIGHT_SCHEDULE",
     "GROUND_SCHEDULE",
+    "GroundReach",
     "LinkSets",
     "TouchUpHistory",
     "TouchUpSession",
@@ -75,6 +79,7 @@ __all__ = [
     "default_schedule",
     "flight_measures",
     "flight_stages",
+    "ground_reach",
     "link_sets",
     "preset_mask",
     "start",

@@ -102,7 +102,7 @@ from .state import TouchUpState, TouchUpWarning, start, step
 if TYPE_CHECKING:  # pragma: no cover
     from ..contacts import Contacts
 
-__all__ = ["TouchUpHistory", "touch_up", "TouchUpSession"]
+__all__ = ["GroundReach", "TouchUpHistory", "ground_reach", "touch_up", "TouchUpSession"]
 
 Array = NDArray[np.float64]
 
@@ -435,15 +435,13 @@ def _no_progress_message(state: TouchUpState, rejected: Sequence[tuple[float, fl
     v = np.nan_to_num(state.violation, nan=0.0)
     worst = intervals_from_mask(v >= 0.5 * v.max()) if v.max() > 0 else []
     spans = ", ".join(f"{a}-{b - 1}" if b - a > 1 else f"{a}" for a, b in worst[:6])
-    out_of_balance = state.balance.distance > 0
-    reach = []
-    for adj in dict.fromkeys(a for a in state.schedule if a.stage == "ground"):
-        sets = link_sets(state.motion.skeleton, adj, roles=state.roles)
-        gpos = state.kinematics[1] if state.kinematics is not None else None
-        _, _, exact = _ground_rotation(state.motion, state.body, sets, state.balance, np.ones(state.motion.n_frames), gpos)
-        reach.append(f"{int(np.sum(out_of_balance & ~exact))} for {'+'.join(adj.s2)}")
+    out_of_balance = (state.balance.distance > 0) & state.interior
+    reach = [
+        f"{ground_reach(state, adj).n_closest} for {'+'.join(adj.s2)}"
+        for adj in dict.fromkeys(a for a in state.schedule if a.stage == "ground")
+    ]
     limits = (
-        f"; of the {int(out_of_balance.sum())} ground frames out of balance, no rotation within "
+        f"; of the {int(out_of_balance.sum())} ground frames out of balance between the clip's ends, no rotation within "
         f"{np.degrees(MAX_ANGLE):.0f} degrees (MAX_ANGLE) puts the ZMP on the support polygon on "
         + ", ".join(reach) if reach else ""
     )
@@ -459,6 +457,119 @@ def _no_progress_message(state: TouchUpState, rejected: Sequence[tuple[float, fl
         f"violation, {1000 * v.max():.1f} mm){limits}{flight_text}. Try another schedule, a smaller sigma or, "
         "around flights, a shorter flight_window"
     )
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class GroundReach:
+    """Which out-of-balance frames a ground adjustment balances exactly, and which take the closest approach.
+
+    Made by :func:`ground_reach`, not by hand; the masks are read-only.  Both masks cover the frames the
+    adjustment corrects that are out of balance: ground frames with a ZMP
+    outside the support polygon, between the clip's
+    :attr:`~TouchUpState.edge_frames` (no adjustment corrects those).
+
+    Parameters
+    ----------
+    adjustment : Adjustment
+        The ground adjustment the frames were solved for.
+    exact : ndarray of bool, shape (F,)
+        Frames where a rotation of S2 within :data:`~mocaplab.physics.adjust.MAX_ANGLE` puts
+        the ZMP on the support polygon (equation 7 has a solution).
+    closest : ndarray of bool, shape (F,)
+        Frames where none does: S2 turns by the angle that brings the ZMP
+        closest to the polygon (section 3.3, ``cos(theta + phi) = +-1``),
+        clamped to ``MAX_ANGLE``; these frames are corrected too, towards
+        the polygon.
+
+    Examples
+    --------
+    >>> import mocaplab as ml
+    >>> state = ml.physics.start(ml.cmu("16_15").resample(30)[:60])
+    >>> reach = ml.physics.ground_reach(state, ml.physics.GROUND_SCHEDULE[2])  # the arms
+    >>> reach.adjustment.label, reach.n_exact, reach.n_closest
+    ('ground: arms (S2)', 8, 16)
+    """
+
+    adjustment: Adjustment
+    exact: NDArray[np.bool_]
+    closest: NDArray[np.bool_]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "exact", readonly(np.asarray(self.exact, dtype=bool)))
+        object.__setattr__(self, "closest", readonly(np.asarray(self.closest, dtype=bool)))
+
+    @property
+    def n_exact(self) -> int:
+        """Number of :attr:`exact` frames."""
+        return int(self.exact.sum())
+
+    @property
+    def n_closest(self) -> int:
+        """Number of :attr:`closest` frames."""
+        return int(self.closest.sum())
+
+
+def ground_reach(state: TouchUpState, adjustment: Adjustment | None = None) -> GroundReach:
+    """Which out-of-balance frames of a state a ground adjustment balances exactly, which only get closer.
+
+    On each ground frame the closed form of equations 6-7 gives the
+    rotation of S2 that puts the ZMP on the support polygon; where no
+    rotation (within :data:`~mocaplab.physics.adjust.MAX_ANGLE`) does, the
+    touch-up applies the one that brings the ZMP closest (section 3.3).
+    This tells the two kinds of frame apart, before the step is taken.
+
+    Parameters
+    ----------
+    state : TouchUpState
+        Where the touch-up stands (:func:`start`, :func:`step`, or any of
+        :attr:`TouchUpHistory.states`).
+    adjustment : Adjustment, optional
+        A ground adjustment; default the state's
+        :attr:`~TouchUpState.next_adjustment`, the one :func:`step` applies
+        next.  For a history, ``ground_reach(h.states[k])`` is what step
+        ``k + 1`` worked with.  The step size (``rho``) does not matter.
+
+    Returns
+    -------
+    GroundReach
+        Per-frame masks ``exact`` and ``closest`` with their counts.
+
+    Raises
+    ------
+    TypeError
+        When ``state`` is not a TouchUpState or ``adjustment`` not an Adjustment.
+    ValueError
+        When the adjustment is a flight adjustment (flight frames have no ZMP).
+
+    Examples
+    --------
+    Two seconds of a captured walk: the lower body balances every frame
+    out of balance exactly, the arms a third of them.
+
+    >>> import mocaplab as ml
+    >>> from mocaplab.physics import GROUND_SCHEDULE, ground_reach, start
+    >>> state = start(ml.cmu("16_15").resample(30)[:60])
+    >>> [(ground_reach(state, adj).n_exact, ground_reach(state, adj).n_closest) for adj in GROUND_SCHEDULE]
+    [(24, 0), (19, 5), (8, 16)]
+    """
+    if not isinstance(state, TouchUpState):
+        raise TypeError(
+            f"Expected `state` to be a TouchUpState (see mocaplab.physics.start), got {type(state).__name__}"
+        )
+    adj = state.next_adjustment if adjustment is None else adjustment
+    if not isinstance(adj, Adjustment):
+        raise TypeError(f"Expected `adjustment` to be an Adjustment or None, got {type(adj).__name__}")
+    if adj.stage != "ground":
+        raise ValueError(
+            f"Expected a ground adjustment, got the flight adjustment {adj.label!r}: flight frames have no ZMP to "
+            "balance. Pass one of the schedule's ground adjustments as `adjustment`"
+        )
+    sets = link_sets(state.motion.skeleton, adj, roles=state.roles)
+    gpos = state.kinematics[1] if state.kinematics is not None else None
+    corrected = state.interior.astype(float)
+    _, _, exact = _ground_rotation(state.motion, state.body, sets, state.balance, corrected, gpos)
+    out = (state.balance.distance > 0) & state.interior  # NaN (flight, no ZMP) compares False
+    return GroundReach(adj, out & exact, out & ~exact)
 
 
 # ======================================================================

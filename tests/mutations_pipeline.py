@@ -8,7 +8,9 @@ message contains ``message`` (None: any assert).
   joint roles do for a file in another convention: each switch removes one
   of them (the unit estimate, the frame-rate snap, the up axis found from
   the body, the travelling path joint, the names in role inference), or the
-  refinement whose output the quality report judges.
+  refinement whose output the quality report judges; one makes lesson 12's pose
+  probability depend on the root layout, which the comparison with the CMU clip
+  catches.
 * Lesson 15 (the capstone) teaches that the touch-up balances and the
   staggered-pose exaggeration stylises: each switch turns one of them off.
 """
@@ -75,6 +77,25 @@ def role_names_ignored(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(roles, "_parse", lambda name: (None, "", None))
 
 
+def pelvis_travel_unweighted(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The pose probability weighs only the root's travel: a pelvis travelling below a static root counts for nothing.
+
+    On a CMU clip nothing changes (its only position variable is the root's); on the studio file the path's
+    own position variable (``Hips.position``) loses the weight the root has on the CMU clip, so lesson 12's
+    P(t) differs between the two layouts.
+    """
+    from mocaplab.staggered import features
+
+    weights = features.signal_weights
+
+    def root_only(trails, n_variables, *, root_weight=1.0):  # type: ignore[no-untyped-def]
+        w = weights(trails, n_variables, root_weight=root_weight)
+        w[trails.variable[(trails.kind == 0) & (trails.variable != 0)]] = 0.0
+        return w
+
+    monkeypatch.setattr(features, "signal_weights", root_only)
+
+
 # ------------------------------------------------------------------ lesson 15
 def no_exaggeration(monkeypatch: pytest.MonkeyPatch) -> None:
     """Exaggerating staggered poses changes nothing (the stylisation stage is the identity)."""
@@ -90,6 +111,7 @@ CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
     (L14, role_names_ignored, "swapped"),
     (L14, no_up_axis_detection, "stands along Z"),
     (L14, refinement_off, "refinement plants them"),
+    (L14, pelvis_travel_unweighted, "the same pose probability"),
     (L15, no_ground_adjustment, "lowers the mean ZMP distance"),
     (L15, no_exaggeration, "doubles the upper body"),
 ]

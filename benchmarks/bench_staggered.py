@@ -288,7 +288,7 @@ def constraint_layer_figures() -> None:
             acc = (quality.angular_acceleration(out)[knees] / np.maximum(a0[knees], 1e-9)).max()
             cells.append((float(move.max()), m.skeleton.names[int(move.argmax())], float(acc)))
         layer = edited.constraints
-        w, targets = layer.weights_and_targets(edited, on.times)
+        w, targets = layer.weights_and_targets(edited, on.times, motion=off)
         feet = [m.skeleton.index(n) for n in layer.joints]
         held = np.linalg.norm(on.global_positions()[:, feet] - targets, axis=-1)[w == 1.0]
         (mv, jn, acc), (mv0, _, acc0) = cells

@@ -177,7 +177,7 @@ def test_the_constraint_layer_gives_the_same_result(clips) -> None:
         edited = succession(exaggerate(sm, 0.5), 0.01, 1.0)
         ref = edited.evaluate()
         free = edited.evaluate(constraints=False)
-        w, targets = sm.constraints.weights_and_targets(edited, ref.times)
+        w, targets = sm.constraints.weights_and_targets(edited, ref.times, motion=free)
         feet = [m.skeleton.index(n) for n in names]
         on = w == 1.0
         # the layer acts: without it the planted feet leave their targets by centimetres

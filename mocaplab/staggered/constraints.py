@@ -125,6 +125,33 @@ _REACH = 0.96
 _MAX_REACH = 0.997
 
 
+#: How fast the layer's correction of a joint may grow or fall, as a multiple of the joint's largest speed in
+#: the input (see "Pull-in" in ConstraintLayer's notes).  On animation.bvh (below) 0.5x leaves the edit's own
+#: LeftToeBase at 1.50x the input's one-frame move, 1x at 1.47x; the CMU clips never reach it.
+_PULL_IN_SPEED = 1.0
+#: The slowest pull-in, m/s, for a joint (nearly) still throughout the input.
+_PULL_IN_FLOOR = 0.5
+
+
+def _pull_in_limited(w: Array, dist: Array, t: Array, speed: Array) -> Array:
+    """Weights ``w`` (F, E) lowered so each correction changes size by at most ``speed`` (E,) m/s.
+
+    ``dist`` (F, E) is each joint's distance to its target without the
+    layer, so ``w * dist`` is the size of its correction, ``t`` the times
+    (s).  A forward pass bounds the correction's growth (a pull-in, or a
+    plant the edited joint runs away from), a backward pass its fall (a
+    release, or a plant the edited joint sweeps through).
+    """
+    out = np.array(w, dtype=float, copy=True)
+    step = speed[None, :] * np.diff(t)[:, None]  # (F - 1, E)
+    safe = np.where(dist > 0, dist, 1.0)
+    F = out.shape[0]
+    for f, g in [(f, f - 1) for f in range(1, F)] + [(f, f + 1) for f in range(F - 2, -1, -1)]:
+        cap = out[g] * dist[g] + step[min(f, g)]
+        out[f] = np.where(out[f] * dist[f] > cap, cap / safe[f], out[f])
+    return out
+
+
 def _frames_of(seconds: float, fps: float) -> int:
     """Whole frames covering ``seconds`` at ``fps`` (at least 1)."""
     return max(int(np.ceil(seconds * fps - 1e-9)), 1)
@@ -172,6 +199,16 @@ class ConstraintLayer:
       landing toe of 49_03 47.9 -> 33.5 mm in a frame (input 27.6), pymo's
       walk AV_8Walk 1,207 -> 686 rad/s^2 (input 344); the plants still
       hold to 0.1 mm.
+    * **Pull-in.**  A correction grows and falls no faster than its
+      joint's largest speed in the input (``speeds``; at least 0.5 m/s):
+      where an edit leaves a joint far from its plant, or sweeps it past
+      the plant, the weight ramps in or out slower than ``window`` says and
+      the plant is held only once the correction has caught up.  The
+      motionmachine file animation.bvh (30 fps, a succession of 0.02 s),
+      whose delayed toe sweeps 33 cm past a 0.3 s toe plant: RightLeg
+      124.8 -> 97.4 mm/frame (input 67.8), the worst joint 1.84x -> 1.48x
+      the input's (LeftFoot), the largest skate 127 -> 82 mm; the CMU clips
+      of tests/test_staggered_quality.py are unchanged.
     * **Reach.**  Where a leg cannot reach, the solver lowers the root,
       smoothly and by at most 15 cm (``adjust_root``, on by default, as in
       Kovar et al. 2002's footskate cleanup): without it a leg snaps
@@ -366,13 +403,19 @@ class ConstraintLayer:
             out[:, e] = T[s] + tn * (T[s + 1] - T[s])
         return out
 
-    def weights_and_targets(self, sm: StaggeredMotion, t: Array, *, staggered: bool = True) -> tuple[Array, Array]:
+    def weights_and_targets(
+        self, sm: StaggeredMotion, t: Array, *, staggered: bool = True, motion: Motion | None = None
+    ) -> tuple[Array, Array]:
         """Blend weights (F, E) and targets (F, E, 3) at times ``t`` for ``sm``'s timing.
 
         The contact intervals, mapped onto ``sm``'s frames through each
         joint's timing (:meth:`frame_times`), are blended by
         :func:`mocaplab.goals.blend_weights` (weights between frames are
         interpolated); targets are interpolated between original frames.
+        Given ``motion``, ``sm`` evaluated at ``t`` without the layer, the
+        weights are those :meth:`apply` uses: lowered where the correction
+        would grow or fall faster than the joint's largest input speed (see
+        "Pull-in" in the class notes).
         """
         t = np.asarray(t, dtype=float).reshape(-1)
         grid = np.arange(sm.n_frames) / sm.fps
@@ -388,6 +431,12 @@ class ConstraintLayer:
             w[:, e] = w_grid if same else np.interp(t, grid, w_grid)
             at = np.interp(t, tau, n)
             tg[:, e] = np.stack([np.interp(at, n, self.targets[:, e, c]) for c in range(3)], axis=-1)
+        if motion is not None and E and t.size > 1:
+            if motion.n_frames != t.size:
+                raise ValueError(f"Expected `motion` with one frame per time ({t.size}), got {motion.n_frames}")
+            pos = motion.global_positions()[:, [motion.skeleton.index(name) for name in self.joints]]
+            speed = np.maximum(_PULL_IN_SPEED * self.speeds.max(axis=0), _PULL_IN_FLOOR)
+            w = _pull_in_limited(w, np.linalg.norm(pos - tg, axis=-1), t, speed)
         return w, tg
 
     def _speeds_at(self, sm: StaggeredMotion, t: Array, staggered: bool) -> Array:
@@ -407,7 +456,7 @@ class ConstraintLayer:
         """
         if not self.joints:
             return motion
-        w, tg = self.weights_and_targets(sm, t, staggered=staggered)
+        w, tg = self.weights_and_targets(sm, t, staggered=staggered, motion=motion)
         sk = motion.skeleton
         idx = [sk.index(n) for n in self.joints]
         pos = motion.global_positions()[:, idx]

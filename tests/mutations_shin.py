@@ -78,6 +78,23 @@ def no_ground_adjustment_with_flights(monkeypatch: pytest.MonkeyPatch) -> None:
     _ground_adjustment_off_where(monkeypatch, lambda bal: not bool(np.all(bal.ground)))
 
 
+def closest_approach_with_zero_weight(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ground frames without an exact solution get no correction (an earlier version), not the closest approach.
+
+    Section 3.3 applies the rotation that brings the ZMP closest; here those frames keep their pose, so only
+    the frames equation 7 solves exactly move.  :func:`mocaplab.physics.ground_reach` still tells them apart.
+    """
+    from mocaplab.physics import ground  # _ground_step looks _ground_rotation up there
+
+    real = ground._ground_rotation
+
+    def exact_only(*args, **kwargs):
+        omega, centre, exact = real(*args, **kwargs)
+        return np.where(exact[:, None], omega, 0.0), centre, exact
+
+    monkeypatch.setattr(ground, "_ground_rotation", exact_only)
+
+
 def no_segment_spin(monkeypatch: pytest.MonkeyPatch) -> None:
     """Rigid segments without their own spin: ``inertia="segments"`` counts the point masses only."""
     from mocaplab.physics import body, flight
@@ -106,6 +123,7 @@ CASES: list[tuple[str, Callable[[pytest.MonkeyPatch], None], str | None]] = [
     (L09, no_ground_adjustment, "one adjustment already helps"),
     (L09, no_ground_adjustment_on_a_slope, "tilts the climber forward"),
     (L09, no_ground_adjustment_with_flights, "leans forward while it speeds up"),
+    (L09, closest_approach_with_zero_weight, "the closest-approach frames move toward the polygon"),
     (L10, no_flight_adjustment, "little swerve left in the air"),
     (L10, no_ground_adjustment, "the landing gets a balancing action"),
     (L10, no_segment_spin, "far above the paper's 2 %"),

@@ -342,6 +342,8 @@ class KeyCapture(anywidget.AnyWidget):  # type: ignore[misc]
     """
 
     _esm = _KEYS_ESM
+    #: what the help line says to do first, by default
+    WHERE = "click a button or this line first"
     #: the keys taken (matplotlib names); every other key is left to JupyterLab
     key_names = traitlets.List(traitlets.Unicode()).tag(sync=True)
     help = traitlets.Unicode("").tag(sync=True)
@@ -352,7 +354,7 @@ class KeyCapture(anywidget.AnyWidget):  # type: ignore[misc]
         shortcuts: Sequence[Shortcut],
         *,
         scope: str,
-        where: str = "click a button or this line first",
+        where: str = WHERE,
         guard: Callable[[Callable[[], object]], None] | None = None,
     ) -> None:
         super().__init__(

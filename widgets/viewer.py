@@ -1223,10 +1223,8 @@ class MotionViewer:
             layout=w.Layout(flex_flow="row wrap", align_items="center", width="100%"),
         )
         # space plays, the arrows step: the buttons' own actions (_controls.viewer_shortcuts), listed on this line
-        where = "click the picture, a button or this line first" if self.backend == "client" else None
-        self.keys = KeyCapture(
-            viewer_shortcuts(lambda: self), scope="mocaplab-viewer", **({"where": where} if where else {})
-        )
+        where = "click the picture, a button or this line first" if self.backend == "client" else KeyCapture.WHERE
+        self.keys = KeyCapture(viewer_shortcuts(lambda: self), scope="mocaplab-viewer", where=where)
         children = ([self._view] if self._view is not None else []) + [
             self._legend,
             controls,

@@ -95,6 +95,12 @@ class UndoStack(Generic[T]):
         """End a gesture: the next push adds a state even with the same ``merge`` key."""
         self._merge = None
 
+    def amend(self, state: T) -> None:
+        """Replace the current state by ``state``, the same edit completed (no new step, redo states kept)."""
+        self._states[self._index] = state
+        if self._index == 0:
+            self._initial = state
+
     def undo(self) -> T:
         """Step back one state and return it; :class:`IndexError` when there is none."""
         if not self.can_undo:

@@ -170,10 +170,11 @@ def test_old_undo_states_release_their_motions_and_rebuild_them_bitwise(trio):
     refs.append([weakref.ref(m) for m in ed.result.motions] + [weakref.ref(m) for m in ed.result.edited_motions])
     for g in range(8):
         for s in np.linspace(0.1, 1.0, 5):  # one gesture: five drags (the merged ones take no place)
-            r = ed.drag(1, end_a + (0.1 * g + s) * np.array([0.4, -0.2]))
+            ed.drag(1, end_a + (0.1 * g + s) * np.array([0.4, -0.2]))
+        ed.checkpoint()  # the gesture ends: its relative constraints settle (the state's result)
+        r = ed.result
         for m in r.motions:
             m.global_positions()
-        ed.checkpoint()
         results.append(r)
         copies.append(frozen(r))
         refs.append([weakref.ref(m) for m in r.motions] + [weakref.ref(m) for m in r.edited_motions])

@@ -85,7 +85,8 @@ Editing (:mod:`mocaplab.editing.scene`)
     none), ``.contact_joints(k)`` (the joints whose foot contacts are kept),
     ``.snapshot()``/``.restore(state)``, and a history (:mod:`mocaplab.undo`):
     ``.undo()``, ``.redo()``, ``.reset()`` (undoable), ``.checkpoint()`` (end a
-    gesture: drags of one constraint merge into one undo step until then),
+    gesture: drags of one constraint merge into one undo step until then;
+    it settles relative constraints, ``.settle()``),
     ``.can_undo``, ``.can_redo``, ``.undo_stack``; a DiscreteEditor has the
     same (its steps include the transformations a drag applied).
     A failed update (ConstraintError) leaves the editor unchanged and records nothing.
@@ -101,11 +102,13 @@ Editing (:mod:`mocaplab.editing.scene`)
     ``hard_residual_space, hard_residual_time, soft_residual_space,
     soft_residual_time, shape_distortion, length_change (K,), min_time_step``,
     ``min_time_step_ratio``, ``.energies -> Energies(shape, scale, time)``,
-    ``.notes``, ``.with_transformations(ts)``; immutable.
+    ``.notes``, ``.settled``, ``.with_transformations(ts)``; immutable.
     Options: ``scale_compensation=True, stationary="auto", min_step=0.25,
     max_step=4.0`` (ratios of the frame time), ``flip_rate=900`` (degrees
     per second), ``flip_window=1.0`` (s), ``relative_tolerance=1e-3`` (m),
-    ``relative_iterations=20``, ``variational_step=10, clock_fps=None,
+    ``relative_iterations=20``, ``relative_drag_iterations=2`` (solves per drag;
+    ``SceneEditor.settle()``, called by ``checkpoint()``, settles the rest),
+    ``variational_step=10, clock_fps=None,
     start_times=None``, ``refine=False``,
     ``roles=None`` (role overrides), ``joints=None`` (contact joints for
     ``stationary="auto"`` and refinement; default the roles' feet).

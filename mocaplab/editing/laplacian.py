@@ -423,6 +423,16 @@ class MetricTargets:
         size = np.maximum(np.linalg.norm(self.coef, axis=1), 1e-300)
         return np.where(self.direction, err / size, err)
 
+    def pair_errors(self, p: Array, soft_values: Array, hard_values: Array) -> Array:
+        """:meth:`errors` of every pair at ``p`` from its rows' values ``Bw @ p`` (weighted) and ``H @ p``."""
+        rows = np.zeros((self.n, 2))
+        for values, sel, scale in ((soft_values, self.soft, self.scale), (hard_values, ~self.soft, None)):
+            if sel.any():
+                i = self.index[sel]
+                vals = np.stack([values[i], values[i + 1]], axis=1)
+                rows[sel] = vals / scale[sel, None] if scale is not None else vals
+        return self.errors(p, rows)
+
 
 def metric_targets(
     soft: Sequence[Rows], weights: Sequence[float], hard: Sequence[Rows], n: int

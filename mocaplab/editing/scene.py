@@ -59,6 +59,15 @@ relative_tolerance : float, default 1e-3
     :mod:`~mocaplab.editing.laplacian`, "Relative constraints in metres").
 relative_iterations : int, default 20
     Most solves per update for that (>= 1).
+relative_drag_iterations : int, default 2
+    Most solves a :meth:`SceneEditor.drag` makes for that (>= 1):
+    a drag warm-starts from the previous update and may stop before the
+    targets settle (``EditResult.settled`` False); when the gesture ends the
+    editor solves them as :func:`edit` does, up to ``relative_iterations``
+    solves (:meth:`SceneEditor.settle`, called by ``checkpoint()``, which
+    the widgets call on mouse release), so the settled edit does not depend
+    on the drags that led to it (``benchmarks/bench_laplacian.py``: a
+    formation of 1000 tied walkers).
 variational_step : int, default 10
     Sampling step of variational constraints (frames, >= 1).
 start_times : sequence of float, optional
@@ -168,6 +177,7 @@ _OPTIONS: Mapping[str, Any] = MappingProxyType(
         "flip_window": 1.0,
         "relative_tolerance": 1e-3,
         "relative_iterations": 20,
+        "relative_drag_iterations": 2,
         "variational_step": 10,
         "start_times": None,
         "clock_fps": None,
@@ -388,6 +398,8 @@ def _checked_options(opts: dict[str, Any], chars: Sequence[Motion]) -> dict[str,
     )
     out["relative_iterations"] = integer(out["relative_iterations"], "relative_iterations", low=1,
                                          why="most solves per update")
+    out["relative_drag_iterations"] = integer(out["relative_drag_iterations"], "relative_drag_iterations", low=1,
+                                              why="most solves per drag")
     out["variational_step"] = integer(out["variational_step"], "variational_step", low=1, why="frames")
     starts = out["start_times"]
     if starts is not None:
@@ -723,15 +735,16 @@ class SceneEditor(Undoable):
         self._td.restore(state[1])
         self._space_sol, self._time_sol, self._effectors, self._constraints, self._result = state[2:]
 
-    def _set(self, constraints: tuple[Any, ...], changed: int | None) -> EditResult:
+    def _set(self, constraints: tuple[Any, ...], changed: int | None, iterations: int | None = None) -> EditResult:
         """Install constraints; ``changed`` = index whose target alone may have moved (fast path).
 
-        On any error the editor keeps its previous state.
+        ``iterations``: most solves for the relative constraints' metric targets
+        (default ``relative_iterations``).  On any error the editor keeps its previous state.
         """
         saved = self.snapshot()
         try:
             with single_blas_thread():  # small systems: one BLAS thread, the caller's setting restored
-                return self._install(constraints, changed)
+                return self._install(constraints, changed, iterations)
         except ConstraintError as exc:
             self.restore(saved)
             current = _naming_current(exc, constraints)
@@ -742,7 +755,7 @@ class SceneEditor(Undoable):
             self.restore(saved)
             raise
 
-    def _install(self, constraints: tuple[Any, ...], changed: int | None) -> EditResult:
+    def _install(self, constraints: tuple[Any, ...], changed: int | None, iterations: int | None) -> EditResult:
         old = self._constraints
         fast = (
             changed is not None
@@ -772,7 +785,11 @@ class SceneEditor(Undoable):
                 if dom is self._sd:
                     same = dom.factors is previous_factors
                     self._space_sol = self._space.solve(
-                        self._sd.factors, self._sd.bw, self._sd.h, previous=self._space_sol if same else None
+                        self._sd.factors,
+                        self._sd.bw,
+                        self._sd.h,
+                        previous=self._space_sol if same else None,
+                        iterations=iterations,
                     )
                 else:
                     self._time_sol = self._time.solve(self._td.factors, self._td.bw, self._td.h)
@@ -818,7 +835,57 @@ class SceneEditor(Undoable):
             raise TypeError(f"constraint #{i} {c!r} has no draggable target")
         new = list(self._constraints)
         new[i] = c.with_target(new_target)
-        return self._record(self._set(tuple(new), changed=i), merge=("edit", i))
+        budget = self.options["relative_drag_iterations"]
+        return self._record(self._set(tuple(new), changed=i, iterations=budget), merge=("edit", i))
+
+    def settle(self) -> EditResult:
+        """Solve the relative constraints' metric targets from the constraints alone, after drags.
+
+        A drag starts the metric-target iterations from the previous update
+        and makes at most ``relative_drag_iterations`` solves, so
+        while the mouse moves a large formation of tied characters can trail
+        its targets, and where more than one arrangement meets them (a long
+        chain of tied characters turned far) the drags can lead to either.
+        Settling solves them again as :func:`edit` does (from the linear
+        rows, up to ``relative_iterations`` solves): the result is
+        then the one ``edit(characters, constraints)`` gives, whatever the
+        drags that led there.  It replaces the current undo state (the same
+        edit, settled) and returns the current result; it does nothing when
+        the current solution was not warm-started.  :meth:`checkpoint` calls
+        it (the widgets call that on mouse release).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mocaplab.data import cmu
+        >>> from mocaplab.editing import PinPosition, Relative
+        >>> walk = cmu("16_15")
+        >>> p = walk.root_positions[:, [0, 2]]
+        >>> side = walk.transformed(translation=[0.0, 0.0, 0.8])
+        >>> cons = [PinPosition(0, 0, p[0], hard=True), PinPosition(0, 470, p[-1]),
+        ...         PinPosition(1, 0, p[0] + (0.0, 0.8), hard=True), Relative(1, 400, 0, 400, (0.0, 0.8))]
+        >>> ed = SceneEditor([walk, side], cons, relative_drag_iterations=1)
+        >>> for x in np.linspace(0.1, 0.8, 8):
+        ...     res = ed.drag(1, p[-1] + (-x, x))
+        >>> settled = ed.settle()
+        >>> once = edit([walk, side], ed.constraints)
+        >>> settled.settled, bool(np.array_equal(settled.paths[1], once.paths[1]))
+        (True, True)
+        """
+        sol = self._space_sol
+        if sol is None or not sol.warm:
+            return self.result
+        saved = self.snapshot()
+        try:
+            with single_blas_thread():
+                self._space_sol = self._space.solve(self._sd.factors, self._sd.bw, self._sd.h)
+                self._result = EditResult(self, self._constraints)
+        except Exception:
+            self.restore(saved)
+            raise
+        self.undo_stack.amend(self.snapshot())
+        self._warm.touch(self._result, replaces=True)
+        return self._result
 
     def add(self, constraint: Any) -> int:
         """Append a constraint and re-solve; returns its index.
@@ -866,6 +933,7 @@ class SceneEditor(Undoable):
 
     def _gesture_ended(self) -> None:
         self._merging = None
+        self.settle()
 
     def trim(self) -> None:
         """Drop the factorisations cached for other constraint structures than the one in use.
@@ -1192,6 +1260,12 @@ class EditResult:
         constraints whose metric targets had not settled.
     relative_iterations : int
         Solves made for the relative constraints' metric targets (1 without any).
+    settled : bool
+        The relative constraints' metric targets were solved from the
+        constraints alone and settled to ``relative_tolerance`` (True
+        without relative constraints): the result :func:`edit` gives.
+        False for a drag's warm-started update until
+        :meth:`SceneEditor.settle` (on release).
 
     Attributes cannot be reassigned; :meth:`with_transformations` returns a copy.
 
@@ -1295,9 +1369,12 @@ class EditResult:
         # the right-hand sides solved for (relative rows corrected to metres)
         self._sbw, self._sh, self._sslices = sp_.bw, sp_.h, editor._sd.slices
         self.relative_iterations = sp_.iterations
+        self.settled = bool(sp_.settled and not sp_.warm)
         notes = list(self._sfac.notes()) + list(editor._td.factors.notes())
         tol = float(editor.options["relative_tolerance"])
-        if self._sfac.metric is not None and sp_.change > tol:
+        out_of_solves = sp_.iterations >= editor.options["relative_iterations"]
+        # a drag's preview may stop early without a note (settle() goes on); a full update that stops says so
+        if self._sfac.metric is not None and sp_.change > tol and (out_of_solves or sp_.diverged or sp_.stalled):
             notes.append(
                 f"relative constraints: metric targets still changing by {sp_.change:.2g} m after "
                 f"{sp_.iterations} solves (relative_tolerance {tol:g} m); residuals() shows the metric errors"
@@ -1503,38 +1580,26 @@ class EditResult:
         """
         out: dict[int, float] = {}
         metric = self._sfac.metric
+        pair_errors = None
         for fac, x, bw, h, slices in (
             (self._sfac, self._phat, self._sbw, self._sh, self._sslices),
             (self._tfac, self._t, self._tbw, self._th, self._tslices),
         ):
             H = fac.H if hasattr(fac, "H") else fac.Hu
+            soft_values = fac.Bw @ x if fac.Bw.shape[0] else np.zeros(0)
+            hard_values = H @ x if H.shape[0] else np.zeros(0)
+            if fac is self._sfac and metric is not None:  # every pair at once (one pass, not one per constraint)
+                pair_errors = metric.pair_errors(x, soft_values, hard_values)
             for i, (which, sl) in slices.items():
                 c = self.constraints[i]
-                if which == "soft":
-                    w = math.sqrt(c.weight)
-                    r = (fac.Bw[sl] @ x - bw[sl]) / w
-                else:
-                    r = H[sl] @ x - h[sl]
-                if isinstance(c, Relative) and metric is not None:
+                if isinstance(c, Relative) and pair_errors is not None and metric is not None:
                     sel = (metric.soft == (which == "soft")) & (metric.index >= sl.start) & (metric.index < sl.stop)
-                    rows = (fac.Bw[sl] @ x / w) if which == "soft" else H[sl] @ x
-                    pairs = metric.index[sel] - sl.start
-                    vals = np.stack([rows[pairs], rows[pairs + 1]], axis=1)
-                    sub = dataclasses.replace(
-                        metric,
-                        tangent=metric.tangent[
-                            np.stack([2 * np.flatnonzero(sel), 2 * np.flatnonzero(sel) + 1], 1).ravel()
-                        ],
-                        coef=metric.coef[sel],
-                        length=metric.length[sel],
-                        linear=metric.linear[sel],
-                        soft=metric.soft[sel],
-                        index=metric.index[sel],
-                        scale=metric.scale[sel],
-                        direction=metric.direction[sel],
-                    )
-                    out[i] = float(np.max(sub.errors(x, vals))) if sel.any() else 0.0
+                    out[i] = float(np.max(pair_errors[sel])) if sel.any() else 0.0
                     continue
+                if which == "soft":
+                    r = (soft_values[sl] - bw[sl]) / math.sqrt(c.weight)
+                else:
+                    r = hard_values[sl] - h[sl]
                 out[i] = float(np.max(np.abs(r))) if len(r) else 0.0
         return dict(sorted(out.items()))
 

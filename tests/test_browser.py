@@ -458,12 +458,18 @@ def test_lesson_01_viewer_with_each_backend(open_lesson: Any, backend: str) -> N
         wait_until(
             lambda: _glyph_sets(page_frame) == ["mocaplab-bones"], timeout=30, what="nine walkers drawn as bones only"
         )
+        lesson.kernel_eval("client_viewer.set_motions([walk])")  # and back: the joints' set was kept mounted
+        wait_until(
+            lambda: _glyph_sets(page_frame) == ["mocaplab-bones", "mocaplab-joints"],
+            timeout=30,
+            what="one walker drawn with its joints again",
+        )
     assert_no_console_errors(lesson)
     lesson.kernel_eval("client_viewer.close()")
 
 
 def _glyph_sets(frame: Any) -> list[str]:
-    """The ids of the crowd's glyph sets the browser-drawn view has (bones, joints), sorted."""
+    """The ids of the crowd's glyph sets the browser-drawn view draws (bones, joints: visible, with points), sorted."""
     return sorted(
         frame.evaluate(
             """() => {
@@ -473,7 +479,9 @@ def _glyph_sets(frame: Any) -> list[str]:
                    if (!view) continue;
                    for (const actor of view.renderer.getActors()) {
                      const id = String(actor.get("representationId").representationId || "");
-                     if (id === "mocaplab-bones" || id === "mocaplab-joints") out.push(id);
+                     const data = actor.getMapper() && actor.getMapper().getInputData(0);
+                     const drawn = actor.getVisibility() && data && data.getNumberOfPoints() > 0;
+                     if (drawn && (id === "mocaplab-bones" || id === "mocaplab-joints")) out.push(id);
                    }
                  }
                  return out;

@@ -57,6 +57,11 @@ __all__ = [
     "state_names",
 ]
 
+#: Joints drawn as spheres while the scene has at most this many drawn points (about eight characters);
+#: a larger crowd is drawn with its bones only: in software WebGL (a browser without a GPU) each glyph set
+#: costs about as much as the other per picture, and at a crowd's size the spheres are a pixel or two wide.
+MAX_JOINT_SPHERES = 320
+
 # The page side (see the module notes): decodes the clip sent once, steps through it on the browser's clock and
 # hands each frame's small arrays to vtk.js.  Registered as ``trame.utils.mocaplab`` (``utils.mocaplab`` in the
 # page's template expressions).
@@ -64,7 +69,7 @@ CLIENT_JS = r"""
 (function () {
   const trame = window.trame;
   if (trame.utils.mocaplab) { return; }
-  const M = { decoded: {}, players: {} };
+  const M = { decoded: {}, players: {}, maxJointSpheres: @MAX_JOINT_SPHERES@ };
   // WebGL contexts of this page without multisampling: in a browser without a GPU (software WebGL) it
   // costs several times the picture, as in the kernel's renders (see the module notes).
   const getContext = HTMLCanvasElement.prototype.getContext;
@@ -140,7 +145,11 @@ CLIENT_JS = r"""
     if (d.frame === f && d.crowd) { return d.crowd; }
     let nb = 0, nj = 0;
     for (const c of d.chars) { nb += c.segs.length / 2; nj += c.n; }
-    const out = { centres: new Float32Array(3 * nb), frames: new Float32Array(9 * nb), joints: new Float32Array(3 * nj) };
+    // a crowd of more than M.maxJointSpheres points: its joints set stays mounted, empty and hidden
+    // (unmounting a vtk-polydata with data arrays logs "instance deleted" in trame-vtk)
+    const spheres = nj <= M.maxJointSpheres;
+    const out = { centres: new Float32Array(3 * nb), frames: new Float32Array(9 * nb),
+                  joints: new Float32Array(spheres ? 3 * nj : 0), spheres: spheres };
     if (!d.colors) {
       d.colors = { bones: new Uint8Array(3 * nb), joints: new Uint8Array(3 * nj) };
       let b = 0, j = 0;
@@ -155,12 +164,12 @@ CLIENT_JS = r"""
       const bones = M.bones(s, k, f);
       out.centres.set(bones.centres, 3 * b);
       out.frames.set(bones.frames, 9 * b);
-      out.joints.set(M.joints(s, k, f), 3 * j);
+      if (spheres) { out.joints.set(M.joints(s, k, f), 3 * j); }
       b += c.segs.length / 2;
       j += c.n;
     });
     out.boneColors = d.colors.bones;
-    out.jointColors = d.colors.joints;
+    out.jointColors = spheres ? d.colors.joints : new Uint8Array(0);
     out.jointRadius = d.chars.length ? d.chars[0].jointRadius : 0;
     d.frame = f;
     d.crowd = out;
@@ -259,12 +268,8 @@ CLIENT_JS = r"""
   // set once the template that loaded this script has rendered (a change during its own render is lost)
   setTimeout(function () { trame.state.set("mocaplab_ready", true); }, 0);
 })();
-"""
+""".replace("@MAX_JOINT_SPHERES@", str(MAX_JOINT_SPHERES))
 _COUNTER = iter(range(1, 1 << 62))
-#: Joints drawn as spheres while the scene has at most this many drawn points (about eight characters);
-#: a larger crowd is drawn with its bones only: in software WebGL (a browser without a GPU) each glyph set
-#: costs about as much as the other per picture, and at a crowd's size the spheres are a pixel or two wide.
-MAX_JOINT_SPHERES = 320
 # The state values of one viewer's page (each ``<key>_<part>``).
 PARTS = ("chars", "overlays", "ground", "camera", "ctl", "start")
 
@@ -371,8 +376,8 @@ def build_page(server: Any, names: Mapping[str, Any], *, joint_radius: float) ->
                         port=1,
                     )
                 with vtkw.VtkGlyphRepresentation(
-                    v_if=f"{chars}.chars.reduce(function (n, c) {{ return n + c.n_points; }}, 0) <= {MAX_JOINT_SPHERES}",
                     id="mocaplab-joints",
+                    actor=(f"{{visibility: {crowd}.spheres}}",),
                     mapper=("{colorMode: 0, scalarVisibility: true, scaling: false}",),
                 ):
                     with vtkw.VtkPolyData("joints", points=(f"{crowd}.joints",)):

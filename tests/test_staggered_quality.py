@@ -275,3 +275,35 @@ def test_max_reach_lowers_the_root_under_a_leg_held_nearly_straight():
     assert np.linalg.norm(pos[:, 2] - pos[:, 0], axis=-1).max() <= 0.99 * 1.0 + 1e-9
     np.testing.assert_allclose(pos[:, 2], ankle, atol=1e-6)  # the ankle still held
     assert np.all(capped.root_positions[:, 1] < 1.0 - 0.009)  # lowered, not pushed sideways
+
+
+@pytest.mark.parametrize("w_r", [0.5, 1.0])
+def test_an_exaggeration_keeps_knees_and_elbows_bending_their_own_way(cmu, monkeypatch, w_r):
+    # 05_02's right elbow folds 131-135 degrees on frames 373-391, its average pose 35: exaggerated by 0.5 it
+    # went past 180 degrees and bent the other way on 19 frames; a hinge's change is shortened there instead
+    import mocaplab.staggered.edit as edit
+
+    m = cmu("05_02")
+    roles = m.skeleton.roles
+    arms = [roles[f"{side}_{part}"] for side in ("left", "right") for part in ("shoulder", "elbow")]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sm = extract(m)
+        kept = exaggerate(sm, w_r, joints=arms, reference="average")
+        monkeypatch.setattr(edit, "_keep_hinges", lambda sm, pos, rot, new_rot: new_rot)
+        asked = exaggerate(sm, w_r, joints=arms, reference="average")
+    axes = quality.hinge_axes(m)
+    assert quality.hinge_flips(asked.evaluate(), axes)["right_elbow"] > 10  # what the guard prevents
+    assert not any(quality.hinge_flips(kept.evaluate(), axes).values())
+    elbows = [m.skeleton.index(roles[f"{side}_elbow"]) for side in ("left", "right")]
+    others = np.setdiff1d(np.arange(m.skeleton.n_joints), elbows)
+    np.testing.assert_array_equal(kept.rotation_values[:, others], asked.rotation_values[:, others])
+    changed = np.any(kept.rotation_values[:, elbows] != asked.rotation_values[:, elbows], axis=(1, 2))
+    assert 0 < changed.sum() < sm.n_poses  # only where a fold passes the limit
+    poses = [kept.pose_motion(k, which="non-staggered").global_positions()[0] for k in range(sm.n_poses)]
+    g = np.array(poses)
+    for side in ("left", "right"):  # the kept poses fold at most to the limit (the input's most is 135)
+        u, mid, lo = (m.skeleton.index(roles[f"{side}_{p}"]) for p in ("shoulder", "elbow", "wrist"))
+        a, b = g[:, u] - g[:, mid], g[:, lo] - g[:, mid]
+        cos = np.einsum("fi,fi->f", a, b) / np.linalg.norm(a, axis=-1) / np.linalg.norm(b, axis=-1)
+        assert 180.0 - np.degrees(np.arccos(np.clip(cos, -1, 1))).min() <= edit.HINGE_FOLD_LIMIT + 1e-3

@@ -82,9 +82,10 @@ from typing import Any, Literal, Union
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .. import quat
+from .. import kinematics, quat
 from .._checks import quaternion, real
 from ..displacement import blend_ramp
+from ..ik import hinge_axes
 from ..motion import Skeleton
 from ..roles import RolesError, resolve_roles
 from .fit import fit_rotation_tangents, fit_translation_tangents
@@ -114,6 +115,7 @@ __all__ = [
     "LIMBS",
     "edit_pose",
     "exaggerate",
+    "HINGE_FOLD_LIMIT",
     "apply_knot_deltas",
     "insert_pose",
     "delete_pose",
@@ -1018,7 +1020,7 @@ def exaggerate(
         ref_rot = np.broadcast_to(quat.normalize(np.asarray(given[1], dtype=float)), (K, J, 4))
     new_pos = pos + w_r * (pos - ref_pos)
     rel = quat.mul(quat.inv(ref_rot), rot)
-    new_rot = quat.mul(rot, quat.exp(w_r * quat.log(rel)))
+    new_rot = _keep_hinges(sm, pos, rot, quat.mul(rot, quat.exp(w_r * quat.log(rel))))
     sel = np.zeros((K, sm.n_variables), dtype=bool)
     sel[ks] = mask
     sel &= sm.active
@@ -1036,6 +1038,103 @@ def exaggerate(
         delta = quat.mul(quat.mul(quat.inv(s_rot), new_rot[k]), quat.inv(D_rot))
         K_q[k] = np.where(act[1 : J + 1, None], delta, K_q[k])
     return apply_knot_deltas(sm, K_p[:, 0], K_q, K_p[:, 1:])
+
+
+#: The most a knee or elbow folds, degrees of bend (0 straight): an exaggeration that would fold a hinge
+#: further (past about 150 degrees the forearm or the shin passes through its upper bone, and past 180 the
+#: limb bends the other way) or straighten it past its straightest pose is shortened (:func:`_keep_hinges`).
+HINGE_FOLD_LIMIT = 150.0
+
+
+def _hinge_limbs(skeleton: Skeleton) -> list[tuple[int, int, int]]:
+    """``(upper, middle, end)`` joints of the knees and elbows the skeleton's roles give."""
+    try:
+        roles = resolve_roles(skeleton)
+    except RolesError:
+        return []
+    out = []
+    for side in ("left", "right"):
+        for limb in ("leg", "arm"):
+            try:
+                u, m, e = (skeleton.index(n) for n in roles.limb(side, limb))
+            except RolesError:
+                continue
+            out.append((u, m, e))
+    return out
+
+
+def _signed_bends(
+    sm: StaggeredMotion, pos: Array, rot: Array, limbs: Sequence[tuple[int, int, int]], axes: Array
+) -> Array:
+    """Bend of each limb's hinge in degrees (0 straight), negative when bent against ``axes``, shape (N, L)."""
+    translations = sm._translations(pos[:, 1:])
+    grot, gpos = kinematics.fk(
+        rot, np.zeros((rot.shape[0], 3)), sm.skeleton.offsets, sm.skeleton.parents, translations=translations
+    )
+    out = np.zeros((rot.shape[0], len(limbs)))
+    for i, (u, m, e) in enumerate(limbs):
+        a, b = gpos[:, u] - gpos[:, m], gpos[:, e] - gpos[:, m]
+        n = np.cross(a, b)
+        bend = 180.0 - np.degrees(np.arctan2(np.linalg.norm(n, axis=-1), np.einsum("ni,ni->n", a, b)))
+        side = quat.rotate(quat.inv(grot[:, m]), n) @ axes[i]
+        out[:, i] = np.where(side < 0.0, -bend, bend)
+    return out
+
+
+def _keep_hinges(sm: StaggeredMotion, pos: Array, rot: Array, new_rot: Array, *, steps: int = 20) -> Array:
+    """``new_rot`` (K, J, 4) with each knee and elbow kept within its poses' range of bends.
+
+    An extrapolated rotation (:func:`exaggerate`) can fold a hinge past
+    :data:`HINGE_FOLD_LIMIT` or straighten it past its straightest pose in
+    ``rot``, where it bends the other way.  On such a pose the change of the
+    joints between the limb's upper and end joint (the middle joint and any
+    twist joints) is shortened along its own geodesic, by bisection, to the
+    largest fraction that keeps the bend within
+    ``[min(0, straightest), max(HINGE_FOLD_LIMIT, most folded)]``, the bend
+    signed against the hinge axis of the unedited poses
+    (:func:`mocaplab.ik.hinge_axes`).  Other joints are left as asked.
+    """
+    limbs = _hinge_limbs(sm.skeleton)
+    if not limbs or rot.shape[0] < 2:
+        return new_rot
+    grot, gpos = kinematics.fk(
+        rot,
+        np.zeros((rot.shape[0], 3)),
+        sm.skeleton.offsets,
+        sm.skeleton.parents,
+        translations=sm._translations(pos[:, 1:]),
+    )
+    axes = hinge_axes(grot, gpos, limbs)
+    before = _signed_bends(sm, pos, rot, limbs, axes)
+    out = new_rot.copy()
+    parents = sm.skeleton.parents
+    for i, (u, _, e) in enumerate(limbs):
+        if not np.any(axes[i]):
+            continue  # straight on every pose: no hinge to keep
+        lo, hi = min(0.0, before[:, i].min()), max(HINGE_FOLD_LIMIT, before[:, i].max())
+        path = []
+        j = int(parents[e])
+        while j not in (u, -1):
+            path.append(j)
+            j = int(parents[j])
+        chain = np.array(path, dtype=np.int64)
+        bad = np.flatnonzero(~_within(_signed_bends(sm, pos, out, limbs[i : i + 1], axes[i : i + 1])[:, 0], lo, hi))
+        if not bad.size or j != u:
+            continue
+        step = quat.log(quat.mul(quat.inv(rot[np.ix_(bad, chain)]), out[np.ix_(bad, chain)]))
+        low, high = np.zeros(bad.size), np.ones(bad.size)  # the fraction kept: low is within the range
+        trial = out[bad].copy()
+        for _ in range(steps):
+            mid = 0.5 * (low + high)
+            trial[:, chain] = quat.mul(rot[np.ix_(bad, chain)], quat.exp(mid[:, None, None] * step))
+            ok = _within(_signed_bends(sm, pos[bad], trial, limbs[i : i + 1], axes[i : i + 1])[:, 0], lo, hi)
+            low, high = np.where(ok, mid, low), np.where(ok, high, mid)
+        out[np.ix_(bad, chain)] = quat.mul(rot[np.ix_(bad, chain)], quat.exp(low[:, None, None] * step))
+    return out
+
+
+def _within(bend: Array, lo: float, hi: float) -> NDArray[np.bool_]:
+    return (bend >= lo - 1e-6) & (bend <= hi + 1e-6)
 
 
 # --------------------------------------------------- creating/deleting poses
@@ -1160,7 +1259,9 @@ def insert_pose(sm: StaggeredMotion, time: float, *, joints: Sequence[str] | Non
     t = float(time)
     K, V = sm.n_poses, sm.n_variables
     if not sm.times[0] < t < sm.times[-1] or np.any(np.isclose(sm.times, t, rtol=0.0, atol=1e-9)):
-        raise ValueError(f"Expected `time` strictly inside ({sm.times[0]}, {sm.times[-1]}) and not on a pose, got {time!r}")
+        raise ValueError(
+            f"Expected `time` strictly inside ({sm.times[0]}, {sm.times[-1]}) and not on a pose, got {time!r}"
+        )
     mask = _variables_mask(sm, joints)
     pos = int(np.searchsorted(sm.times, t))
     T = sm.times[:, None] + sm.refinements
@@ -1189,8 +1290,15 @@ def insert_pose(sm: StaggeredMotion, time: float, *, joints: Sequence[str] | Non
         refit[pos, i] = True
     priorities = np.insert(sm.priorities, pos, np.nan)
     return _restructure(
-        sm, times=times, refinements=refinements, active=active, position_values=position_values,
-        rotation_values=rotation_values, old_to_new=old_to_new, refit=refit, priorities=priorities,
+        sm,
+        times=times,
+        refinements=refinements,
+        active=active,
+        position_values=position_values,
+        rotation_values=rotation_values,
+        old_to_new=old_to_new,
+        refit=refit,
+        priorities=priorities,
     )
 
 
@@ -1238,8 +1346,13 @@ def delete_pose(sm: StaggeredMotion, k: int) -> StaggeredMotion:
         prev = np.flatnonzero(active[:k, i])[-1]
         refit[prev, i] = True
     return _restructure(
-        sm, times=times, refinements=refinements, active=active,
+        sm,
+        times=times,
+        refinements=refinements,
+        active=active,
         position_values=np.delete(sm.position_values, k, axis=0),
         rotation_values=np.delete(sm.rotation_values, k, axis=0),
-        old_to_new=old_to_new, refit=refit, priorities=np.delete(sm.priorities, k),
+        old_to_new=old_to_new,
+        refit=refit,
+        priorities=np.delete(sm.priorities, k),
     )

@@ -464,8 +464,32 @@ def test_lesson_01_viewer_with_each_backend(open_lesson: Any, backend: str) -> N
             timeout=30,
             what="one walker drawn with its joints again",
         )
+        # a browser that cannot draw the play fast enough draws it with fewer pixels, sharp again when stopped
+        # (asked for an impossible rate here, as a slow one would see it)
+        full = _canvas_sizes(page_frame)
+        page_frame.evaluate("() => { window.trame.utils.mocaplab.targetRate = 1e6; }")
+        lesson.kernel_eval("client_viewer.set_frame(0); client_viewer.toggle_playback()")
+        reduced = wait_until(
+            lambda: (lambda now: now if now[0][0] < 0.6 * full[0][0] else None)(_canvas_sizes(page_frame)),
+            timeout=20,
+            what="the play drawn with fewer pixels",
+        )
+        lesson.kernel_eval("client_viewer.stop_playback()")
+        wait_until(lambda: _canvas_sizes(page_frame) == full, timeout=20, what="full resolution once stopped")
+        page_frame.evaluate("() => { window.trame.utils.mocaplab.targetRate = 30; }")
+        assert reduced[0][0] >= 0.5 * full[0][0] - 1, (reduced, full)  # never below PLAY_MIN_RATIO
     assert_no_console_errors(lesson)
     lesson.kernel_eval("client_viewer.close()")
+
+
+def _canvas_sizes(frame: Any) -> list[list[int]]:
+    """The drawing size (canvas pixels) of each vtk.js view of the browser-drawn page."""
+    return frame.evaluate(
+        """() => Object.values(window.trame.refs)
+                 .map((ref) => ref && ref.$ && ref.$.provides && ref.$.provides.view)
+                 .filter((view) => view && view.openglRenderWindow)
+                 .map((view) => view.openglRenderWindow.getSize().slice())"""
+    )
 
 
 def _glyph_sets(frame: Any) -> list[str]:

@@ -22,8 +22,12 @@ crowd as two glyph sets (bones as 6-sided cylinders placed by one 3x3 matrix
 each, joints as low-poly spheres, a colour per glyph; a crowd of more than
 :data:`MAX_JOINT_SPHERES` points is drawn with its bones only), overlays as their own
 meshes, and plays on its own clock (``requestAnimationFrame``), writing each
-frame's few arrays straight into vtk.js.  The kernel only sends where to
-start and whether to play (:func:`control_payload`).  The mouse rotates and
+frame's few arrays straight into vtk.js.  A browser that cannot draw
+:data:`PLAY_TARGET_RATE` pictures a second while playing (software WebGL on a
+busy machine) draws the play with fewer pixels, down to
+:data:`PLAY_MIN_RATIO` of the view's size, and sharp again when it stops.
+The kernel only sends where to start and whether to play
+(:func:`control_payload`).  The mouse rotates and
 zooms (vtk.js's interactor); a camera reset goes back to the fitted camera.
 The page's WebGL contexts are made without multisampling (in a browser
 without a GPU it costs several times the picture).  vtk.js comes bundled with
@@ -61,6 +65,12 @@ __all__ = [
 #: a larger crowd is drawn with its bones only: in software WebGL (a browser without a GPU) each glyph set
 #: costs about as much as the other per picture, and at a crowd's size the spheres are a pixel or two wide.
 MAX_JOINT_SPHERES = 320
+#: Pictures per second a playing view aims at: a browser that draws fewer (software WebGL on a busy
+#: laptop) draws the play with fewer pixels, down to :data:`PLAY_MIN_RATIO` of the view's width and height
+#: (a quarter of the pixels: 38 against 28 pictures/s for one character in Chromium without a GPU beside two
+#: CPU-bound processes on two cores), and at full resolution again when it stops.
+PLAY_TARGET_RATE = 30.0
+PLAY_MIN_RATIO = 0.5
 
 # The page side (see the module notes): decodes the clip sent once, steps through it on the browser's clock and
 # hands each frame's small arrays to vtk.js.  Registered as ``trame.utils.mocaplab`` (``utils.mocaplab`` in the
@@ -200,10 +210,13 @@ CLIENT_JS = r"""
   M.at = function (key, initial) { return key in M.frames ? M.frames[key] : initial; };
   // Draw frame f of the viewer `key` straight into its vtk.js data (no template update): the glyph
   // sets and overlays are found by their representation ids.
+  M.view = function (key) {
+    const comp = trame.refs[key + "_view"];
+    return comp && comp.$ && comp.$.provides && comp.$.provides.view;
+  };
   M.draw = function (key, f) {
     M.frames[key] = f;
-    const comp = trame.refs[key + "_view"];
-    const view = comp && comp.$ && comp.$.provides && comp.$.provides.view;
+    const view = M.view(key);
     const chars = trame.state.get(key + "_chars"), ovl = trame.state.get(key + "_overlays");
     if (!view || !chars) { return false; }
     const crowd = M.crowd(chars, f);
@@ -230,19 +243,51 @@ CLIENT_JS = r"""
     view.renderWindow.render();
     return true;
   };
+  // Dynamic resolution: a browser that draws in software (no GPU) and cannot keep up with the play
+  // (fewer than M.targetRate pictures a second, or the clip's own rate if lower) draws it with fewer
+  // pixels, down to M.minRatio of the view's width and height, stretched to the view.  Every 0.3 s the
+  // ratio follows the rate drawn (the cost of a picture goes with its pixels, the square of the ratio);
+  // with headroom (M.raiseAbove x the rate wanted) it goes back up.  The next play starts at the ratio
+  // the last one ended with; a stopped view is drawn at full resolution.
+  M.targetRate = @TARGET_RATE@;
+  M.minRatio = @MIN_RATIO@;
+  M.raiseAbove = 1.4;
+  M.resolution = function (key, ratio) {
+    const view = M.view(key), gl = view && view.openglRenderWindow, box = view && view.container;
+    if (!gl || !box) { return false; }
+    const r = box.getBoundingClientRect(), dpr = window.devicePixelRatio || 1;
+    const w = Math.max(10, Math.floor(r.width * dpr * ratio)), h = Math.max(10, Math.floor(r.height * dpr * ratio));
+    const size = gl.getSize();
+    if (size[0] !== w || size[1] !== h) { gl.setSize(w, h); }
+    return true;
+  };
   // Playback on the page's clock: ctl = {playing, frame, fps, n_frames} from the kernel.
   M.control = function (key, ctl) {
     if (!ctl) { return; }
-    const player = M.players[key] || (M.players[key] = { token: 0 });
+    const player = M.players[key] || (M.players[key] = { token: 0, ratio: 1, playRatio: 1 });
     player.token += 1;
     const token = player.token;
+    const last = ctl.n_frames - 1;
+    const ratio = ctl.playing && ctl.frame < last ? player.playRatio : 1;
+    if (ratio !== player.ratio) { player.ratio = ratio; M.resolution(key, ratio); }
     M.draw(key, ctl.frame);
     if (!ctl.playing) { return; }
-    const start = performance.now(), last = ctl.n_frames - 1;
+    const start = performance.now(), wanted = Math.min(M.targetRate, ctl.fps);
+    let since = start, drawn = 0;
     function tick(now) {
       if (player.token !== token) { return; }
       const f = Math.min(ctl.frame + Math.floor(((now - start) / 1000) * ctl.fps + 1e-9), last);
-      if (M.frames[key] !== f) { M.draw(key, f); }
+      if (f >= last && player.ratio !== 1) { player.ratio = 1; M.resolution(key, 1); }
+      if (M.frames[key] !== f) { M.draw(key, f); drawn += 1; }
+      if (now - since >= 300 && f < last) {
+        const rate = (1000 * drawn) / (now - since);
+        let next = player.ratio;
+        if (rate < 0.9 * wanted) { next = Math.max(M.minRatio, next * Math.sqrt(rate / wanted)); }
+        else if (rate > M.raiseAbove * wanted) { next = Math.min(1, next * 1.15); }
+        if (next !== player.ratio) { player.ratio = player.playRatio = next; M.resolution(key, next); }
+        since = now;
+        drawn = 0;
+      }
       if (f < last) { requestAnimationFrame(tick); }
     }
     requestAnimationFrame(tick);
@@ -268,7 +313,9 @@ CLIENT_JS = r"""
   // set once the template that loaded this script has rendered (a change during its own render is lost)
   setTimeout(function () { trame.state.set("mocaplab_ready", true); }, 0);
 })();
-""".replace("@MAX_JOINT_SPHERES@", str(MAX_JOINT_SPHERES))
+""".replace("@MAX_JOINT_SPHERES@", str(MAX_JOINT_SPHERES)).replace("@TARGET_RATE@", repr(PLAY_TARGET_RATE)).replace(
+    "@MIN_RATIO@", repr(PLAY_MIN_RATIO)
+)
 _COUNTER = iter(range(1, 1 << 62))
 # The state values of one viewer's page (each ``<key>_<part>``).
 PARTS = ("chars", "overlays", "ground", "camera", "ctl", "start")

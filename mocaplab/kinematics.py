@@ -214,29 +214,61 @@ def joint_depths(parents: NDArray[np.int64]) -> NDArray[np.int64]:
     return depth
 
 
-def velocities(positions: NDArray[np.float64], fps: float) -> NDArray[np.float64]:
+def _spans(n: int, fps: float, span: float | None) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+    """Frames ahead and behind each frame for a central difference over ``span`` seconds, and its seconds."""
+    h = 1 if span is None else max(1, int(round(0.5 * span * fps)))
+    idx = np.arange(n)
+    ahead, behind = np.minimum(idx + h, n - 1), np.maximum(idx - h, 0)
+    return ahead, behind, (ahead - behind) / fps
+
+
+def velocities(positions: NDArray[np.float64], fps: float, *, span: float | None = None) -> NDArray[np.float64]:
     """Per-frame velocities (units per second) by central differences.
 
     One-sided differences at the ends; a single frame has zero velocity.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (F, ...)
+    fps : float
+    span : float, optional
+        Seconds the difference spans, ``round(span * fps / 2)`` frames (at
+        least one) on each side, fewer at the ends: the same clip at another
+        frame rate gives about the same velocities (over one frame each side,
+        the default, capture noise grows with the rate).
+
+    Examples
+    --------
+    >>> velocities(np.array([0.0, 1.0, 4.0, 9.0, 16.0]), 10.0).tolist()
+    [10.0, 20.0, 40.0, 60.0, 70.0]
+    >>> velocities(np.array([0.0, 1.0, 4.0, 9.0, 16.0]), 10.0, span=0.4).tolist()
+    [20.0, 30.0, 40.0, 50.0, 60.0]
     """
     positions = np.asarray(positions, dtype=float)
-    if positions.shape[0] < 2:
+    n = positions.shape[0]
+    if n < 2:
         return np.zeros_like(positions)
-    return np.gradient(positions, 1.0 / fps, axis=0)
+    ahead, behind, dt = _spans(n, fps, span)
+    return (positions[ahead] - positions[behind]) / dt.reshape((n,) + (1,) * (positions.ndim - 1))
 
 
-def angular_velocities(rotations: NDArray[np.float64], fps: float) -> NDArray[np.float64]:
+def angular_velocities(
+    rotations: NDArray[np.float64], fps: float, *, span: float | None = None
+) -> NDArray[np.float64]:
     """Per-frame angular velocities (radians per second, world axes) of global rotations, by central differences.
 
     The rotation vector of ``q[i + 1] q[i - 1]^-1`` over two frame
     intervals, one-sided at the ends (as :func:`velocities`); a single frame
-    has zero angular velocity.
+    has zero angular velocity.  Applied to local rotations it gives the
+    angular velocities in each parent's axes.
 
     Parameters
     ----------
     rotations : ndarray, shape (F, ..., 4)
         Global (world) rotations, unit quaternions ``(x, y, z, w)``.
     fps : float
+    span : float, optional
+        Seconds the difference spans (see :func:`velocities`).
 
     Returns
     -------
@@ -255,8 +287,5 @@ def angular_velocities(rotations: NDArray[np.float64], fps: float) -> NDArray[np
     n = q.shape[0]
     if n < 2:
         return np.zeros(q.shape[:-1] + (3,))
-    ahead = np.concatenate([q[1:2], q[2:], q[-1:]])
-    behind = np.concatenate([q[:1], q[:-2], q[-2:-1]])
-    steps = np.full((n,) + (1,) * (q.ndim - 1), 2.0)
-    steps[[0, -1]] = 1.0
-    return quat.log(quat.mul(ahead, quat.inv(behind))) * (fps / steps)
+    ahead, behind, dt = _spans(n, fps, span)
+    return quat.log(quat.mul(q[ahead], quat.inv(q[behind]))) / dt.reshape((n,) + (1,) * (q.ndim - 1))

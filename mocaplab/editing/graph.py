@@ -30,7 +30,11 @@ and are left out like it.
   removed (pitch and roll only, the ``2 q`` form again): where the
   character faces on the ground does not matter;
 * **joint velocities**: local angular velocities (rad/s, central
-  differences), with the joint-angle weights;
+  differences over :data:`VELOCITY_SPAN` seconds, so that the same clip at
+  24 or 120 fps gives the same features: over one frame each side the
+  capture's noise grows with the frame rate, and 16_15 at 120 fps had
+  twice the distance of the same pair of moments at 24 fps), with the
+  joint-angle weights;
 * **root velocities in the body frame**: the root's linear velocity (m/s)
   and angular velocity (rad/s) expressed in its heading frame (yaw removed),
   so a walk is similar to the same walk in another direction.
@@ -76,6 +80,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import minimum_filter
 
 from .. import quat
+from ..kinematics import angular_velocities, velocities
 from ..motion import Motion
 from .paths import with_roles
 
@@ -86,9 +91,13 @@ __all__ = [
     "frame_features",
     "joint_weights",
     "frame_distances",
+    "VELOCITY_SPAN",
 ]
 
 Array = NDArray[np.float64]
+
+#: Seconds over which the features' velocities are differenced (one frame each side at 30 fps, four at 120).
+VELOCITY_SPAN = 1.0 / 15.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -178,18 +187,6 @@ def _canonical(q: Array) -> Array:
     return np.where(q[..., 3:4] < 0, -q, q)
 
 
-def _rate(q: Array, fps: float) -> Array:
-    """Angular velocity (rotation vector per second) by central differences, same shape as ``q[..., :3]``."""
-    F = q.shape[0]
-    if F < 2:
-        return np.zeros(q.shape[:-1] + (3,))
-    nxt = np.concatenate([q[1:], q[-1:]])
-    prv = np.concatenate([q[:1], q[:-1]])
-    span = np.full(F, 2.0)
-    span[0] = span[-1] = 1.0
-    return quat.log(quat.mul(nxt, quat.inv(prv))) * (fps / span).reshape((F,) + (1,) * (q.ndim - 1))
-
-
 def frame_features(
     motion: Motion, weights: SimilarityWeights | None = None, *, roles: Mapping[str, Any] | None = None
 ) -> NDArray[np.float32]:
@@ -228,10 +225,11 @@ def frame_features(
     parts.append(2.0 * _canonical(tilt)[:, None, :] * np.sqrt(w.root_tilt))
     parts.append(root_p[:, 1:2, None] * np.sqrt(w.root_height))
     qu = quat.unroll(local, axis=0)
-    parts.append(_rate(qu, motion.fps) * (np.sqrt(w.joint_velocities) * sj)[None, :, None])
-    vel = np.gradient(root_p, axis=0) * motion.fps if F > 1 else np.zeros((F, 3))
+    fps = motion.fps
+    parts.append(angular_velocities(qu, fps, span=VELOCITY_SPAN) * (np.sqrt(w.joint_velocities) * sj)[None, :, None])
+    vel = velocities(root_p, fps, span=VELOCITY_SPAN)
     parts.append(quat.rotate(unyaw, vel)[:, None, :] * np.sqrt(w.root_velocity))
-    omega = _rate(quat.unroll(root_q, axis=0), motion.fps)
+    omega = angular_velocities(quat.unroll(root_q, axis=0), fps, span=VELOCITY_SPAN)
     parts.append(quat.rotate(unyaw, omega)[:, None, :] * np.sqrt(w.root_angular_velocity))
     return np.concatenate([p.reshape(F, -1) for p in parts], axis=1).astype(np.float32)
 

@@ -38,11 +38,15 @@ file's unit, since a :class:`~mocaplab.motion.Motion` is in metres):
     a static root, stretchy rigs) are left out.  Zero for one motion measured
     against itself unless a rigid bone varies by up to 1 mm.
 ``hinge_flips``
-    Frames on which a knee or elbow bends the other way: the hinge axis
-    ``(upper bone x lower bone)``, seen in the frame of the upper bone's joint,
-    points against the axis the input bends about (its bend-weighted mean),
-    counted where the limb is bent by at least :data:`FLIP_MIN_BEND`.  A
-    straight limb has no axis and never counts.
+    Frames on which a knee or elbow bends the other way: the bend about the
+    axis the input bends about (its bend-weighted mean, in the frame of the
+    upper bone's joint), that is the bend angle times the cosine between
+    the frame's own axis ``(upper bone x lower bone)`` and that one, is at
+    least :data:`FLIP_MIN_BEND` degrees the other way.  A straight limb has
+    no axis and never counts, nor does a bend about an axis near
+    perpendicular to the hinge (a near-straight elbow's axis is mostly the
+    capture's noise: bent 18 degrees about an axis 91 degrees off the hinge
+    is not bent backwards).
 ``zmp``
     Mean distance of the ZMP outside the support polygon over the ground
     frames, mm (:func:`mocaplab.physics.zmp.balance`, the input's contacts).
@@ -442,7 +446,8 @@ def hinge_flips(
     -------
     dict of str to int
         Per hinge with an axis, the frames bent by at least
-        :data:`FLIP_MIN_BEND` degrees about the opposite direction.
+        :data:`FLIP_MIN_BEND` degrees the other way about it (the bend's
+        component about the axis).
 
     Examples
     --------
@@ -464,7 +469,7 @@ def hinge_flips(
         if label not in axes:
             continue
         local, bend = _bend(motion, upper, middle, lower)
-        against = (local @ np.asarray(axes[label], dtype=float) < 0.0) & (bend >= FLIP_MIN_BEND)
+        against = bend * (local @ np.asarray(axes[label], dtype=float)) <= -FLIP_MIN_BEND
         out[label] = int(np.count_nonzero(against))
     return out
 

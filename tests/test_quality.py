@@ -143,6 +143,20 @@ def test_a_straight_knee_is_never_a_flip():
     assert quality.hinge_flips(straight, quality.hinge_axes(before))["left_knee"] == 0
 
 
+def test_a_knee_bent_sideways_is_not_a_flip_but_bent_backwards_is():
+    # the bend's component about the input's hinge counts: 20 degrees about an axis 91 degrees off the hinge
+    # (-0.3 degrees about it) is not bent the other way; 20 degrees about one 150 degrees off (-17.3) is
+    before = pose(knee_deg=25.0)
+    sk = before.skeleton
+    knee = sk.index("LeftLeg")
+    for off, flips in ((91.0, 0), (150.0, 40)):
+        rot = np.array(before.rotations)
+        axis = [np.cos(np.radians(off)), 0.0, np.sin(np.radians(off))]  # the hinge is +x; the bone runs along -y
+        rot[:, knee] = quat.from_axis_angle(axis, np.radians(20.0) * np.ones(before.n_frames))
+        bent = before.replace(rotations=rot)
+        assert quality.hinge_flips(bent, quality.hinge_axes(before))["left_knee"] == flips, off
+
+
 def test_feet_pushed_three_centimetres_under_the_floor():
     still = pose()
     root = np.array(still.root_positions)

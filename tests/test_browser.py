@@ -451,18 +451,21 @@ def test_lesson_01_viewer_with_each_backend(open_lesson: Any, backend: str) -> N
     assert len(pairs) >= 3 and all(a == b for a, b in pairs), f"slider time and frame during play: {pairs}"
     assert len({b for _, b in pairs}) >= 3, f"the slider did not follow the play: {pairs}"
     assert played["max_lag_s"] < 0.6, f"the time shown lagged the wall clock by {played['max_lag_s']:.2f} s"
-    if backend == "client":  # joints as spheres for a few characters, bones only for a crowd (MAX_JOINT_SPHERES)
+    if backend == "client":  # cylinders and spheres for a few characters, stick figures for a crowd
         page_frame = iframe.element_handle().content_frame()
-        assert _glyph_sets(page_frame) == ["mocaplab-bones", "mocaplab-joints"], _glyph_sets(page_frame)
+        assert _drawn_sets(page_frame) == ["mocaplab-bones", "mocaplab-joints"], _drawn_sets(page_frame)
         lesson.kernel_eval("client_viewer.set_motions([walk] * 9)")
         wait_until(
-            lambda: _glyph_sets(page_frame) == ["mocaplab-bones"], timeout=30, what="nine walkers drawn as bones only"
+            lambda: _drawn_sets(page_frame) == ["mocaplab-sticks"], timeout=30, what="nine walkers drawn as sticks"
         )
-        lesson.kernel_eval("client_viewer.set_motions([walk])")  # and back: the joints' set was kept mounted
+        sticks, change = wait_view_change(lesson, lambda: _largest_surface(iframe.content_frame), moved)
+        lesson.screenshot(f"{backend}-viewer-sticks", box)
+        assert change > MIN_CHANGE and image_std(sticks) > MIN_VIEW_STD, f"nine walkers' sticks not shown ({change:.3f})"
+        lesson.kernel_eval("client_viewer.set_motions([walk])")  # and back: every set was kept mounted
         wait_until(
-            lambda: _glyph_sets(page_frame) == ["mocaplab-bones", "mocaplab-joints"],
+            lambda: _drawn_sets(page_frame) == ["mocaplab-bones", "mocaplab-joints"],
             timeout=30,
-            what="one walker drawn with its joints again",
+            what="one walker drawn with cylinders and spheres again",
         )
         # a browser that cannot draw the play fast enough draws it with fewer pixels, sharp again when stopped
         # (asked for an impossible rate here, as a slow one would see it)
@@ -492,8 +495,9 @@ def _canvas_sizes(frame: Any) -> list[list[int]]:
     )
 
 
-def _glyph_sets(frame: Any) -> list[str]:
-    """The ids of the crowd's glyph sets the browser-drawn view draws (bones, joints: visible, with points), sorted."""
+def _drawn_sets(frame: Any) -> list[str]:
+    """The ids of the crowd's sets the browser-drawn view draws (bones, joints, sticks: visible, with points
+    and, for the sticks, lines), sorted."""
     return sorted(
         frame.evaluate(
             """() => {
@@ -504,8 +508,9 @@ def _glyph_sets(frame: Any) -> list[str]:
                    for (const actor of view.renderer.getActors()) {
                      const id = String(actor.get("representationId").representationId || "");
                      const data = actor.getMapper() && actor.getMapper().getInputData(0);
-                     const drawn = actor.getVisibility() && data && data.getNumberOfPoints() > 0;
-                     if (drawn && (id === "mocaplab-bones" || id === "mocaplab-joints")) out.push(id);
+                     const drawn = actor.getVisibility() && data && data.getNumberOfPoints() > 0
+                       && (id !== "mocaplab-sticks" || data.getLines().getNumberOfCells() > 0);
+                     if (drawn && id.indexOf("mocaplab-") === 0 && id.indexOf("overlay") < 0) out.push(id);
                    }
                  }
                  return out;

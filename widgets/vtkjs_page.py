@@ -20,7 +20,7 @@ What the page does
 :data:`CLIENT_JS` (registered as ``trame.utils.mocaplab``) draws the whole
 crowd as two glyph sets (bones as 6-sided cylinders placed by one 3x3 matrix
 each, joints as low-poly spheres, a colour per glyph; a crowd of more than
-:data:`MAX_JOINT_SPHERES` points is drawn with its bones only), overlays as their own
+:data:`MAX_JOINT_SPHERES` points is drawn as stick figures), overlays as their own
 meshes, and plays on its own clock (``requestAnimationFrame``), writing each
 frame's few arrays straight into vtk.js.  A browser that cannot draw
 :data:`PLAY_TARGET_RATE` pictures a second while playing (software WebGL on a
@@ -61,10 +61,13 @@ __all__ = [
     "state_names",
 ]
 
-#: Joints drawn as spheres while the scene has at most this many drawn points (about eight characters);
-#: a larger crowd is drawn with its bones only: in software WebGL (a browser without a GPU) each glyph set
-#: costs about as much as the other per picture, and at a crowd's size the spheres are a pixel or two wide.
+#: Bones drawn as cylinders and joints as spheres while the scene has at most this many drawn points (about
+#: eight characters); a larger crowd is drawn as stick figures, a line of :data:`STICK_WIDTH` pixels per bone
+#: in one draw.  In software WebGL (a browser without a GPU) each glyph costs about 20 microseconds a picture
+#: (16 walkers: 20 ms of WebGL work a picture as glyphs, 14 ms as lines), and at a crowd's size a cylinder
+#: is a few pixels wide anyway.
 MAX_JOINT_SPHERES = 320
+STICK_WIDTH = 3
 #: Pictures per second a playing view aims at: a browser that draws fewer (software WebGL on a busy
 #: laptop) draws the play with fewer pixels, down to :data:`PLAY_MIN_RATIO` of the view's width and height
 #: (a quarter of the pixels: 38 against 28 pictures/s for one character in Chromium without a GPU beside two
@@ -148,38 +151,48 @@ CLIENT_JS = r"""
     c.bones = { centres: centres, frames: frames };
     return c.bones;
   };
-  // All characters in two glyph sets (bones, joints) with a colour per glyph: two actors for any crowd.
+  // All characters in two glyph sets (bones as cylinders, joints as spheres) with a colour per glyph: two
+  // actors for any crowd.  A crowd of more than M.maxJointSpheres points is drawn as stick figures instead
+  // (one line per bone, one draw: in software WebGL each glyph costs about 20 microseconds a picture).
+  // The sets not drawn stay mounted, empty and hidden (unmounting a vtk-polydata with data arrays logs
+  // "instance deleted" in trame-vtk).
   M.crowd = function (s, f) {
     const d = decoded(s);
     if (!d) { return null; }
     if (d.frame === f && d.crowd) { return d.crowd; }
     let nb = 0, nj = 0;
     for (const c of d.chars) { nb += c.segs.length / 2; nj += c.n; }
-    // a crowd of more than M.maxJointSpheres points: its joints set stays mounted, empty and hidden
-    // (unmounting a vtk-polydata with data arrays logs "instance deleted" in trame-vtk)
-    const spheres = nj <= M.maxJointSpheres;
-    const out = { centres: new Float32Array(3 * nb), frames: new Float32Array(9 * nb),
-                  joints: new Float32Array(spheres ? 3 * nj : 0), spheres: spheres };
+    const detailed = nj <= M.maxJointSpheres;
     if (!d.colors) {
       d.colors = { bones: new Uint8Array(3 * nb), joints: new Uint8Array(3 * nj) };
+      d.sticks = new Uint32Array(3 * nb);  // line cells (2, a, b) over all characters' points
       let b = 0, j = 0;
       for (const c of d.chars) {
         const rgb = c.color.map(function (x) { return Math.round(255 * x); });
-        for (let i = 0; i < c.segs.length / 2; i++, b++) { d.colors.bones.set(rgb, 3 * b); }
-        for (let i = 0; i < c.n; i++, j++) { d.colors.joints.set(rgb, 3 * j); }
+        for (let i = 0; i < c.segs.length / 2; i++, b++) {
+          d.colors.bones.set(rgb, 3 * b);
+          d.sticks.set([2, j + c.segs[2 * i], j + c.segs[2 * i + 1]], 3 * b);
+        }
+        for (let i = 0; i < c.n; i++) { d.colors.joints.set(rgb, 3 * (j + i)); }
+        j += c.n;
       }
     }
+    const out = { centres: new Float32Array(detailed ? 3 * nb : 0), frames: new Float32Array(detailed ? 9 * nb : 0),
+                  joints: new Float32Array(3 * nj), detailed: detailed };
     let b = 0, j = 0;
     d.chars.forEach(function (c, k) {
-      const bones = M.bones(s, k, f);
-      out.centres.set(bones.centres, 3 * b);
-      out.frames.set(bones.frames, 9 * b);
-      if (spheres) { out.joints.set(M.joints(s, k, f), 3 * j); }
+      if (detailed) {
+        const bones = M.bones(s, k, f);
+        out.centres.set(bones.centres, 3 * b);
+        out.frames.set(bones.frames, 9 * b);
+      }
+      out.joints.set(M.joints(s, k, f), 3 * j);
       b += c.segs.length / 2;
       j += c.n;
     });
-    out.boneColors = d.colors.bones;
-    out.jointColors = spheres ? d.colors.joints : new Uint8Array(0);
+    out.boneColors = detailed ? d.colors.bones : new Uint8Array(0);
+    out.jointColors = d.colors.joints;
+    out.sticks = detailed ? new Uint32Array(0) : d.sticks;
     out.jointRadius = d.chars.length ? d.chars[0].jointRadius : 0;
     d.frame = f;
     d.crowd = out;
@@ -229,7 +242,7 @@ CLIENT_JS = r"""
         data.getPoints().setData(crowd.centres, 3);
         const frames = data.getPointData().getArrayByName("frame");
         if (frames) { frames.setData(crowd.frames, 9); }
-      } else if (id === "mocaplab-joints") {
+      } else if (id === "mocaplab-joints" || id === "mocaplab-sticks") {
         data.getPoints().setData(crowd.joints, 3);
       } else if (id.indexOf("mocaplab-overlay-") === 0) {
         const shape = M.overlay(ovl, Number(id.slice(17)), f);
@@ -400,6 +413,7 @@ def build_page(server: Any, names: Mapping[str, Any], *, joint_radius: float) ->
             with html.Div(v_if=f"{chars} && {chars}.chars.length"):
                 with vtkw.VtkGlyphRepresentation(
                     id="mocaplab-bones",
+                    actor=(f"{{visibility: {crowd}.detailed}}",),
                     property=("{interpolation: 1}",),
                     # a 3x3 matrix per bone; its colour from the uint8 RGB scalars
                     mapper=(
@@ -424,7 +438,7 @@ def build_page(server: Any, names: Mapping[str, Any], *, joint_radius: float) ->
                     )
                 with vtkw.VtkGlyphRepresentation(
                     id="mocaplab-joints",
-                    actor=(f"{{visibility: {crowd}.spheres}}",),
+                    actor=(f"{{visibility: {crowd}.detailed}}",),
                     mapper=("{colorMode: 0, scalarVisibility: true, scaling: false}",),
                 ):
                     with vtkw.VtkPolyData("joints", points=(f"{crowd}.joints",)):
@@ -441,6 +455,22 @@ def build_page(server: Any, names: Mapping[str, Any], *, joint_radius: float) ->
                         state=(f"{{radius: {joint_radius}, thetaResolution: 6, phiResolution: 4}}",),
                         port=1,
                     )
+                # a crowd's stick figures: a line per bone between the joints' points, in one draw
+                with vtkw.VtkGeometryRepresentation(
+                    id="mocaplab-sticks",
+                    actor=(f"{{visibility: !{crowd}.detailed}}",),
+                    property=(f"{{lineWidth: {STICK_WIDTH}, ambient: 1, diffuse: 0}}",),
+                    mapper=("{colorMode: 0, scalarVisibility: true}",),
+                ):
+                    with vtkw.VtkPolyData("sticks", points=(f"{crowd}.joints",), lines=(f"{crowd}.sticks",)):
+                        with vtkw.VtkPointData():
+                            vtkw.VtkDataArray(
+                                name="colors",
+                                registration="setScalars",
+                                type="Uint8Array",
+                                values=(f"{crowd}.jointColors",),
+                                number_of_components=("3",),
+                            )
             with html.Div(v_for=f"(o, k) in {ovl}.overlays", key=("k + '/' + o.kind",)):
                 shape = f"{ml}.overlay({ovl}, k, {frame})"
                 with vtkw.VtkGlyphRepresentation(

@@ -355,6 +355,14 @@ def start_server() -> Any:
     return server
 
 
+def _rgb_scalars(vtkw: Any, values: str) -> Any:
+    """A ``vtk-data-array`` of uint8 RGB colours, one per point, set as the point scalars, from the page
+    expression ``values`` (the colour of each glyph or line point)."""
+    return vtkw.VtkDataArray(
+        name="colors", registration="setScalars", type="Uint8Array", values=(values,), number_of_components=("3",)
+    )
+
+
 def build_page(server: Any, names: Mapping[str, Any], *, joint_radius: float) -> str:
     """Register the page of the viewer ``names["key"]`` on the trame ``server``; return its address.
 
@@ -424,13 +432,7 @@ def build_page(server: Any, names: Mapping[str, Any], *, joint_radius: float) ->
                     with vtkw.VtkPolyData("bones", points=(f"{crowd}.centres",)):
                         with vtkw.VtkPointData():
                             vtkw.VtkDataArray(name="frame", values=(f"{crowd}.frames",), number_of_components=("9",))
-                            vtkw.VtkDataArray(
-                                name="colors",
-                                registration="setScalars",
-                                type="Uint8Array",
-                                values=(f"{crowd}.boneColors",),
-                                number_of_components=("3",),
-                            )
+                            _rgb_scalars(vtkw, f"{crowd}.boneColors")
                     vtkw.VtkAlgorithm(
                         vtk_class="vtkCylinderSource",
                         state=("{height: 1, radius: 1, resolution: 6, capping: false, direction: [1, 0, 0]}",),
@@ -443,13 +445,7 @@ def build_page(server: Any, names: Mapping[str, Any], *, joint_radius: float) ->
                 ):
                     with vtkw.VtkPolyData("joints", points=(f"{crowd}.joints",)):
                         with vtkw.VtkPointData():
-                            vtkw.VtkDataArray(
-                                name="colors",
-                                registration="setScalars",
-                                type="Uint8Array",
-                                values=(f"{crowd}.jointColors",),
-                                number_of_components=("3",),
-                            )
+                            _rgb_scalars(vtkw, f"{crowd}.jointColors")
                     vtkw.VtkAlgorithm(
                         vtk_class="vtkSphereSource",
                         state=(f"{{radius: {joint_radius}, thetaResolution: 6, phiResolution: 4}}",),
@@ -464,13 +460,7 @@ def build_page(server: Any, names: Mapping[str, Any], *, joint_radius: float) ->
                 ):
                     with vtkw.VtkPolyData("sticks", points=(f"{crowd}.joints",), lines=(f"{crowd}.sticks",)):
                         with vtkw.VtkPointData():
-                            vtkw.VtkDataArray(
-                                name="colors",
-                                registration="setScalars",
-                                type="Uint8Array",
-                                values=(f"{crowd}.jointColors",),
-                                number_of_components=("3",),
-                            )
+                            _rgb_scalars(vtkw, f"{crowd}.jointColors")
             with html.Div(v_for=f"(o, k) in {ovl}.overlays", key=("k + '/' + o.kind",)):
                 shape = f"{ml}.overlay({ovl}, k, {frame})"
                 with vtkw.VtkGlyphRepresentation(

@@ -1063,15 +1063,18 @@ def _hinge_limbs(skeleton: Skeleton) -> list[tuple[int, int, int]]:
     return out
 
 
-def _signed_bends(
-    sm: StaggeredMotion, pos: Array, rot: Array, limbs: Sequence[tuple[int, int, int]], axes: Array
-) -> Array:
-    """Bend of each limb's hinge in degrees (0 straight), negative when bent against ``axes``, shape (N, L)."""
+def _pose_fk(sm: StaggeredMotion, pos: Array, rot: Array) -> tuple[Array, Array]:
+    """Forward kinematics of poses (N, P, 3) and (N, J, 4), the root at the origin."""
     translations = sm._translations(pos[:, 1:])
-    grot, gpos = kinematics.fk(
+    return kinematics.fk(
         rot, np.zeros((rot.shape[0], 3)), sm.skeleton.offsets, sm.skeleton.parents, translations=translations
     )
-    out = np.zeros((rot.shape[0], len(limbs)))
+
+
+def _signed_bends(fk: tuple[Array, Array], limbs: Sequence[tuple[int, int, int]], axes: Array) -> Array:
+    """Bend of each limb's hinge in degrees (0 straight), negative when bent against ``axes``, shape (N, L)."""
+    grot, gpos = fk
+    out = np.zeros((gpos.shape[0], len(limbs)))
     for i, (u, m, e) in enumerate(limbs):
         a, b = gpos[:, u] - gpos[:, m], gpos[:, e] - gpos[:, m]
         n = np.cross(a, b)
@@ -1097,37 +1100,33 @@ def _keep_hinges(sm: StaggeredMotion, pos: Array, rot: Array, new_rot: Array, *,
     limbs = _hinge_limbs(sm.skeleton)
     if not limbs or rot.shape[0] < 2:
         return new_rot
-    grot, gpos = kinematics.fk(
-        rot,
-        np.zeros((rot.shape[0], 3)),
-        sm.skeleton.offsets,
-        sm.skeleton.parents,
-        translations=sm._translations(pos[:, 1:]),
-    )
-    axes = hinge_axes(grot, gpos, limbs)
-    before = _signed_bends(sm, pos, rot, limbs, axes)
+    fk = _pose_fk(sm, pos, rot)
+    axes = hinge_axes(*fk, limbs)
+    before = _signed_bends(fk, limbs, axes)
+    asked = _signed_bends(_pose_fk(sm, pos, new_rot), limbs, axes)  # a limb's joints move no other limb's bend
     out = new_rot.copy()
     parents = sm.skeleton.parents
     for i, (u, _, e) in enumerate(limbs):
-        if not np.any(axes[i]):
-            continue  # straight on every pose: no hinge to keep
         lo, hi = min(0.0, before[:, i].min()), max(HINGE_FOLD_LIMIT, before[:, i].max())
+        bad = np.flatnonzero(~_within(asked[:, i], lo, hi))
+        if not np.any(axes[i]) or not bad.size:
+            continue  # straight on every pose (no hinge to keep), or every pose within its range
         path = []
         j = int(parents[e])
         while j not in (u, -1):
             path.append(j)
             j = int(parents[j])
-        chain = np.array(path, dtype=np.int64)
-        bad = np.flatnonzero(~_within(_signed_bends(sm, pos, out, limbs[i : i + 1], axes[i : i + 1])[:, 0], lo, hi))
-        if not bad.size or j != u:
+        if j != u:
             continue
+        chain = np.array(path, dtype=np.int64)
         step = quat.log(quat.mul(quat.inv(rot[np.ix_(bad, chain)]), out[np.ix_(bad, chain)]))
         low, high = np.zeros(bad.size), np.ones(bad.size)  # the fraction kept: low is within the range
         trial = out[bad].copy()
         for _ in range(steps):
             mid = 0.5 * (low + high)
             trial[:, chain] = quat.mul(rot[np.ix_(bad, chain)], quat.exp(mid[:, None, None] * step))
-            ok = _within(_signed_bends(sm, pos[bad], trial, limbs[i : i + 1], axes[i : i + 1])[:, 0], lo, hi)
+            bend = _signed_bends(_pose_fk(sm, pos[bad], trial), limbs[i : i + 1], axes[i : i + 1])[:, 0]
+            ok = _within(bend, lo, hi)
             low, high = np.where(ok, mid, low), np.where(ok, high, mid)
         out[np.ix_(bad, chain)] = quat.mul(rot[np.ix_(bad, chain)], quat.exp(low[:, None, None] * step))
     return out

@@ -98,6 +98,7 @@ __all__ = [
     "interval_weights",
     "blend_weights",
     "plant_positions",
+    "STILL_SPEED",
     "foot_goals",
     "effector_goals",
     "world_targets",
@@ -337,7 +338,9 @@ def _window_targets(positions: Array, targets: Array, mask: Array, weights: Arra
     return out
 
 
-def _spans(intervals: Sequence[Sequence[tuple[int, int]]], n: int, pad: int) -> dict[str, NDArray[np.int64]]:
+def _spans(
+    intervals: Sequence[Sequence[tuple[int, int]] | NDArray[np.int64]], n: int, pad: int
+) -> dict[str, NDArray[np.int64]]:
     """The frames of every interval of every column, padded by ``pad`` frames (clipped to [0, n)).
 
     Returns int arrays with one entry per visited frame, intervals in order:
@@ -361,6 +364,8 @@ def _plant_goal_targets(
     heights: Array | None,
     intervals: Sequence[Sequence[tuple[int, int]]],
     window: int,
+    still: Sequence[NDArray[np.int64]] | None = None,
+    rolling: tuple[Array, Array] | None = None,
 ) -> tuple[Array, Array]:
     """Targets and weights of several joints from one plant per contact interval.
 
@@ -376,6 +381,14 @@ def _plant_goal_targets(
     intervals : sequence of n sequences of (start, stop)
     window : int
         Blending frames on each side of an interval.
+    still : sequence of n ndarrays, shape (K_c, 2), optional
+        The frames ``[s0, s1)`` of each interval where the plant holds
+        (:func:`_still_spans`); by default the whole interval.
+    rolling : (ndarray, ndarray), shapes (F, n, 3) and (F, n), optional
+        Where the joints' rolling travel outside the still spans comes from:
+        their positions in the motion before editing, and the heading the
+        edit turned each joint by (radians about +Y); by default their own
+        travel in ``positions``.
 
     Returns
     -------
@@ -394,8 +407,11 @@ def _plant_goal_targets(
     sum_k b_k (T_k - cur)`` stays continuous even where the ramps of two
     intervals overlap.  Vectorised over all intervals of all joints: only
     the frames where a bump is positive (the interval and ``window`` frames
-    on each side) are visited.  Inside an interval the nearest constrained
-    frame is the frame itself, around it the interval's first or last frame.
+    on each side) are visited.  The plant holds on the interval's still
+    span; on the rest of the interval (the foot rolling onto its heel
+    after the strike and off its toe before lifting, both at full weight)
+    and around it, the nearest constrained frame is the span's first or
+    last frame, so the joint keeps its own rolling travel there.
     """
     n, n_cols = positions.shape[:2]
     targets = np.array(positions, copy=True)
@@ -408,8 +424,9 @@ def _plant_goal_targets(
     # the same expression as interval_weights, on the visited frames only
     bump = np.minimum(blend_ramp((i - (fa - w1)) / w1), blend_ramp(((fb - 1 + w1) - i) / w1))
     nearest = np.clip(frames, fa, fb - 1)
-    own = np.concatenate([np.asarray(p, dtype=float).reshape(-1, 3) for p in plants])[sp["interval"]]
-    held = own.copy()
+    plant = np.concatenate([np.asarray(p, dtype=float).reshape(-1, 3) for p in plants])[sp["interval"]]
+    own = plant.copy()
+    held = plant.copy()
     if heights is not None:
         own[:, 1] = heights[frames, col]
         held[:, 1] = heights[nearest, col]
@@ -420,6 +437,30 @@ def _plant_goal_targets(
     w = bump[:, None]
     inside = (frames >= fa) & (frames < fb)
     field[inside] = own[inside]
+    if still is not None:
+        # on the ground plane the plant holds on the still span [s0, s1) only.  From the interval's ends to the
+        # span's the joint rolls (r = 1 at the ends, 0 on the span, the blend ramp between: no velocity jump
+        # where the plant takes over): the plant plus the travel of the rolling source since the span's
+        # nearest frame, turned by the source's heading change; around the interval, as above, the joint's own
+        # motion plus the correction at the interval's nearest frame
+        span = np.concatenate([np.asarray(v, dtype=np.int64).reshape(-1, 2) for v in still])[sp["interval"]]
+        s0, s1 = span[:, 0], span[:, 1]
+        src, turn = (positions, None) if rolling is None else rolling
+
+        def rolled(g: NDArray[np.int64]) -> Array:
+            near = np.clip(g, s0, s1 - 1)
+            u = g.astype(float)
+            r = np.maximum(blend_ramp((s0 - u) / (s0 - fa + 1)), blend_ramp((u - (s1 - 1)) / (fb - s1 + 1)))
+            d = src[g, col] - src[near, col]
+            if turn is not None:
+                d = quat.rotate(quat.from_yaw(turn[near, col]), d)
+            return plant[:, [0, 2]] + r[:, None] * d[:, [0, 2]]
+
+        xz = rolled(frames)
+        xz[~inside] = positions[frames, col][~inside][:, [0, 2]] + (
+            rolled(nearest) - positions[nearest, col][:, [0, 2]]
+        )[~inside]
+        field[:, 0], field[:, 2] = xz[:, 0], xz[:, 1]
     slot = frames * n_cols + col  # flat (frame, column) index
     total = np.bincount(slot, weights=bump, minlength=n * n_cols).reshape(n, n_cols)
     contrib = w * field
@@ -440,12 +481,14 @@ def plant_positions(
     """One plant position per contact interval of ``joint``, shape (K, 3).
 
     The ground-plane position ``(x, z)`` is the mean of the joint's position
-    over the interval in ``motion`` (where the edited foot is), the height
-    its mean in ``reference`` when given (the foot's contact height before
-    editing), else in ``motion``.  Both means weight each frame by
-    ``1 / (speed + 0.1 m/s)`` (speed in ``reference``, else ``motion``): the
-    detected intervals include the slow ends of the foot's landing and
-    take-off, and the plant belongs where the foot rests.
+    over the interval's still span in ``motion`` (where the edited foot is),
+    the height its mean in ``reference`` when given (the foot's contact
+    height before editing), else in ``motion``.  The still span runs from
+    the first to the last frame of the interval where the joint moves slower
+    than :data:`STILL_SPEED` (speed in ``reference``, else ``motion``): the
+    detected intervals include the foot rolling onto its heel and off its
+    toe, and the plant belongs where the foot rests.  Both means weight each
+    frame by ``1 / (speed + 0.1 m/s)``.
 
     Parameters
     ----------
@@ -474,7 +517,8 @@ def plant_positions(
     j = motion.skeleton.index(joint)
     ref = reference if reference is not None else motion
     pos = motion.global_positions()[:, j, None]
-    return _plants(pos, ref.global_positions()[:, j, 1, None], _speed(ref, j)[:, None], [contacts.intervals(joint)])[0]
+    speed = _speed(ref, j)[:, None]
+    return _plants(pos, ref.global_positions()[:, j, 1, None], speed, _still_spans(speed, [contacts.intervals(joint)]))[0]
 
 
 def _speed(motion: Motion, j: int) -> Array:
@@ -482,8 +526,45 @@ def _speed(motion: Motion, j: int) -> Array:
     return np.linalg.norm(kinematics.velocities(motion.global_positions()[:, j], motion.fps), axis=-1)
 
 
-def _plants(pos: Array, hgt: Array, speed: Array, ivs: Sequence[Sequence[tuple[int, int]]]) -> list[Array]:
-    """Plants of several joints: ``pos`` (F, n, 3), ``hgt`` and ``speed`` (F, n), intervals per joint."""
+#: A planted joint holds its plant on the frames of its contact interval from the first to the last where it
+#: moves slower than this, m/s (:func:`_still_spans`; its slowest frame when it never does); before and after
+#: it rolls as captured.  A captured foot is in contact from heel strike to toe-off, but it rolls onto its heel
+#: first and off its toe last: the ankle travels 58-77 mm over CMU 16_15's 0.46-0.64 s intervals, at 0.3-0.6
+#: m/s at their ends.  Held at one spot over the whole interval, the ankle needed up to 54 mm of correction
+#: faded in just before heel strike with the knee near straight (16_15 refined: left knee 110 -> 358 rad/s^2).
+#: Rolling, the correction at heel strike is 13-37 mm (mean 27 against 45) and the knees stay within the
+#: quality limits.  0.25 and 0.35 m/s also clear 16_15 but leave a knee pop on a 30 fps squeeze or a toe
+#: slide on an exporter's walk (tests/test_quality_pipeline.py).
+STILL_SPEED = 0.3
+
+
+def _still_spans(speed: Array, ivs: Sequence[Sequence[tuple[int, int]]]) -> list[NDArray[np.int64]]:
+    """Per joint, the still span ``[s0, s1)`` of each of its intervals, shape (K_c, 2).
+
+    ``speed`` (F, n) in m/s.  The span runs from the interval's first to its
+    last frame slower than :data:`STILL_SPEED` (or than the interval's
+    slowest frame, when none is).
+    """
+    out = [np.asarray(v, dtype=np.int64).reshape(-1, 2) for v in ivs]
+    if not any(len(v) for v in out):
+        return out
+    sp = _spans(ivs, speed.shape[0], 0)
+    frames, col, first = sp["frame"], sp["column"], sp["first"]
+    v = speed[frames, col]
+    slowest = np.minimum.reduceat(v, first)
+    still = v <= np.maximum(STILL_SPEED, slowest)[sp["interval"]]
+    big = np.iinfo(np.int64).max
+    s0 = np.minimum.reduceat(np.where(still, frames, big), first)
+    s1 = np.maximum.reduceat(np.where(still, frames, -1), first) + 1
+    spans = np.stack([s0, s1], axis=-1)
+    edges = np.cumsum([0] + [len(v) for v in out])
+    return [spans[edges[c] : edges[c + 1]] for c in range(len(out))]
+
+
+def _plants(
+    pos: Array, hgt: Array, speed: Array, ivs: Sequence[Sequence[tuple[int, int]] | NDArray[np.int64]]
+) -> list[Array]:
+    """Plants of several joints: ``pos`` (F, n, 3), ``hgt`` and ``speed`` (F, n), the spans to average per joint."""
     out = [np.zeros((len(v), 3)) for v in ivs]
     if not any(len(v) for v in ivs):
         return out
@@ -546,7 +627,12 @@ def foot_goals(
         end of a leg ``shin -> ankle -> toe``).  Stiffness is
         ``1 / (speed + 0.05 m/s)`` (speed in ``reference``): where ankle and
         toe are both planted but the captured heel rises or the toe lands,
-        the foot rolls about whichever joint was stiller.
+        the foot rolls about whichever joint was stiller.  On the ground
+        plane a joint's plant holds on its interval's still span (slower
+        than :data:`STILL_SPEED`); between the interval's ends and that
+        span, where the foot rolls onto its heel or off its toe, the goal
+        rolls too: the plant plus the joint's travel in ``reference`` (its
+        own without one), turned by the heading the edit gave the joint.
 
     Notes
     -----
@@ -589,14 +675,22 @@ def foot_goals(
     heights = ref_pos[:, cols, 1]
     speeds = np.linalg.norm(kinematics.velocities(ref_pos[:, cols], ref.fps), axis=-1)  # (F, n)
     ivs = [contacts.intervals(name) for name in names]
-    plants = _plants(pos, heights, speeds, ivs)
+    still = _still_spans(speeds, ivs)
+    plants = _plants(pos, heights, speeds, still)
     kinds = ["toe" if _is_toe(sk, name, names) else "foot" for name in names]
     for k, name in enumerate(names):
         if kinds[k] == "toe":
             parent = names.index(sk.names[int(sk.parents[cols[k]])])
             length = float(np.linalg.norm(_bone(motion, name)))
             plants[k] = _consistent_toe(plants[k], ivs[k], plants[parent], ivs[parent], length)
-    targets, weights = _plant_goal_targets(pos, plants, heights if follow_height else None, ivs, window)
+    rolling = None
+    if reference is not None:
+        # the rolling travel as captured, turned by the heading the edit gave each joint
+        turn = quat.yaw(quat.mul(motion.global_rotations()[:, cols], quat.inv(ref.global_rotations()[:, cols])))
+        rolling = (ref_pos[:, cols], turn)
+    targets, weights = _plant_goal_targets(
+        pos, plants, heights if follow_height else None, ivs, window, still, rolling
+    )
     stiffness = 1.0 / (speeds + 0.05)
     return [
         Goal(name, targets[:, k], weights[:, k], kind=kinds[k], stiffness=stiffness[:, k])  # type: ignore[arg-type]

@@ -818,6 +818,16 @@ def play_viewer(
         play.click()
 
     rate, counter, samples = count_pictures(page, view_box, seconds, click, sample=both, skip_top=0.18)
+    # the share of the view's width the browser draws at (the client page's dynamic resolution), read before
+    # the play stops (a stopped view is sharp again)
+    handle = iframe.element_handle()
+    inner = handle.content_frame() if handle is not None else None
+    drawn = None
+    if inner is not None:
+        drawn = inner.evaluate(
+            "() => { const c = document.querySelector('canvas'); "
+            "return c && c.clientWidth ? c.width / (c.clientWidth * (window.devicePixelRatio || 1)) : null; }"
+        )
     cpu = None
     if clicked:
         (t0, c0), t1, c1 = clicked[0], time.monotonic(), process_cpu_seconds(pid)
@@ -844,4 +854,5 @@ def play_viewer(
         "state": state,
         "box": box,
         "kernel_cpu_percent": cpu,
+        "drawn_width_share": drawn,
     }

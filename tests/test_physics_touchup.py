@@ -668,7 +668,7 @@ def test_captured_walks_are_left_alone(cmu, clip):
 
 def test_default_footplants_leave_the_input_as_it_is(cmu):
     """The default goals put the planted joints where the input has them: on the input, they change nothing;
-    the plant goals (one spot per contact) move a captured walk's knees by centimetres."""
+    the plant goals (one spot per contact where the foot rests) move a captured walk's knees by centimetres."""
     from mocaplab.physics.footplants import _footplant_fn
 
     walk = cmu("16_15")
@@ -676,7 +676,7 @@ def test_default_footplants_leave_the_input_as_it_is(cmu):
     same = _footplant_fn("auto", c, walk)(_posed(walk)).motion
     assert np.abs(same.global_positions() - walk.global_positions()).max() < 1e-9
     planted = _footplant_fn("plant", c, walk)(_posed(walk)).motion
-    assert np.linalg.norm(planted.global_positions() - walk.global_positions(), axis=-1).max() > 0.05
+    assert np.linalg.norm(planted.global_positions() - walk.global_positions(), axis=-1).max() > 0.03
 
 
 def test_footplant_goals_stay_out_of_flights(cmu):

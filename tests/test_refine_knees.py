@@ -169,3 +169,61 @@ def test_pinned_frames_keep_their_values_and_the_rest_is_smoothed_around_them():
     np.testing.assert_allclose(got[free], want, rtol=1e-9, atol=1e-9)
     # without pins, the banded smoother moves every frame
     assert np.abs(goals._whittaker(values, weights, frames)[pinned] - values[pinned]).max() > 0.01
+
+
+def _heel_strike_corrections(clip, contacts):
+    gs = {g.joint: g for g in foot_goals(clip, contacts, reference=clip)}
+    pos = clip.global_positions()
+    out = []
+    for joint in ("LeftFoot", "RightFoot"):
+        j = clip.skeleton.index(joint)
+        out += [np.linalg.norm(gs[joint].targets[a] - pos[a, j]) for a, b in contacts.intervals(joint) if a > 0]
+    return np.array(out), gs
+
+
+def test_a_planted_foot_rolls_onto_its_heel_and_off_its_toe_before_its_plant_holds(clip, monkeypatch):
+    # CMU 16_15's ankle travels 58-77 mm over a contact interval, most of it rolling onto the heel after the
+    # strike and off the toe before lifting.  Held at one spot over the whole interval, the ankle needed up to
+    # 54 mm of correction faded in before heel strike; the plant now holds only while the joint is slower than
+    # STILL_SPEED, and the goal rolls with the captured joint before and after
+    contacts = foot_contacts(clip)
+    rolled, gs = _heel_strike_corrections(clip, contacts)
+    with monkeypatch.context() as mp:
+        mp.setattr(goals, "STILL_SPEED", np.inf)  # the plant held over the whole interval
+        held, _ = _heel_strike_corrections(clip, contacts)
+    assert held.max() > 0.045 and rolled.max() < 0.04, (held, rolled)
+    assert rolled.mean() < 0.6 * held.mean(), (held, rolled)
+    # where the ankle rests the goal is one spot on the ground
+    pos = clip.global_positions()
+    speed = np.linalg.norm(np.gradient(pos, axis=0), axis=-1) * clip.fps
+    for joint in ("LeftFoot", "RightFoot"):
+        j = clip.skeleton.index(joint)
+        for a, b in contacts.intervals(joint):
+            still = np.flatnonzero(speed[a:b, j] < goals.STILL_SPEED) + a
+            spot = gs[joint].targets[still[0] : still[-1] + 1][:, [0, 2]]
+            assert np.ptp(spot, axis=0).max() < 1e-9, (joint, a)
+    # refinement of the unedited clip keeps the knees' accelerations (was 110 -> 358 rad/s^2 at the left knee)
+    out = enforce_goals(clip, list(gs.values()))
+    acc_in, acc_out = quality.angular_acceleration(clip), quality.angular_acceleration(out)
+    for knee in ("LeftLeg", "RightLeg"):
+        j = clip.skeleton.index(knee)
+        assert acc_out[j] <= 2.0 * acc_in[j] + 20.0, (knee, acc_in[j], acc_out[j])
+
+
+def test_the_rolling_travel_turns_with_the_edit(clip):
+    # an edit that turns the whole clip by 90 degrees about +Y: the goals are the unedited clip's goals, turned
+    from mocaplab import Motion, quat
+
+    turn = quat.from_yaw(np.pi / 2)
+    turned = Motion(
+        clip.skeleton,
+        np.concatenate([quat.mul(turn, clip.rotations[:, :1]), clip.rotations[:, 1:]], axis=1),
+        quat.rotate(turn, clip.root_positions),
+        clip.fps,
+    )
+    contacts = foot_contacts(clip)
+    plain = foot_goals(clip, contacts, reference=clip)
+    edited = foot_goals(turned, contacts, reference=clip)
+    for g0, g1 in zip(plain, edited, strict=True):
+        np.testing.assert_allclose(g1.weights, g0.weights)
+        np.testing.assert_allclose(g1.targets, quat.rotate(turn, g0.targets), atol=1e-9)

@@ -660,7 +660,7 @@ def test_refined_on_release_plants_the_feet_in_the_view_and_the_file(walks, tmp_
     assert shown is pe.result.refined()[0] and shown is not plain
     input_skate = _skate(walks[0], walks[0])
     assert _skate(walks[0], shown) <= input_skate, "the refined view skates no more than the input"
-    assert _skate(walks[0], plain) > 2.0 * _skate(walks[0], shown), "the plain edit skates: refinement mattered"
+    assert _skate(walks[0], plain) > 1.5 * _skate(walks[0], shown), "the plain edit skates: refinement mattered"
     (written,) = pe.export(tmp_path / "refined.bvh")
     back = load_bvh(written, scale=0.01)
     np.testing.assert_allclose(back.global_positions(), shown.global_positions(), atol=1e-4)

@@ -30,7 +30,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import quat
+from .. import quality, quat
 from .._api import reject_keywords
 from .._checks import real
 from .._warnings import warn
@@ -346,22 +346,15 @@ def foot_skate(motion: Motion, contacts: Contacts) -> Array:
     Entry ``i`` is the largest ground-plane distance ``|p(i+1) - p(i)|``
     (x and z only) over the contact joints planted on both frames ``i`` and
     ``i + 1``; NaN where no joint is planted on both (so
-    ``np.nanmean(foot_skate(m, c))`` is the mean skate per planted frame).
+    ``np.nanmean(foot_skate(m, c))`` is the mean skate per planted frame):
+    :func:`mocaplab.quality.skate` with a NaN for the last frame, so that
+    it lines up with the motion's frames.
     """
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
     if not isinstance(contacts, Contacts):
         raise TypeError(f"Expected `contacts` to be a Contacts, got {type(contacts).__name__}")
-    if contacts.n_frames != motion.n_frames:
-        raise ValueError(f"Expected contacts over {motion.n_frames} frames, got {contacts.n_frames}")
-    idx = [motion.skeleton.index(j) for j in contacts.joints]
-    pos = motion.global_positions()[:, idx][:, :, [0, 2]]
-    slide = np.linalg.norm(np.diff(pos, axis=0), axis=-1) * 1000.0  # (F-1, n)
-    both = contacts.mask[1:] & contacts.mask[:-1]
-    out = np.full(motion.n_frames, np.nan)
-    any_ = both.any(axis=1)
-    out[:-1][any_] = np.where(both, slide, -np.inf).max(axis=1)[any_]
-    return out
+    return np.append(quality.skate(motion, contacts), np.nan)
 
 
 def end_effector_residuals(

@@ -777,6 +777,34 @@ def process_rss_mb(pid: int) -> float:
     return psutil.Process(pid).memory_info().rss / 2**20
 
 
+def _viewer_parts(lesson: LessonPage, var: str, *, settle: float) -> tuple[Any, Any, Any, Any]:
+    """The box, 3D view iframe, play button and slider of the lesson's ``MotionViewer`` ``var``, at frame 0, stopped
+    and scrolled into view (found by a class the kernel adds to its box), after ``settle`` seconds."""
+    page = lesson.page
+    marker = f"mocaplab-measured-{secrets.token_hex(3)}"
+    lesson.kernel_eval(f"{var}.widget.add_class({marker!r}); {var}.stop_playback(); {var}.set_frame(0)")
+    box = page.locator(f".{marker}").first
+    box.wait_for(timeout=30000)
+    box.scroll_into_view_if_needed()
+    page.wait_for_timeout(int(settle * 1000))
+    iframe = box.locator("iframe.pyvista").first
+    play = box.locator(".mocaplab-viewer-play button, button.mocaplab-viewer-play").first
+    slider = box.locator(".mocaplab-viewer-slider").first
+    return box, iframe, play, slider
+
+
+def _drawn_share(iframe: Any) -> float | None:
+    """The share of its view's width a browser-drawn 3D view is drawn at (the client page's dynamic resolution)."""
+    handle = iframe.element_handle()
+    inner = handle.content_frame() if handle is not None else None
+    if inner is None:
+        return None
+    return inner.evaluate(
+        "() => { const c = document.querySelector('canvas'); "
+        "return c && c.clientWidth ? c.width / (c.clientWidth * (window.devicePixelRatio || 1)) : null; }"
+    )
+
+
 def play_viewer(
     lesson: LessonPage, var: str, *, seconds: float = 3.0, settle: float = 2.0, pid: int | None = None
 ) -> dict[str, Any]:
@@ -793,17 +821,9 @@ def play_viewer(
     to the end of the count, in percent of one core (``kernel_cpu_percent``).
     """
     page = lesson.page
-    marker = f"mocaplab-measured-{secrets.token_hex(3)}"
-    lesson.kernel_eval(f"{var}.widget.add_class({marker!r}); {var}.stop_playback(); {var}.set_frame(0)")
-    box = page.locator(f".{marker}").first
-    box.wait_for(timeout=30000)
-    box.scroll_into_view_if_needed()
-    page.wait_for_timeout(int(settle * 1000))
+    box, iframe, play, slider = _viewer_parts(lesson, var, settle=settle)
     lesson.kernel_eval(f"{var}.play_log.clear()")
-    iframe = box.locator("iframe.pyvista").first
     view_box = iframe.bounding_box()
-    play = box.locator(".mocaplab-viewer-play button, button.mocaplab-viewer-play").first
-    slider = box.locator(".mocaplab-viewer-slider").first
 
     def both() -> tuple[str, str]:  # the slider's time (its description) and frame (its readout), read together
         return slider.evaluate(
@@ -818,16 +838,7 @@ def play_viewer(
         play.click()
 
     rate, counter, samples = count_pictures(page, view_box, seconds, click, sample=both, skip_top=0.18)
-    # the share of the view's width the browser draws at (the client page's dynamic resolution), read before
-    # the play stops (a stopped view is sharp again)
-    handle = iframe.element_handle()
-    inner = handle.content_frame() if handle is not None else None
-    drawn = None
-    if inner is not None:
-        drawn = inner.evaluate(
-            "() => { const c = document.querySelector('canvas'); "
-            "return c && c.clientWidth ? c.width / (c.clientWidth * (window.devicePixelRatio || 1)) : null; }"
-        )
+    drawn = _drawn_share(iframe)  # read before the play stops (a stopped view is sharp again)
     cpu = None
     if clicked:
         (t0, c0), t1, c1 = clicked[0], time.monotonic(), process_cpu_seconds(pid)
@@ -856,3 +867,85 @@ def play_viewer(
         "kernel_cpu_percent": cpu,
         "drawn_width_share": drawn,
     }
+
+
+def traced_pictures(
+    lesson: LessonPage, var: str, *, seconds: float = 3.0, settle: float = 1.0, play: bool = True
+) -> dict[str, Any]:
+    """New pictures per second that the browser-drawn view ``var`` puts on the display while playing, from a trace.
+
+    The screencast (:func:`count_pictures`) encodes and ships every picture it
+    counts, and on a busy machine without a GPU it becomes the bottleneck
+    (:func:`screencast_ceiling`).  This plays the viewer again with Chromium's
+    tracing on and counts, between two marks the view's page sets around the
+    click on play, the display's frames (``Display::DrawAndSwap``) and the
+    WebGL canvas's new pictures that reached them: without a GPU, Chromium
+    composites in software and reads each new WebGL picture back once
+    (``GLES2::ReadPixels`` in the view's renderer).  ``pictures_per_s`` is the
+    smaller count per second; ``None`` when no picture was read back (a
+    browser compositing on a GPU, where this count does not apply).
+    ``play=False`` traces the stopped view instead (no click).
+    """
+    page = lesson.page
+    _, iframe, button, _ = _viewer_parts(lesson, var, settle=settle)
+    handle = iframe.element_handle()
+    inner = handle.content_frame() if handle is not None else None
+    if inner is None:
+        raise RuntimeError(f"the 3D view of {var!r} has no page to trace")
+    browser = page.context.browser
+    browser.start_tracing(page=page, categories=["gpu", "viz", "blink.user_timing"])
+    try:
+        inner.evaluate("() => performance.mark('mocaplab-play')")
+        if play:
+            button.click()
+        page.wait_for_timeout(int(seconds * 1000))
+        inner.evaluate("() => performance.mark('mocaplab-played')")
+        drawn = _drawn_share(iframe)
+    finally:
+        raw = browser.stop_tracing()
+    lesson.kernel_eval(f"{var}.stop_playback()")
+    data = json.loads(raw)
+    events = data["traceEvents"] if isinstance(data, dict) else data
+    marks = {e["name"]: e for e in events if e.get("name") in ("mocaplab-play", "mocaplab-played")}
+    t0, t1, pid = marks["mocaplab-play"]["ts"], marks["mocaplab-played"]["ts"], marks["mocaplab-play"]["pid"]
+    span = (t1 - t0) / 1e6
+
+    def count(name: str, same_process: bool) -> int:
+        return sum(
+            1 for e in events
+            if e.get("name") == name and t0 <= e.get("ts", -1) <= t1 and (not same_process or e.get("pid") == pid)
+        )
+
+    readbacks, frames = count("GLES2::ReadPixels", True), count("Display::DrawAndSwap", False)
+    return {
+        "pictures_per_s": min(readbacks, frames) / span if readbacks else None,
+        "display_frames_per_s": frames / span,
+        "new_pictures": readbacks,
+        "seconds": span,
+        "drawn_width_share": drawn,
+    }
+
+
+def screencast_ceiling(page: Any, box: dict[str, float], *, seconds: float = 3.0) -> float:
+    """The most distinct pictures per second the screencast counts over ``box`` on this machine now.
+
+    A plain 2D canvas over ``box`` is filled with a new colour on every
+    animation frame (about 60 a second, far cheaper than any 3D view) and
+    counted like a view (:func:`count_pictures`): what the instrument itself
+    can see.  Beside two CPU-bound processes on two cores it counts 20-22.
+    """
+    page.evaluate(
+        """(b) => { const c = document.createElement('canvas'); c.id = 'mocaplab-ceiling';
+           c.width = Math.round(b.width); c.height = Math.round(b.height);
+           c.style = `position:fixed;left:${b.x}px;top:${b.y}px;width:${b.width}px;height:${b.height}px;z-index:99999`;
+           document.body.appendChild(c); const g = c.getContext('2d'); let n = 0;
+           (function paint() { if (!c.isConnected) { return; } n += 1;
+             g.fillStyle = `hsl(${(n * 37) % 360}, 80%, 50%)`; g.fillRect(0, 0, c.width, c.height);
+             requestAnimationFrame(paint); })(); }""",
+        box,
+    )
+    try:
+        rate, _, _ = count_pictures(page, box, seconds, lambda: None)
+    finally:
+        page.evaluate("() => document.getElementById('mocaplab-ceiling')?.remove()")
+    return rate

@@ -54,6 +54,7 @@ from browser_support import (
     play_viewer,
     png_to_grey,
     server_env,
+    traced_pictures,
     wait_until,
 )
 
@@ -451,6 +452,14 @@ def test_lesson_01_viewer_with_each_backend(open_lesson: Any, backend: str) -> N
     assert len(pairs) >= 3 and all(a == b for a, b in pairs), f"slider time and frame during play: {pairs}"
     assert len({b for _, b in pairs}) >= 3, f"the slider did not follow the play: {pairs}"
     assert played["max_lag_s"] < 0.6, f"the time shown lagged the wall clock by {played['max_lag_s']:.2f} s"
+    if backend == "client":
+        # the trace's count of new pictures on the display (bench_viewer judges its targets on it): pictures
+        # reach the display while the browser plays, none while it is stopped
+        traced = traced_pictures(lesson, "client_viewer", seconds=1.5)
+        assert traced["pictures_per_s"] is not None and traced["pictures_per_s"] >= MIN_PLAY_RATE, traced
+        lesson.kernel_eval("client_viewer.stop_playback(); client_viewer.set_frame(0)")
+        still = traced_pictures(lesson, "client_viewer", seconds=1.0, play=False)
+        assert still["new_pictures"] == 0, f"pictures drawn while stopped: {still}"
     if backend == "client":  # cylinders and spheres for a few characters, stick figures for a crowd
         page_frame = iframe.element_handle().content_frame()
         assert _drawn_sets(page_frame) == ["mocaplab-bones", "mocaplab-joints"], _drawn_sets(page_frame)

@@ -70,8 +70,9 @@ MAX_JOINT_SPHERES = 320
 STICK_WIDTH = 3
 #: Pictures per second a playing view aims at: a browser that draws fewer (software WebGL on a busy
 #: laptop) draws the play with fewer pixels, down to :data:`PLAY_MIN_RATIO` of the view's width and height
-#: (a quarter of the pixels: 38 against 28 pictures/s for one character in Chromium without a GPU beside two
-#: CPU-bound processes on two cores), and at full resolution again when it stops.
+#: (a quarter of the pixels), and at full resolution again when it stops.  Chromium without a GPU beside two
+#: CPU-bound processes on two cores draws 49-59 pictures/s at full resolution (benchmarks/bench_viewer.py, by
+#: its trace); a browser also encoding a screencast of itself draws fewer, and this brings it back up.
 PLAY_TARGET_RATE = 30.0
 PLAY_MIN_RATIO = 0.5
 
@@ -259,12 +260,15 @@ CLIENT_JS = r"""
   // Dynamic resolution: a browser that draws in software (no GPU) and cannot keep up with the play
   // (fewer than M.targetRate pictures a second, or the clip's own rate if lower) draws it with fewer
   // pixels, down to M.minRatio of the view's width and height, stretched to the view.  Every 0.3 s the
-  // ratio follows the rate drawn (the cost of a picture goes with its pixels, the square of the ratio);
-  // with headroom (M.raiseAbove x the rate wanted) it goes back up.  The next play starts at the ratio
+  // ratio follows the rate drawn (the cost of a picture goes with its pixels, the square of the ratio):
+  // below the rate wanted it aims M.aimAbove x above it (a rate that hovers at the target shows fewer
+  // pictures than the target half of the time); with headroom (M.raiseAbove x the rate wanted) it goes
+  // back up.  The next play starts at the ratio
   // the last one ended with; a stopped view is drawn at full resolution.
   M.targetRate = @TARGET_RATE@;
   M.minRatio = @MIN_RATIO@;
-  M.raiseAbove = 1.4;
+  M.aimAbove = 1.15;
+  M.raiseAbove = 1.5;
   M.resolution = function (key, ratio) {
     const view = M.view(key), gl = view && view.openglRenderWindow, box = view && view.container;
     if (!gl || !box) { return false; }
@@ -294,8 +298,9 @@ CLIENT_JS = r"""
       if (M.frames[key] !== f) { M.draw(key, f); drawn += 1; }
       if (now - since >= 300 && f < last) {
         const rate = (1000 * drawn) / (now - since);
+        player.rate = rate;
         let next = player.ratio;
-        if (rate < 0.9 * wanted) { next = Math.max(M.minRatio, next * Math.sqrt(rate / wanted)); }
+        if (rate < wanted) { next = Math.max(M.minRatio, next * Math.sqrt(rate / (M.aimAbove * wanted))); }
         else if (rate > M.raiseAbove * wanted) { next = Math.min(1, next * 1.15); }
         if (next !== player.ratio) { player.ratio = player.playRatio = next; M.resolution(key, next); }
         since = now;

@@ -123,6 +123,22 @@ class Contacts:
         """Contact flags of one joint, shape (F,) (read-only)."""
         return self.mask[:, self.index(joint)]
 
+    def slide(self, motion: Motion) -> NDArray[np.float64]:
+        """Horizontal slide of the planted joints of ``motion``, mm per frame, shape (F - 1,).
+
+        Entry ``i`` is the largest ground-plane distance ``|p(i+1) - p(i)|``
+        over the joints planted on both frames ``i`` and ``i + 1``; NaN where
+        none is (:func:`mocaplab.quality.skate`, the measure, reads it).
+        """
+        if self.n_frames != motion.n_frames:
+            raise ValueError(f"Expected contacts over {motion.n_frames} frames, got {self.n_frames}")
+        idx = [motion.skeleton.index(j) for j in self.joints]
+        pos = motion.global_positions()[:, idx][:, :, [0, 2]]
+        slide = np.linalg.norm(np.diff(pos, axis=0), axis=-1) * 1000.0
+        both = self.mask[1:] & self.mask[:-1]
+        out = np.where(both, slide, -np.inf).max(axis=1, initial=-np.inf)
+        return np.where(both.any(axis=1), out, np.nan)
+
     def intervals(self, joint: str) -> list[tuple[int, int]]:
         """Half-open frame intervals ``[(start, stop), ...]`` where ``joint`` is in contact."""
         return intervals_from_mask(self.of(joint))
@@ -758,6 +774,13 @@ class Floor:
     def angle(self) -> float:
         """Steepest inclination of the floor, degrees."""
         return float(np.degrees(np.arctan(np.linalg.norm(self.slope))))
+
+    @property
+    def inclination(self) -> NDArray[np.float64]:
+        """The slope the methods follow, shape (2,): :attr:`slope`, or ``(0, 0)`` for a floor within
+        :data:`LEVEL_FLOOR_ANGLE` of level (a capture floor's tilt of a few centimetres over the volume, which
+        the per-joint levels absorb, is not extrapolated to where an edit moves the feet)."""
+        return np.array(self.slope) if self.angle >= LEVEL_FLOOR_ANGLE else np.zeros(2)
 
     def depth(self, motion: Motion) -> NDArray[np.float64]:
         """How far each joint is below its planted height on every frame, metres, shape (F, n) (negative above)."""

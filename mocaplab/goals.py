@@ -76,7 +76,7 @@ from scipy.sparse.linalg import spsolve
 from . import kinematics, quat
 from ._api import reject_keywords
 from ._checks import integer, real
-from .contacts import Contacts, intervals_from_mask
+from .contacts import Contacts, estimate_floor, intervals_from_mask
 from .displacement import DisplacementMap, blend_ramp, displace, displacement_between, rotation_displacement
 from .ik import (
     aim_deltas,
@@ -450,7 +450,9 @@ def _plant_goal_targets(
         def rolled(g: NDArray[np.int64]) -> Array:
             near = np.clip(g, s0, s1 - 1)
             u = g.astype(float)
-            r = np.maximum(blend_ramp((s0 - u) / (s0 - fa + 1)), blend_ramp((u - (s1 - 1)) / (fb - s1 + 1)))
+            r = np.maximum(
+                blend_ramp((s0 - u) / np.maximum(s0 - fa, 1)), blend_ramp((u - (s1 - 1)) / np.maximum(fb - s1, 1))
+            )
             d = src[g, col] - src[near, col]
             if turn is not None:
                 d = quat.rotate(quat.from_yaw(turn[near, col]), d)
@@ -543,7 +545,11 @@ def _still_spans(speed: Array, ivs: Sequence[Sequence[tuple[int, int]]]) -> list
 
     ``speed`` (F, n) in m/s.  The span runs from the interval's first to its
     last frame slower than :data:`STILL_SPEED` (or than the interval's
-    slowest frame, when none is).
+    slowest frame, when none is).  A brief dip of speed while the foot still
+    rolls starts the plant early (CMU 16_15's right ankle: 0.22 m/s between
+    0.37 and 0.64 just after heel strike); the run around the slowest frame
+    alone avoids that, but left more of an edit's drift in the roll (the
+    pipeline's bent HumanIK walk skates, its squeezed 02_01 pops).
     """
     out = [np.asarray(v, dtype=np.int64).reshape(-1, 2) for v in ivs]
     if not any(len(v) for v in out):
@@ -673,6 +679,9 @@ def foot_goals(
     ref_pos = ref.global_positions()
     pos = motion.global_positions()[:, cols]
     heights = ref_pos[:, cols, 1]
+    if reference is not None and (floor := estimate_floor(ref, contacts)) is not None:
+        # on an inclined floor a foot the edit moved stands where the floor is higher or lower
+        heights = heights + (pos[..., [0, 2]] - ref_pos[:, cols][..., [0, 2]]) @ floor.inclination
     speeds = np.linalg.norm(kinematics.velocities(ref_pos[:, cols], ref.fps), axis=-1)  # (F, n)
     ivs = [contacts.intervals(name) for name in names]
     still = _still_spans(speeds, ivs)
@@ -686,7 +695,8 @@ def foot_goals(
     rolling = None
     if reference is not None:
         # the rolling travel as captured, turned by the heading the edit gave each joint
-        turn = quat.yaw(quat.mul(motion.global_rotations()[:, cols], quat.inv(ref.global_rotations()[:, cols])))
+        change = quat.mul(motion.global_rotations()[:, cols], quat.inv(ref.global_rotations()[:, cols]))
+        turn = 2.0 * np.arctan2(change[..., 1], change[..., 3])  # its twist about +Y
         rolling = (ref_pos[:, cols], turn)
     targets, weights = _plant_goal_targets(
         pos, plants, heights if follow_height else None, ivs, window, still, rolling

@@ -217,15 +217,7 @@ def skate(motion: Motion, contacts: Contacts) -> Array:
     >>> skate(m, Contacts(("foot",), np.ones((3, 1), bool), 30)).round(3).tolist()
     [10.0, 10.0]
     """
-    motion = _check_motion(motion)
-    if contacts.n_frames != motion.n_frames:
-        raise ValueError(f"Expected contacts over {motion.n_frames} frames, got {contacts.n_frames}")
-    idx = [motion.skeleton.index(j) for j in contacts.joints]
-    pos = motion.global_positions()[:, idx][:, :, [0, 2]]
-    slide = np.linalg.norm(np.diff(pos, axis=0), axis=-1) * 1000.0
-    both = contacts.mask[1:] & contacts.mask[:-1]
-    out = np.where(both, slide, -np.inf).max(axis=1, initial=-np.inf)
-    return np.where(both.any(axis=1), out, np.nan)
+    return contacts.slide(_check_motion(motion))
 
 
 def penetration(motion: Motion, floor: Floor) -> Array:

@@ -594,7 +594,7 @@ def test_the_bent_jump_improves_with_the_papers_flight_window(cmu):
     assert h.best == 2 * n and h.errors[h.best] < 0.6 * h.errors[0]
     assert np.all(np.diff(h.errors[::n]) < 0)
     zmp = [s.mean_zmp_distance for s in h.states[:: n]]
-    assert max(zmp) <= zmp[0] + ZMP_SLACK < 2.0 * max(zmp)
+    assert zmp[0] < max(zmp) <= zmp[0] + ZMP_SLACK  # the passes unbalance the ground frames, within the slack
 
 
 def test_no_pass_that_helps_returns_the_input_with_a_reason(walk30):

@@ -210,9 +210,12 @@ def test_a_planted_foot_rolls_onto_its_heel_and_off_its_toe_before_its_plant_hol
         assert acc_out[j] <= 2.0 * acc_in[j] + 20.0, (knee, acc_in[j], acc_out[j])
 
 
-def test_the_rolling_travel_turns_with_the_edit(clip):
+def test_the_rolling_travel_turns_with_the_edit(clip, monkeypatch):
     # an edit that turns the whole clip by 90 degrees about +Y: the goals are the unedited clip's goals, turned
+    # (on a level floor: on the capture's, inclined 0.3 degrees, the turned feet stand higher or lower)
     from mocaplab import Motion, quat
+
+    monkeypatch.setattr(goals, "estimate_floor", lambda motion, contacts: None)
 
     turn = quat.from_yaw(np.pi / 2)
     turned = Motion(

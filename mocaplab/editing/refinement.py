@@ -30,11 +30,11 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import quality, quat
+from .. import quat
 from .._api import reject_keywords
 from .._checks import real
 from .._warnings import warn
-from ..contacts import Contacts, resolve_contacts
+from ..contacts import Contacts, estimate_floor, resolve_contacts
 from ..goals import (
     EndEffector,
     Goal,
@@ -97,7 +97,11 @@ def refine(
         Extra constraints (``character`` must be 0 and any
         :class:`RelativeTo` must refer to this character).
     reference : Motion, optional
-        The motion before editing, with the same number of frames.
+        The motion before editing, with the same number of frames.  Where
+        its contacts show an inclined floor
+        (:func:`mocaplab.contacts.estimate_floor`), the body and its plants
+        climb or descend with the floor wherever the edit moved them on the
+        ground plane.
     blend : float
         Blending window on each side of every constraint, seconds (>= 0).
     spacing, levels : float, int
@@ -173,6 +177,8 @@ def _refine_one(
     goals: list[Goal] = []
     c = resolve_contacts(contacts, reference if reference is not None else motion, roles=roles)
     if c is not None:
+        if reference is not None:
+            motion = _on_floor(motion, reference, c)
         goals += foot_goals(motion, c, reference=reference, blend=blend)
     goals += effector_goals(motion, end_effectors, targets, blend=blend)
     out = enforce_goals(
@@ -180,6 +186,28 @@ def _refine_one(
     )
     _warn_missed(out, end_effectors, targets)
     return out
+
+
+def _on_floor(motion: Motion, reference: Motion, contacts: Contacts) -> Motion:
+    """``motion`` raised or lowered with the floor under its path joint, where the edit moved it.
+
+    Path editing moves the body on the ground plane only; on a floor inclined
+    as the reference's contacts say (:func:`mocaplab.contacts.estimate_floor`,
+    :attr:`~mocaplab.contacts.Floor.inclination`: level within 2 degrees) the
+    body must climb or descend with it, by ``slope . (p' - p)`` for the path
+    joint's ground positions ``p'`` (edited) and ``p`` (reference).  The foot
+    goals put the plants on the floor there too
+    (:func:`mocaplab.goals.foot_goals`).  ``motion`` is ``reference`` moved
+    on the ground plane (a path edit): a motion already lifted would be
+    lifted again.
+    """
+    floor = estimate_floor(reference, contacts)
+    if floor is None or not floor.inclination.any():
+        return motion
+    lift = (motion.pelvis_positions - reference.pelvis_positions)[:, [0, 2]] @ floor.inclination
+    if not np.any(np.abs(lift) > 1e-9):
+        return motion
+    return motion.transformed(translation=np.stack([np.zeros_like(lift), lift, np.zeros_like(lift)], axis=-1))
 
 
 def _warn_missed(motion: Motion, end_effectors: Sequence[EndEffector], targets: Sequence[Array]) -> None:
@@ -347,14 +375,14 @@ def foot_skate(motion: Motion, contacts: Contacts) -> Array:
     (x and z only) over the contact joints planted on both frames ``i`` and
     ``i + 1``; NaN where no joint is planted on both (so
     ``np.nanmean(foot_skate(m, c))`` is the mean skate per planted frame):
-    :func:`mocaplab.quality.skate` with a NaN for the last frame, so that
-    it lines up with the motion's frames.
+    :meth:`mocaplab.contacts.Contacts.slide` (as :func:`mocaplab.quality.skate`)
+    with a NaN for the last frame, so that it lines up with the motion's frames.
     """
     if not isinstance(motion, Motion):
         raise TypeError(f"Expected `motion` to be a Motion, got {type(motion).__name__}")
     if not isinstance(contacts, Contacts):
         raise TypeError(f"Expected `contacts` to be a Contacts, got {type(contacts).__name__}")
-    return np.append(quality.skate(motion, contacts), np.nan)
+    return np.append(contacts.slide(motion), np.nan)
 
 
 def end_effector_residuals(

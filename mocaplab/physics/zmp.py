@@ -635,7 +635,7 @@ def _ground_of(
     floor: Floor | str, motion: Motion, contacts: Contacts, support: Array, column: NDArray[np.int64]
 ) -> _Ground:
     """The ground of :func:`balance`'s ``floor`` option (see there)."""
-    from ..contacts import LEVEL_FLOOR_ANGLE, Floor, estimate_floor
+    from ..contacts import Floor, estimate_floor
 
     if isinstance(floor, Floor):
         return _plane(floor.slope, floor.ground, floor)
@@ -649,7 +649,7 @@ def _ground_of(
     planted = np.asarray(contacts.mask, dtype=bool)[:, column]
     if not planted.any():
         return _LEVEL
-    slope = found.slope if found.angle >= LEVEL_FLOOR_ANGLE else np.zeros(2)
+    slope = found.inclination
     above = support[..., 1] - support[..., [0, 2]] @ slope
     height = float(np.percentile(above[planted], GROUND_PERCENTILE))
     if abs(height) <= GROUND_TOLERANCE and not slope.any():

@@ -85,7 +85,6 @@ KNOWN_DEFECTS: dict[tuple[str, str, str], str] = {
     ('perfume/A_test', 'bend+refine', 'displacement'): "refinement's leg IK pops a knee or foot (issue 23 item 8): displacement 41 -> 122 mm/frame at Hips",
     ('perfume/A_test', 'bend+refine+touch_up', 'angular_acceleration'): 'the touch-up adds it (issue 24): angular_acceleration 62.6 -> 168 rad/s^2 at RightKnee (its input, the refined bend, is clean since the knee bends about its hinge near straight)',
     ('pybvh/bvh_test1', 'bend+refine', 'displacement'): "refinement's leg IK pops a knee or foot (issue 23 item 8): displacement 23.1 -> 45.7 mm/frame at RightLeg",
-    ('pybvh/bvh_test1', 'staggered', 'displacement'): 'the staggered constraint layer / exaggeration adds it (issue 25): displacement 105 -> 176 mm/frame at LeftHand',
     ('16_15', 'squeeze', 'penetration'): 'the raw path edit moves the body on the ground plane only, over a capture floor inclined 0.26 degrees (issue 23): penetration 1.31 -> 7.27 mm at frame 353',
     ('16_15', 'squeeze+refine', 'penetration'): 'the methods take a floor within contacts.LEVEL_FLOOR_ANGLE (2 degrees) as level, the measure follows its fitted 0.26 degrees: the squeeze moved the feet 1.6 m along it (issue 23; a 3-degree floor is followed: tests/test_refine.py): penetration 1.31 -> 7.07 mm at frame 353',
     ('16_05', 'bend+refine+touch_up', 'skate_max'): 'the touch-up adds it (issue 24): the footplant goals fade out on the ground frames before take-off and the toes planted there slide: skate_max 1.97 -> 15.8 mm/frame at frame 130',

@@ -508,10 +508,24 @@ def resolve_contacts(
     return contacts
 
 
-#: Floors inclined by less than this (degrees) are taken as level by
-#: :func:`foot_contacts`: capture floors tilt by a few centimetres over a
-#: volume, which the per-joint floor level absorbs.
+#: Floors inclined by less than this (degrees) are level: :func:`estimate_floor`
+#: returns them with a zero slope (so the methods, which follow
+#: :attr:`Floor.slope`, and :mod:`mocaplab.quality`'s penetration, which
+#: measures against it, see the same floor), and :func:`foot_contacts` tests
+#: heights above a level plane.  Fitted to the contacts of a capture on a level
+#: stage, a plane tilts by a fraction of a degree, and the tilt follows the
+#: walker rather than the stage: on the CMU walks and runs of the mirror it
+#: rises 10-15 mm per metre along the direction of travel whichever way the
+#: subject goes (02_01 going +z, 127_04 going -z, 127_21) and falls 2-5 mm/m in
+#: subject 16's takes.  Taken as a floor, it moved an edited walk's plants by
+#: the tilt times the distance the edit moved them (7 mm for a squeeze of 1.6 m
+#: on 16_15).
 LEVEL_FLOOR_ANGLE = 2.0
+
+
+def _levelled(slope: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``slope`` (2,), or zeros for a floor within :data:`LEVEL_FLOOR_ANGLE` of level."""
+    return slope if np.degrees(np.arctan(np.linalg.norm(slope))) >= LEVEL_FLOOR_ANGLE else np.zeros(2)
 
 
 #: Samples per second at which :func:`foot_contacts` tests heights and speeds
@@ -561,8 +575,7 @@ def _slope(pos: NDArray[np.float64], slow: NDArray[np.bool_]) -> NDArray[np.floa
     """Slope of the floor under slow points (F, n, 3), (0, 0) when within :data:`LEVEL_FLOOR_ANGLE` of level."""
     if not slow.any():
         return np.zeros(2)
-    found = _fit_slope(pos, slow)
-    return found if np.degrees(np.arctan(np.linalg.norm(found))) >= LEVEL_FLOOR_ANGLE else np.zeros(2)
+    return _levelled(_fit_slope(pos, slow))
 
 
 # --------------------------------------------------------------------------
@@ -775,13 +788,6 @@ class Floor:
         """Steepest inclination of the floor, degrees."""
         return float(np.degrees(np.arctan(np.linalg.norm(self.slope))))
 
-    @property
-    def inclination(self) -> NDArray[np.float64]:
-        """The slope the methods follow, shape (2,): :attr:`slope`, or ``(0, 0)`` for a floor within
-        :data:`LEVEL_FLOOR_ANGLE` of level (a capture floor's tilt of a few centimetres over the volume, which
-        the per-joint levels absorb, is not extrapolated to where an edit moves the feet)."""
-        return np.array(self.slope) if self.angle >= LEVEL_FLOOR_ANGLE else np.zeros(2)
-
     def depth(self, motion: Motion) -> NDArray[np.float64]:
         """How far each joint is below its planted height on every frame, metres, shape (F, n) (negative above)."""
         idx = [motion.skeleton.index(j) for j in self.joints]
@@ -826,7 +832,9 @@ def estimate_floor(
     fitted only along the horizontal directions over which the planted
     samples spread by at least :data:`FLOOR_SLOPE_SPREAD` metres (standard
     deviation): along a straight walk but not across it, and not for a dance
-    on the spot, where the floor is taken as level.  Each joint's level is then the
+    on the spot, where the floor is taken as level; a slope within
+    :data:`LEVEL_FLOOR_ANGLE` (2 degrees) is taken as level too (see there:
+    such a fit follows the walker, not the stage).  Each joint's level is then the
     ``percentile`` percentile of its heights above the plane while planted,
     so capture noise leaves only a few planted frames below the floor.
 
@@ -862,8 +870,8 @@ def estimate_floor(
     idx = [motion.skeleton.index(j) for j in contacts.joints]
     pos = motion.global_positions()[:, idx]
     n = len(contacts.joints)
-    slope = _fit_slope(pos, contacts.mask)
-    above = pos[..., 1] - pos[..., [0, 2]] @ slope  # (F, n) heights above the tilted plane
+    slope = _levelled(_fit_slope(pos, contacts.mask))
+    above = pos[..., 1] - pos[..., [0, 2]] @ slope  # (F, n) heights above the plane
     levels = np.empty(n)
     for k in range(n):
         planted = contacts.mask[:, k]

@@ -682,7 +682,7 @@ def foot_goals(
     heights = ref_pos[:, cols, 1]
     if reference is not None and (floor := estimate_floor(ref, contacts)) is not None:
         # on an inclined floor a foot the edit moved stands where the floor is higher or lower
-        heights = heights + (pos[..., [0, 2]] - ref_pos[:, cols][..., [0, 2]]) @ floor.inclination
+        heights = heights + (pos[..., [0, 2]] - ref_pos[:, cols][..., [0, 2]]) @ floor.slope
     speeds = np.linalg.norm(kinematics.velocities(ref_pos[:, cols], ref.fps), axis=-1)  # (F, n)
     ivs = [contacts.intervals(name) for name in names]
     still = _still_spans(speeds, ivs)

@@ -370,3 +370,32 @@ def test_one_contacts_vocabulary(walk, contacts):
         refine(bent, contacts="detect")
     with pytest.raises(TypeError, match="no longer takes `feet`"):
         refine_scene([bent], feet=False)
+
+
+def test_a_plant_pulled_out_of_the_legs_reach_is_reported(cmu):
+    """127_04 stands for 1.3 s, then walks: bending its path 1.4 m sideways at 1.9 s, while the left foot is still
+    planted, pulls the body out of that leg's reach (it missed its plant by 1.85 m, silently).  Refinement says so,
+    naming the joint; the same refinement of the walk's own path, or of a mild bend of 16_15, says nothing."""
+    import warnings
+
+    from mocaplab.editing import PinPosition
+    from mocaplab.ik import UnreachableTargetWarning
+
+    def bent(m, sideways):
+        p = m.pelvis_positions[:, [0, 2]]
+        n = len(p)
+        along = (p[-1] - p[0]) / np.linalg.norm(p[-1] - p[0])
+        side = np.array([-along[1], along[0]])
+        pins = [PinPosition(0, 0, p[0], hard=True), PinPosition(0, n // 2, p[n // 2] + sideways * side),
+                PinPosition(0, n - 1, p[-1])]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the path edit's own warnings
+            return mocaplab.edit([m], pins).motions[0]
+
+    run = cmu("127_04")
+    with pytest.warns(UnreachableTargetWarning, match=r"foot plant target of 'Left(Foot|ToeBase)' out of reach"):
+        refine(bent(run, 1.4), reference=run)
+    for m, sideways in ((run, 0.0), (cmu("16_15")[:240], 0.3)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", UnreachableTargetWarning)
+            refine(bent(m, sideways), reference=m)

@@ -124,6 +124,15 @@ def refine(
     Motion
         A new motion; ``motion`` and ``reference`` are not modified.
 
+    Warns
+    -----
+    UnreachableTargetWarning
+        An end effector misses its target by more than 1 mm, or a planted
+        foot joint misses its plant by more than :data:`PLANT_TOLERANCE`
+        (50 mm) on frames its contact holds fully: the edit moved the body
+        beyond the leg's reach of the plant, even with the root lowered by
+        the most the goal layer allows (15 cm), and the foot slides.
+
     Examples
     --------
     A second of walk whose root drifts 30 cm sideways, so the planted feet
@@ -185,15 +194,42 @@ def _refine_one(
         motion, goals, spacing=spacing, levels=levels, adjust_root=adjust_root, dls_options=dls_options
     )
     _warn_missed(out, end_effectors, targets)
+    _warn_lost_plants(out, [g for g in goals if g.kind in ("foot", "toe")])
     return out
+
+
+#: A planted foot joint further than this (metres) from its plant on a frame its goal holds fully is reported
+#: (:func:`refine`).  Refinement meets plants to a few millimetres, and up to about 26 mm where an ankle's and a
+#: toe's plants disagree with the foot's length (the shared files and CMU clips, edited or not); an edit that
+#: moves the body out of a leg's reach of its plant misses it by decimetres or metres.
+PLANT_TOLERANCE = 0.05
+
+
+def _warn_lost_plants(motion: Motion, goals: Sequence[Goal]) -> None:
+    """One warning per foot joint that misses its plant by more than :data:`PLANT_TOLERANCE` where held fully."""
+    if not goals:
+        return
+    pos = motion.global_positions()
+    for g in goals:
+        held = g.weights >= 1.0 - 1e-9
+        j = motion.skeleton.index(g.joint)
+        miss = np.zeros(motion.n_frames)
+        miss[held] = np.linalg.norm(pos[held, j] - g.targets[held], axis=-1)
+        message = unreachable_message(motion.skeleton.names[j], miss, tolerance=PLANT_TOLERANCE)
+        if message is not None:
+            warn(
+                f"foot plant {message}: the edit moved the body beyond the leg's reach of where the foot was "
+                "planted (the foot slides with it); keep the path's pins nearer the captured path there",
+                UnreachableTargetWarning,
+            )
 
 
 def _on_floor(motion: Motion, reference: Motion, contacts: Contacts) -> Motion:
     """``motion`` raised or lowered with the floor under its path joint, where the edit moved it.
 
     Path editing moves the body on the ground plane only; on a floor inclined
-    as the reference's contacts say (:func:`mocaplab.contacts.estimate_floor`,
-    :attr:`~mocaplab.contacts.Floor.inclination`: level within 2 degrees) the
+    as the reference's contacts say (:func:`mocaplab.contacts.estimate_floor`:
+    level within 2 degrees) the
     body must climb or descend with it, by ``slope . (p' - p)`` for the path
     joint's ground positions ``p'`` (edited) and ``p`` (reference).  The foot
     goals put the plants on the floor there too
@@ -202,9 +238,9 @@ def _on_floor(motion: Motion, reference: Motion, contacts: Contacts) -> Motion:
     lifted again.
     """
     floor = estimate_floor(reference, contacts)
-    if floor is None or not floor.inclination.any():
+    if floor is None or not floor.slope.any():
         return motion
-    lift = (motion.pelvis_positions - reference.pelvis_positions)[:, [0, 2]] @ floor.inclination
+    lift = (motion.pelvis_positions - reference.pelvis_positions)[:, [0, 2]] @ floor.slope
     if not np.any(np.abs(lift) > 1e-9):
         return motion
     return motion.transformed(translation=np.stack([np.zeros_like(lift), lift, np.zeros_like(lift)], axis=-1))

@@ -649,7 +649,7 @@ def _ground_of(
     planted = np.asarray(contacts.mask, dtype=bool)[:, column]
     if not planted.any():
         return _LEVEL
-    slope = found.inclination
+    slope = found.slope
     above = support[..., 1] - support[..., [0, 2]] @ slope
     height = float(np.percentile(above[planted], GROUND_PERCENTILE))
     if abs(height) <= GROUND_TOLERANCE and not slope.any():

@@ -512,14 +512,16 @@ def resolve_contacts(
 #: returns them with a zero slope (so the methods, which follow
 #: :attr:`Floor.slope`, and :mod:`mocaplab.quality`'s penetration, which
 #: measures against it, see the same floor), and :func:`foot_contacts` tests
-#: heights above a level plane.  Fitted to the contacts of a capture on a level
-#: stage, a plane tilts by a fraction of a degree, and the tilt follows the
-#: walker rather than the stage: on the CMU walks and runs of the mirror it
-#: rises 10-15 mm per metre along the direction of travel whichever way the
-#: subject goes (02_01 going +z, 127_04 going -z, 127_21) and falls 2-5 mm/m in
-#: subject 16's takes.  Taken as a floor, it moved an edited walk's plants by
-#: the tilt times the distance the edit moved them (7 mm for a squeeze of 1.6 m
-#: on 16_15).
+#: heights above a level plane.  A plane fitted to the contacts of one take
+#: tilts by up to a degree, and one take cannot tell a stage's calibration
+#: tilt from a drift of the planted heights along the walk: on the CMU walks
+#: and runs of the mirror the fit rises 10-15 mm per metre along the travel in
+#: three takes of two sessions (02_01 going +z, 127_04 and 127_21 going -z) and
+#: falls 2-5 mm/m in subject 16's.  Extrapolated to where an edit moves the
+#: feet, such a tilt moves the plants by the tilt times the distance (7 mm for
+#: a squeeze of 1.6 m on 16_15).  The price: over a take whose planted heights
+#: do drift, the penetration measure cannot see a foot sunk by less than the
+#: drift at the high end (up to 40-50 mm on 127_04).
 LEVEL_FLOOR_ANGLE = 2.0
 
 

@@ -27,6 +27,7 @@ import mocaplab as ml
 from mocaplab import Motion, quality
 from mocaplab.contacts import foot_contacts
 from mocaplab.editing import PinPosition
+from mocaplab.ik import UnreachableTargetWarning
 
 #: Clips are trimmed to this many seconds (the corpus must run in minutes).
 MAX_SECONDS = 20.0
@@ -55,6 +56,8 @@ class StepResult:
     seconds: float
     report: quality.Comparison | None
     error: str = ""
+    #: The step's :class:`~mocaplab.ik.UnreachableTargetWarning` messages: what the method said it could not do.
+    unreachable: tuple[str, ...] = ()
 
 
 def trimmed(motion: Motion, seconds: float = MAX_SECONDS) -> Motion:
@@ -154,16 +157,17 @@ def run(motion: Motion, *, steps: tuple[str, ...] | None = None) -> Iterator[Ste
             continue
         start = time.perf_counter()
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+            with warnings.catch_warnings(record=True) as said:
+                warnings.simplefilter("always")
                 out = functions[name](outputs[source])
         except Exception as exc:  # noqa: BLE001 - the corpus reports every failure and goes on
             yield StepResult(motion.name, name, time.perf_counter() - start, None, f"{type(exc).__name__}: {exc}")
             continue
         seconds = time.perf_counter() - start
         outputs[name] = out
+        unreachable = tuple(str(w.message) for w in said if issubclass(w.category, UnreachableTargetWarning))
         if name in wanted:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 report = quality.compare(outputs[source], out)
-            yield StepResult(motion.name, name, seconds, report)
+            yield StepResult(motion.name, name, seconds, report, unreachable=unreachable)

@@ -85,14 +85,19 @@ KNOWN_DEFECTS: dict[tuple[str, str, str], str] = {
     ('perfume/A_test', 'bend+refine', 'displacement'): "the raw path edit's pop, which refinement keeps (the bend's own row; the path edit warns): displacement 41 -> 122 mm/frame at Hips",
     ('perfume/A_test', 'bend+refine+touch_up', 'angular_acceleration'): 'the touch-up adds it (issue 24): angular_acceleration 62.6 -> 168 rad/s^2 at RightKnee (its input, the refined bend, is clean since the knee bends about its hinge near straight)',
     ('pybvh/bvh_test1', 'bend+refine', 'displacement'): "refinement's leg IK pops a knee or foot (issue 23 item 8): displacement 23.1 -> 45.7 mm/frame at RightLeg",
-    ('127_04', 'bend+refine', 'skate'): "the bend pulls the body 1.4 m sideways at 1.9 s while the left foot is still planted, beyond the leg's reach even with the root lowered 15 cm: refinement warns (tests/test_refine.py::test_a_plant_pulled_out_of_the_legs_reach_is_reported) and the foot slides with the body: skate 0.64 -> 4.73 mm/frame",
-    ('127_04', 'bend+refine', 'skate_max'): "the bend pulls the body 1.4 m sideways at 1.9 s while the left foot is still planted, beyond the leg's reach even with the root lowered 15 cm: refinement warns (tests/test_refine.py::test_a_plant_pulled_out_of_the_legs_reach_is_reported) and the foot slides with the body: skate_max 4.37 -> 37 mm/frame at frame 225",
-    ('127_04', 'bend+refine', 'angular_acceleration'): "the bend pulls the body 1.4 m sideways at 1.9 s while the left foot is still planted, beyond the leg's reach even with the root lowered 15 cm: refinement warns (tests/test_refine.py::test_a_plant_pulled_out_of_the_legs_reach_is_reported) and the foot slides with the body: angular_acceleration 242 -> 2990 rad/s^2 at LeftLeg",
-    ('127_04', 'bend+refine', 'penetration'): "the bend pulls the body 1.4 m sideways at 1.9 s while the left foot is still planted, beyond the leg's reach even with the root lowered 15 cm: refinement warns (tests/test_refine.py::test_a_plant_pulled_out_of_the_legs_reach_is_reported) and the foot slides with the body; the lowered root takes the swing foot under the floor: penetration 0.19 -> 26.2 mm at frame 223",
-    ('127_04', 'bend+refine+touch_up', 'skate_max'): "its input, the refined bend, is out of reach already (the bend pulls the body 1.4 m sideways at 1.9 s while the left foot is still planted, beyond the leg's reach even with the root lowered 15 cm: refinement warns (tests/test_refine.py::test_a_plant_pulled_out_of_the_legs_reach_is_reported) and the foot slides with the body): skate_max 4.74 -> 33.7 mm/frame at frame 252",
-    ('127_04', 'bend+refine+touch_up', 'angular_acceleration'): "its input, the refined bend, is out of reach already (the bend pulls the body 1.4 m sideways at 1.9 s while the left foot is still planted, beyond the leg's reach even with the root lowered 15 cm: refinement warns (tests/test_refine.py::test_a_plant_pulled_out_of_the_legs_reach_is_reported) and the foot slides with the body): angular_acceleration 1380 -> 4290 rad/s^2 at RightFoot",
-    ('127_04', 'bend+refine+touch_up', 'penetration'): "its input, the refined bend, is out of reach already (the bend pulls the body 1.4 m sideways at 1.9 s while the left foot is still planted, beyond the leg's reach even with the root lowered 15 cm: refinement warns (tests/test_refine.py::test_a_plant_pulled_out_of_the_legs_reach_is_reported) and the foot slides with the body): penetration 26.2 -> 87.9 mm at frame 270",
     ('16_05', 'bend+refine+touch_up', 'skate_max'): 'the touch-up adds it (issue 24): the footplant goals fade out on the ground frames before take-off and the toes planted there slide: skate_max 1.97 -> 15.8 mm/frame at frame 130',
+}
+
+
+#: ``(clip, step): the step whose out-of-reach warning announces it``: an edit no method can meet (the method
+#: says so, :class:`~mocaplab.ik.UnreachableTargetWarning`), so the step's output is not judged; the test asserts
+#: the announcement instead.  127_04 stands for 1.3 s, then walks: the pipeline's bend pulls the body 1.4 m
+#: sideways at 1.9 s while the left foot is still planted, beyond the leg's reach even with the root lowered
+#: 15 cm (skate 0.64 -> 4.7 mm/frame, knees 242 -> 2990 rad/s^2, the swing foot 26 mm under the floor), and the
+#: touch-up after it starts from that.
+ANNOUNCED: dict[tuple[str, str], str] = {
+    ("127_04", "bend+refine"): "bend+refine",
+    ("127_04", "bend+refine+touch_up"): "bend+refine",
 }
 
 
@@ -118,6 +123,9 @@ def _results(label: str) -> dict[str, object]:
 def _cases():
     for label in REALWORLD + CMU:
         for step, _ in STEPS:
+            if (label, step) in ANNOUNCED:
+                yield pytest.param(label, step, "announced", id=f"{label.split('/')[-1]}-{step}-announced")
+                continue
             for measure in JUDGED[step]:
                 key = (label, step, measure)
                 marks = []
@@ -130,6 +138,11 @@ def _cases():
 def test_step_adds_no_artefact(label: str, step: str, measure: str, mocap_dir):
     result = _results(label)[step]
     assert result.report is not None, f"{label} {step} failed: {result.error}"
+    if measure == "announced":
+        said = _results(label)[ANNOUNCED[label, step]].unreachable
+        assert any("foot plant" in message and "out of reach" in message for message in said), (
+            f"{label} {step}: a plant out of the leg's reach, not announced: {said}")
+        return
     row = result.report[measure]
     limit = JUDGED[step][measure]
     if np.isnan(row.before) or np.isnan(row.after):

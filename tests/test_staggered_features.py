@@ -244,8 +244,8 @@ def test_hip_knots_fall_on_the_hips_swing_extremes(cmu, fps: float) -> None:
     """Issue 25: a hip's timing refinements find its swing extremes (the thigh's turning points).
 
     They look at each variable's dominant trail (its swing, for a thigh): 18 and 20 of the 26 extremes of these
-    walks and run have a hip knot within 50 ms at 120 and 30 fps.  With the maximum over all trails the hip's small
-    twist reversals outranked the swing: 15 and 15.  (The rest lie between a third and a half of the pose gap from
+    walks and run have a hip knot within 50 ms at 120 and 30 fps (the bound: 16).  With the maximum over all trails
+    the hip's small twist reversals outranked the swing: 15 and 15.  (The rest lie between a third and a half of the pose gap from
     the nearest pose, beyond a knot's reach: see timing_refinements.)
     """
     hit = total = 0
@@ -262,7 +262,7 @@ def test_hip_knots_fall_on_the_hips_swing_extremes(cmu, fps: float) -> None:
             hit += int((near <= 0.05).sum())
             total += extremes.size
     assert total >= 24, total
-    assert hit >= 0.65 * total, f"{hit} of {total} hip swing extremes have a hip knot within 50 ms"
+    assert hit >= 0.6 * total, f"{hit} of {total} hip swing extremes have a hip knot within 50 ms"
 
 
 @pytest.mark.parametrize("trial", ["16_15", "05_02", "49_03"])

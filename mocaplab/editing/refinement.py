@@ -182,6 +182,7 @@ def _refine_one(
     adjust_root: bool,
     dls_options: dict[str, Any] | None,
     roles: Mapping[str, Any] | None = None,
+    label: str = "",
 ) -> Motion:
     goals: list[Goal] = []
     c = resolve_contacts(contacts, reference if reference is not None else motion, roles=roles)
@@ -194,7 +195,7 @@ def _refine_one(
         motion, goals, spacing=spacing, levels=levels, adjust_root=adjust_root, dls_options=dls_options
     )
     _warn_missed(out, end_effectors, targets)
-    _warn_lost_plants(out, [g for g in goals if g.kind in ("foot", "toe")])
+    _warn_lost_plants(out, [g for g in goals if g.kind in ("foot", "toe")], label)
     return out
 
 
@@ -205,7 +206,7 @@ def _refine_one(
 PLANT_TOLERANCE = 0.05
 
 
-def _warn_lost_plants(motion: Motion, goals: Sequence[Goal]) -> None:
+def _warn_lost_plants(motion: Motion, goals: Sequence[Goal], label: str = "") -> None:
     """One warning per foot joint that misses its plant by more than :data:`PLANT_TOLERANCE` where held fully."""
     if not goals:
         return
@@ -218,8 +219,9 @@ def _warn_lost_plants(motion: Motion, goals: Sequence[Goal]) -> None:
         message = unreachable_message(motion.skeleton.names[j], miss, tolerance=PLANT_TOLERANCE)
         if message is not None:
             warn(
-                f"foot plant {message}: the edit moved the body beyond the leg's reach of where the foot was "
-                "planted (the foot slides with it); keep the path's pins nearer the captured path there",
+                f"{label}foot plant {message}: the body is beyond the leg's reach of where the foot was planted, "
+                "even with the root lowered, and the foot slides (an edit that moves the path far from a planted "
+                "foot does this: keep the path's pins nearer the captured path there)",
                 UnreachableTargetWarning,
             )
 
@@ -378,6 +380,7 @@ def refine_scene(
             motions[c], [ees[k] for k in mine], tg,
             contacts=contacts[c],
             reference=None if references is None else references[c],
+            label=f"character {c}: " if n_chars > 1 else "",
             **opts,
         )
     return current

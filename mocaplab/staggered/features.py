@@ -478,7 +478,8 @@ def dominant_trail_signals(trails: Trails, kappa: Array, n_variables: int) -> Ar
     """
     arc = np.linalg.norm(np.diff(trails.points, axis=0), axis=-1).sum(axis=0)  # (n,)
     sweep = np.where(trails.kind == 0, arc, trails.bone_length * arc)
-    order = np.lexsort((sweep, trails.variable))  # by variable, then sweep: each variable's largest comes last
+    # by variable, then sweep: each variable's largest comes last (of equal sweeps, the later trail)
+    order = np.lexsort((sweep, trails.variable))
     last = order[np.r_[np.diff(trails.variable[order]) != 0, True]] if order.size else order
     out = np.zeros((kappa.shape[0], n_variables))
     out[:, trails.variable[last]] = kappa[:, last]

@@ -836,7 +836,8 @@ def estimate_floor(
     deviation): along a straight walk but not across it, and not for a dance
     on the spot, where the floor is taken as level; a slope within
     :data:`LEVEL_FLOOR_ANGLE` (2 degrees) is taken as level too (see there:
-    such a fit follows the walker, not the stage).  Each joint's level is then the
+    one take cannot tell a stage's tilt from a drift of the planted heights).
+    Each joint's level is then the
     ``percentile`` percentile of its heights above the plane while planted,
     so capture noise leaves only a few planted frames below the floor.
 

@@ -451,21 +451,28 @@ def signal_weights(trails: Trails, n_variables: int, *, root_weight: float = 1.0
     metres) times ``root_weight``.  Arc lengths are measured on the smoothed
     trails passed in.
     """
-    arc = np.linalg.norm(np.diff(trails.points, axis=0), axis=-1).sum(axis=0)  # (n,)
+    sweep = _sweeps(trails)
     w = np.zeros(n_variables)
     m1 = trails.kind == 1
-    np.add.at(w, trails.variable[m1], trails.bone_length[m1] * arc[m1])
+    np.add.at(w, trails.variable[m1], sweep[m1])
     m0 = trails.kind == 0
-    w[trails.variable[m0]] = root_weight * arc[m0]
+    w[trails.variable[m0]] = root_weight * sweep[m0]
     return w
+
+
+def _sweeps(trails: Trails) -> Array:
+    """The distance each trail's tip sweeps, metres, shape (n,): its arc length, times the bone length for the
+    rotation trails (``m1``, ``m2``), alone for the root and translation trails."""
+    arc = np.linalg.norm(np.diff(trails.points, axis=0), axis=-1).sum(axis=0)
+    return np.where(trails.kind == 0, arc, trails.bone_length * arc)
 
 
 def dominant_trail_signals(trails: Trails, kappa: Array, n_variables: int) -> Array:
     """Each variable's bounded curvature on its dominant trail, shape (F, V).
 
     The dominant trail of a variable is the one whose tip sweeps the longest
-    distance (bone length times arc length, as in :func:`signal_weights`;
-    arc length alone for the root and translation trails).  ``p_i`` (the
+    distance (bone length times arc length; arc length alone for the root
+    and translation trails; as :func:`signal_weights` measures it).  ``p_i`` (the
     maximum over all trails) saturates at 1 on every reversal of any trail,
     however small: a walk's hip twists back and forth by a few degrees
     while the thigh swings through 40, so the timing refinements found the
@@ -476,8 +483,7 @@ def dominant_trail_signals(trails: Trails, kappa: Array, n_variables: int) -> Ar
     ``p_i`` still makes the pose probability: a pose is where anything
     about the body turns.
     """
-    arc = np.linalg.norm(np.diff(trails.points, axis=0), axis=-1).sum(axis=0)  # (n,)
-    sweep = np.where(trails.kind == 0, arc, trails.bone_length * arc)
+    sweep = _sweeps(trails)
     # by variable, then sweep: each variable's largest comes last (of equal sweeps, the later trail)
     order = np.lexsort((sweep, trails.variable))
     last = order[np.r_[np.diff(trails.variable[order]) != 0, True]] if order.size else order
